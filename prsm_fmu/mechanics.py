@@ -1,0 +1,432 @@
+"""Forces, torques and accelerations of a multi-stage PRSM at one instant (the hot path).
+
+Given the screw speed ω [rad/s], the carrier speeds ω_Pk [rad/s], the load on the last nut and
+either the motor torque (torque drive) or the screw acceleration (speed drive), this module
+solves the per-body balances of docs/model.md §3:
+
+* nut assembly k (nut, rollers, carriers), axial:   A_k = B_k + m_Ak c_k α
+* screw k (k ≥ 2), axial:                           B_(k−1) = A_k + h_k − h_(k+1) + m_Sk c_(k−1) α
+* screw k, torque:                                  M_Sk = J_Sk α + M_S(k+1) − κ_k A_k − T_b,k
+* carrier k (Lagrange, generalized force):          J_Pk α_Pk = γ_k A_k
+
+with A_k the axial force the rollers of stage k take from their screw, B_k the force that
+screw k+1 puts on nut k through the thrust bearing (B_n = the external load), h_k the spline
+friction on screw k, T_b,k the bearing friction torque on screw k, α = dω/dt and c_k = Σ_{i≤k}
+L_Si / 2π.  Every quantity is affine in α once the signs of A_k (which flank carries the load),
+M_Sk and B_k are fixed, so the chain is solved exactly from the last stage down to stage 1
+with (value, d value/dα) pairs; the signs are found by a short deterministic fixed-point
+iteration starting from α = 0, so the result is a pure function of its arguments.
+
+The contact coefficients per unit of transmitted axial force (κ: torque on the screw, γ:
+generalized force on the carrier, π: friction power) follow from the contact geometry
+(:mod:`prsm_fmu.geometry`) and the regularised Coulomb law (:mod:`prsm_fmu.friction`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .friction import regularised_sign
+from .geometry import contact_geometry
+from .kinematics import ideal_carrier_speed_ratio
+from .params import MechanismParams
+
+TWO_PI = 2.0 * math.pi
+
+#: number of sign-pattern iterations before the last pattern is accepted
+MAX_SIGN_ITERATIONS = 8
+
+
+class _Flank:
+    """Per-flank constants of one stage's screw–roller contact (plain floats for speed)."""
+
+    __slots__ = ("px", "py", "nx", "ny", "nz", "ax", "ay", "az", "bx", "by")
+
+    def __init__(self, geo) -> None:
+        (self.px, self.py, _), (self.nx, self.ny, self.nz) = geo.point, geo.normal
+        (ax, ay, az), (bx, by, bz) = geo.slip_jacobians()
+        if abs(bz) > 1e-15:
+            raise ValueError("carrier slip Jacobian has an axial part; geometry inconsistent")
+        self.ax, self.ay, self.az, self.bx, self.by = ax, ay, az, bx, by
+
+    def steady_ratio(self) -> float:
+        """Carrier/screw speed ratio at which the slip has no component along b [-]."""
+        return -(self.ax * self.bx + self.ay * self.by) / (self.bx * self.bx + self.by * self.by)
+
+
+class _Stage:
+    """Constants of stage k used by the recursion."""
+
+    __slots__ = ("n_rollers", "ell", "c", "c_prev", "m_assembly", "m_screw", "j_screw",
+                 "j_carrier", "flanks", "e_spline", "g_bearing", "spline_speed_factor",
+                 "bearing_speed_factor", "zeta_geometric", "zeta_ideal", "min_normal_z")
+
+    def __init__(self, params: MechanismParams, k: int) -> None:
+        st = params.stages[k]
+        leads = [s.screw_lead for s in params.stages]
+        self.n_rollers = float(st.n_rollers)
+        self.ell = st.screw_lead / TWO_PI
+        self.c = sum(leads[: k + 1]) / TWO_PI
+        self.c_prev = sum(leads[:k]) / TWO_PI
+        self.m_assembly = st.nut_mass + st.n_rollers * st.roller_mass + st.carriers * st.carrier_mass
+        self.m_screw = st.screw_mass if k > 0 else 0.0
+        self.j_screw = st.screw_inertia
+        self.j_carrier = (st.carriers * st.carrier_inertia
+                          + st.n_rollers * st.roller_inertia * (st.screw_starts - 1) ** 2
+                          + st.n_rollers * st.roller_mass * (st.screw_radius + st.roller_radius) ** 2)
+        geo = contact_geometry(st)
+        self.flanks = (_Flank(geo), _Flank(geo.mirrored()))
+        self.min_normal_z = min(abs(self.flanks[0].nz), abs(self.flanks[1].nz))
+        self.e_spline = params.mu_spline / st.spline_radius if (k > 0 and params.mu_spline > 0) else 0.0
+        below = params.stages[k - 1] if k > 0 else None
+        self.g_bearing = (params.mu_nut_screw * below.bearing_radius
+                          if (below is not None and params.mu_nut_screw > 0) else 0.0)
+        # sliding speeds per unit screw speed [m/rad]: spline slides at ω·ℓ_(k−1); the bearing
+        # face slides at ω·r_NS
+        self.spline_speed_factor = leads[k - 1] / TWO_PI if k > 0 else 0.0
+        self.bearing_speed_factor = below.bearing_radius if below is not None else 0.0
+        self.zeta_geometric = self.flanks[0].steady_ratio()
+        self.zeta_ideal = ideal_carrier_speed_ratio(st)
+
+
+@dataclass
+class Solution:
+    """Everything the balances determine at one instant (SI units).
+
+    Attributes
+    ----------
+    screw_acceleration : float
+        α = dω/dt [rad/s²].
+    carrier_accelerations : list of float
+        dω_Pk/dt [rad/s²] (zero for fidelity levels that slave the carriers).
+    motor_torque : float
+        M_S1, torque on screw 1 [N·m].
+    friction_power : float
+        Total power dissipated by friction [W] (≥ 0).
+    stage_axial_force : list of float
+        A_k, axial force the rollers of stage k take from screw k [N] (all rollers).
+    contact_force : list of float
+        Axial component of the screw–roller contact force per roller [N], signed: > 0 when the
+        flank that resists extension carries the load (seed 000's F_Srzk, Eq. 25).
+    normal_force : list of float
+        Magnitude of the screw–roller normal contact force per roller [N] (seed 000's F_Srk).
+    driven_torque : list of float
+        M_Sk, torque driving screw k [N·m] (M_S1 is the motor torque).
+    spline_friction : list of float
+        Axial spline friction force on screw k from screw k−1 [N] (0 for k = 1).
+    bearing_force : list of float
+        B_k, axial force screw k+1 puts on nut k through the thrust bearing [N] (B_n = load).
+    stage_friction_power : list of float
+        Power dissipated at stage k's screw–roller contacts, its spline and the bearing under
+        its screw [W].
+    consistent : bool
+        False when the rigid contacts with Coulomb friction admit no acceleration that balances
+        the motor torque (a Painlevé-type inconsistency: carriers far from equilibrium with a
+        self-locking slip direction); the returned α then minimises the imbalance.
+    """
+
+    screw_acceleration: float
+    carrier_accelerations: list
+    motor_torque: float
+    friction_power: float
+    stage_axial_force: list | None = None
+    contact_force: list | None = None
+    normal_force: list | None = None
+    driven_torque: list | None = None
+    spline_friction: list | None = None
+    bearing_force: list | None = None
+    stage_friction_power: list | None = None
+    consistent: bool = True
+
+
+class Mechanism:
+    """Precomputed constants of a mechanism and the instantaneous force solution.
+
+    Parameters
+    ----------
+    params : MechanismParams
+        The mechanism (validated here).
+    carriers : {"dynamic", "equilibrium", "ideal"}
+        How carrier speeds are obtained: from the state (``dynamic``), held at the force
+        equilibrium ratio ζ* of the contact geometry (``equilibrium``, quasi-static level), or at
+        the pure-rolling ratio r_S/(r_S + r_N) with all friction off (``ideal``, kinematic level).
+    """
+
+    def __init__(self, params: MechanismParams, carriers: str = "dynamic") -> None:
+        if carriers not in ("dynamic", "equilibrium", "ideal"):
+            raise ValueError(f"carriers = {carriers!r}: must be 'dynamic', 'equilibrium' or 'ideal'")
+        params.validate()
+        self.params = params
+        self.mode = carriers
+        self.stages = [_Stage(params, k) for k in range(params.n_stages)]
+        frictionless = carriers == "ideal"
+        self.mu = 0.0 if frictionless else params.mu_screw_roller
+        if frictionless:
+            for s in self.stages:
+                s.e_spline = 0.0
+                s.g_bearing = 0.0
+        limit = min(s.min_normal_z for s in self.stages)
+        if self.mu >= limit:
+            raise ValueError(
+                f"mu_screw_roller = {self.mu!r} is out of range for this geometry: must be < "
+                f"{limit:.4f} (the axial part of the contact normal); above it the thread self-locks "
+                "and the rigid model has no solution")
+        self.v_eps = params.slip_velocity_scale
+        self.c_out = self.stages[-1].c
+        if carriers == "dynamic":
+            self.zeta = None
+        else:
+            self.zeta = [s.zeta_ideal if frictionless else s.zeta_geometric for s in self.stages]
+            for s, z in zip(self.stages, self.zeta):
+                # carriers slaved to the screw: their inertia is driven through the screw
+                s.j_screw = s.j_screw + s.j_carrier * z * z
+
+    # ------------------------------------------------------------------------------------
+    def equivalent_inertia(self) -> float:
+        """Inertia reflected to the screw of everything slaved to it [kg·m²] (Eq. 11's θ̇_S² term,
+        plus the carriers' J_Pk ζ_k² when they are slaved)."""
+        j = 0.0
+        for s in self.stages:
+            j += s.j_screw + s.m_assembly * s.c * s.c + s.m_screw * s.c_prev * s.c_prev
+        return j
+
+    def kinetic_energy(self, omega: float, carrier_speeds) -> float:
+        """Kinetic energy of the whole mechanism [J] (seed 000 Eq. 11)."""
+        t = 0.5 * self.equivalent_inertia() * omega * omega
+        if self.zeta is None:
+            for s, wp in zip(self.stages, carrier_speeds):
+                t += 0.5 * s.j_carrier * wp * wp
+        return t
+
+    def carrier_speeds(self, omega: float, carrier_state) -> list:
+        """Carrier speeds [rad/s]: the state's for the dynamic level, ζ_k ω otherwise."""
+        if self.zeta is None:
+            return list(carrier_state)
+        return [z * omega for z in self.zeta]
+
+    # ------------------------------------------------------------------------------------
+    def _coefficients(self, s: _Stage, fl: _Flank, omega: float, wp: float):
+        """Per unit axial force: torque on screw κ, carrier force γ, friction power π, and the
+        normal force per roller per unit axial force."""
+        mu = self.mu
+        sx = omega * fl.ax + wp * fl.bx
+        sy = omega * fl.ay + wp * fl.by
+        sz = omega * fl.az
+        q = math.sqrt(sx * sx + sy * sy + sz * sz + self.v_eps * self.v_eps)
+        ux, uy, uz = sx / q, sy / q, sz / q
+        nr = s.n_rollers
+        d = nr * (fl.nz - mu * uz)
+        kappa = nr * (fl.px * (fl.ny - mu * uy) - fl.py * (fl.nx - mu * ux)) / d
+        gamma = -nr * mu * (ux * fl.bx + uy * fl.by) / d
+        pw = nr * mu * (ux * sx + uy * sy + uz * sz) / d
+        return kappa, gamma, pw, 1.0 / d
+
+    def solve(self, omega: float, carrier_state, load: float, *, torque: float | None = None,
+              acceleration: float | None = None, detail: bool = False) -> Solution:
+        """Solve the balances at one instant.
+
+        Parameters
+        ----------
+        omega : float
+            Screw speed ω [rad/s].
+        carrier_state : sequence of float
+            Carrier speeds ω_Pk [rad/s] (ignored unless the carriers are dynamic).
+        load : float
+            External axial force on the last nut [N], positive resisting extension.
+        torque : float, optional
+            Motor torque on screw 1 [N·m] (torque drive).  Exactly one of ``torque`` and
+            ``acceleration`` is given.
+        acceleration : float, optional
+            Prescribed screw acceleration [rad/s²] (speed drive).
+        detail : bool
+            Also fill the per-stage force lists of :class:`Solution`.
+
+        Returns
+        -------
+        Solution
+        """
+        stages = self.stages
+        n = len(stages)
+        wps = self.carrier_speeds(omega, carrier_state)
+        cache: list = [[None, None] for _ in range(n)]
+        alpha_guess = acceleration if acceleration is not None else 0.0
+        consistent = True
+        visited = []
+        for _ in range(MAX_SIGN_ITERATIONS):
+            rec = self._sweep(omega, wps, load, alpha_guess, cache)
+            m0, m1 = rec[0]
+            alpha = acceleration if acceleration is not None else (torque - m0) / m1
+            if acceleration is not None or (m1 > 0.0 and self._signs_hold(rec, alpha)):
+                break
+            visited.append(alpha_guess)
+            alpha_guess = alpha
+        else:
+            alpha, rec, consistent = self._bracket(omega, wps, load, torque, visited, cache)
+        sol = self._assemble(omega, wps, load, alpha, rec, detail)
+        sol.consistent = consistent
+        return sol
+
+    def _bracket(self, omega, wps, load, torque, visited, cache):
+        """Root of the continuous, piecewise-affine M_S1(α) − torque when the sign iteration
+        cycles (docs/model.md §3, "Rigid-contact inconsistency").
+
+        Returns (α, sweep record, consistent); ``consistent`` is False when no α balances the
+        motor torque (no root), in which case the α of smallest imbalance is returned.
+        """
+        def g(a):
+            rec = self._sweep(omega, wps, load, a, cache)
+            return rec[0][0] + rec[0][1] * a - torque, rec
+
+        samples = sorted(set(visited + [0.0] + [sgn * 10.0 ** e for e in range(0, 13, 2)
+                                                 for sgn in (-1.0, 1.0)]))
+        vals = [(a,) + g(a) for a in samples]
+        roots = []
+        for (a_lo, g_lo, _), (a_hi, g_hi, _) in zip(vals, vals[1:]):
+            if g_lo == 0.0:
+                roots.append(a_lo)
+            elif (g_lo < 0.0) != (g_hi < 0.0):
+                lo, hi = a_lo, a_hi
+                for _ in range(200):
+                    mid = 0.5 * (lo + hi)
+                    gm = g(mid)[0]
+                    if (gm < 0.0) == (g_lo < 0.0):
+                        lo = mid
+                    else:
+                        hi = mid
+                    if hi - lo <= 1e-15 * max(1.0, abs(mid)):
+                        break
+                roots.append(0.5 * (lo + hi))
+        if roots:
+            # several roots: the one of least |α| (the rigid model's non-uniqueness; the
+            # smallest acceleration is the one reached continuously from rest)
+            a = min(roots, key=abs)
+            return a, g(a)[1], True
+        a = min(vals, key=lambda v: abs(v[1]))[0]
+        return a, g(a)[1], False
+
+    def _sweep(self, omega, wps, load, ag, cache):
+        """One pass from the last stage down with signs chosen at α = ag; returns a record."""
+        stages = self.stages
+        n = len(stages)
+        a0, a1 = load, stages[-1].m_assembly * stages[-1].c
+        mn0 = mn1 = hn0 = hn1 = 0.0
+        per_stage = [None] * n
+        for k in range(n - 1, -1, -1):
+            s = stages[k]
+            fi = 0 if a0 + a1 * ag >= 0.0 else 1
+            co = cache[k][fi]
+            if co is None:
+                co = cache[k][fi] = self._coefficients(s, s.flanks[fi], omega, wps[k])
+            kappa = co[0]
+            x0 = mn0 - kappa * a0
+            x1 = s.j_screw + mn1 - kappa * a1
+            if k == 0:
+                per_stage[0] = (fi, a0, a1, co, x0, x1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1, 1)
+                return (x0, x1), per_stage
+            y0 = a0 - hn0
+            y1 = a1 - hn1 + s.m_screw * s.c_prev
+            e = s.e_spline * regularised_sign(omega * s.spline_speed_factor, self.v_eps)
+            g = s.g_bearing * regularised_sign(omega * s.bearing_speed_factor, self.v_eps)
+            sm = 1.0 if x0 + x1 * ag >= 0.0 else -1.0
+            sb = 1.0 if y0 + y1 * ag >= 0.0 else -1.0
+            for _ in range(3):
+                den = 1.0 - g * sb * e * sm
+                m0 = (x0 + g * sb * y0) / den
+                m1 = (x1 + g * sb * y1) / den
+                b0 = y0 + e * sm * m0
+                b1 = y1 + e * sm * m1
+                sm_new = 1.0 if m0 + m1 * ag >= 0.0 else -1.0
+                sb_new = 1.0 if b0 + b1 * ag >= 0.0 else -1.0
+                if sm_new == sm and sb_new == sb:
+                    break
+                sm, sb = sm_new, sb_new
+            h0, h1 = e * sm * m0, e * sm * m1
+            per_stage[k] = (fi, a0, a1, co, m0, m1, h0, h1, b0, b1, e, g, sm, sb)
+            prev = stages[k - 1]
+            a0, a1 = b0, b1 + prev.m_assembly * prev.c
+            mn0, mn1, hn0, hn1 = m0, m1, h0, h1
+        raise AssertionError("unreachable")
+
+    @staticmethod
+    def _signs_hold(rec, alpha) -> bool:
+        """Whether the signs used in a sweep are those of the quantities at ``alpha``."""
+        for fi, a0, a1, co, m0, m1, h0, h1, b0, b1, e, g, sm, sb in rec[1]:
+            if (0 if a0 + a1 * alpha >= 0.0 else 1) != fi:
+                return False
+            if e or g:
+                if (1.0 if m0 + m1 * alpha >= 0.0 else -1.0) != sm:
+                    return False
+                if (1.0 if b0 + b1 * alpha >= 0.0 else -1.0) != sb:
+                    return False
+        return True
+
+    def _assemble(self, omega, wps, load, alpha, rec, detail) -> Solution:
+        stages = self.stages
+        n = len(stages)
+        (m0, m1), per_stage = rec
+        motor = m0 + m1 * alpha
+        dyn = self.zeta is None
+        acc = [0.0] * n
+        p_fric = 0.0
+        if detail:
+            axial, contact, normal, torque, spline, bearing, stage_p = ([0.0] * n for _ in range(7))
+        for k in range(n):
+            fi, a0, a1, co, x0, x1, h0, h1, b0, b1, e, g, sm, sb = per_stage[k]
+            s = stages[k]
+            a = a0 + a1 * alpha
+            kappa, gamma, pw, inv_d = co
+            if dyn:
+                acc[k] = gamma * a / s.j_carrier
+            pk = pw * a
+            if k > 0:
+                h = h0 + h1 * alpha
+                b = b0 + b1 * alpha
+                # spline: screw k slides at −ω ℓ_(k−1) relative to screw k−1; bearing: at ω r_NS
+                pk += h * omega * s.spline_speed_factor
+                pk += g * abs(b) * omega  # g = µ_NS r_NS sgñ(ω r_NS)
+            p_fric += pk
+            if detail:
+                fl = s.flanks[fi]
+                f_normal = a * inv_d
+                axial[k] = a
+                normal[k] = f_normal
+                contact[k] = f_normal * fl.nz
+                torque[k] = motor if k == 0 else x0 + x1 * alpha
+                spline[k] = 0.0 if k == 0 else h0 + h1 * alpha
+                if k > 0:
+                    bearing[k - 1] = b0 + b1 * alpha
+                stage_p[k] = pk
+        sol = Solution(alpha, acc, motor, p_fric)
+        if detail:
+            bearing[n - 1] = load
+            sol.stage_axial_force, sol.contact_force, sol.normal_force = axial, contact, normal
+            sol.driven_torque, sol.spline_friction, sol.bearing_force = torque, spline, bearing
+            sol.stage_friction_power = stage_p
+        return sol
+
+    def fastest_time_constant(self, omega: float, carrier_state, load: float) -> float:
+        """Smallest carrier time constant J_Pk / |∂G_Pk/∂ω_Pk| at this point [s] (inf if none).
+
+        Used for step selection, stability predictions and the ``auto`` fidelity choice.
+        """
+        if self.zeta is not None:
+            return math.inf
+        sol = self.solve(omega, carrier_state, load, acceleration=0.0, detail=True)
+        tau = math.inf
+        for s, wp, a in zip(self.stages, carrier_state, sol.stage_axial_force):
+            fl = s.flanks[0 if a >= 0 else 1]
+            sx = omega * fl.ax + wp * fl.bx
+            sy = omega * fl.ay + wp * fl.by
+            sz = omega * fl.az
+            q2 = sx * sx + sy * sy + sz * sz + self.v_eps * self.v_eps
+            q = math.sqrt(q2)
+            sb = sx * fl.bx + sy * fl.by
+            bb = fl.bx * fl.bx + fl.by * fl.by
+            nr = s.n_rollers
+            d = abs(nr * (fl.nz - self.mu * sz / q))
+            rate = nr * self.mu * abs(a) / d * (bb / q - sb * sb / (q2 * q))
+            if rate > 0.0:
+                tau = min(tau, s.j_carrier / rate)
+        return tau
+

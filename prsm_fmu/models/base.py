@@ -1,0 +1,219 @@
+"""The interface every fidelity level shares: pure functions of time, state and inputs.
+
+Drive modes
+-----------
+``torque``  (the FMU's): inputs u = (screw_torque [N·m], load_force [N]); the screw speed is a
+            state.
+``speed``   (the papers'): inputs u = (screw_speed [rad/s], load_force [N]) or
+            (screw_speed, load_force, screw_acceleration [rad/s²]); the screw speed is
+            prescribed and the driven torques are outputs.
+
+State layout: ``screw_angle`` [rad], ``screw_speed`` [rad/s] (torque drive only), the carrier
+speeds ``carrier_k_speed`` [rad/s] (dynamic level only), then the energy accumulators
+``input_work``, ``output_work``, ``friction_work`` [J] (integrals of motor power, load power and
+friction power).  Sign conventions: README.md "Conventions".
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC
+
+from ..mechanics import Mechanism
+from ..params import MechanismParams
+
+DRIVES = ("torque", "speed")
+
+
+class Model(ABC):
+    """One fidelity level of the mechanism (see module docstring for inputs and states).
+
+    Parameters
+    ----------
+    params : MechanismParams
+        The mechanism; validated on construction.
+    drive : {"torque", "speed"}
+        Drive mode.
+    """
+
+    fidelity: str = ""
+    carriers: str = "dynamic"
+
+    def __init__(self, params: MechanismParams, drive: str = "torque") -> None:
+        if drive not in DRIVES:
+            raise ValueError(f"drive = {drive!r} is not allowed: must be one of {DRIVES}")
+        self.params = params
+        self.drive = drive
+        self.mechanism = Mechanism(params, self.carriers)
+        n = params.n_stages
+        self.n_carrier_states = n if self.carriers == "dynamic" else 0
+        names = ["screw_angle"]
+        if drive == "torque":
+            names.append("screw_speed")
+        names += [f"carrier_{k}_speed" for k in range(1, self.n_carrier_states + 1)]
+        names += ["input_work", "output_work", "friction_work"]
+        self.state_names: tuple[str, ...] = tuple(names)
+        self.n_states = len(names)
+        self._i_carrier = 2 if drive == "torque" else 1
+        self._i_energy = self._i_carrier + self.n_carrier_states
+        #: per-state absolute scale for error norms [rad, rad/s, rad/s, J]
+        self.state_scale = tuple(1.0 for _ in names)
+        self.error_mask = tuple(True for _ in names)
+        stage_outputs = []
+        for k in range(1, n + 1):
+            stage_outputs += [f"stage[{k}].contact_force", f"stage[{k}].normal_force",
+                              f"stage[{k}].driven_torque", f"stage[{k}].spline_friction",
+                              f"stage[{k}].carrier_speed", f"stage[{k}].carrier_speed_ratio"]
+        self.output_names: tuple[str, ...] = tuple(
+            ["screw_speed", "screw_angle", "screw_acceleration", "screw_torque", "rod_position",
+             "rod_velocity", "load_force"] + stage_outputs
+            + ["efficiency", "friction_power", "input_power", "output_power", "input_work",
+               "output_work", "friction_work", "kinetic_energy"])
+
+    # ---- hooks for levels with extra losses (kinematic efficiency) ------------------------
+    def _extra_loss_torque(self, omega: float, load: float) -> float:
+        """Torque on screw 1 opposing rotation from losses outside the mechanism model [N·m]."""
+        return 0.0
+
+    # ---- interface -------------------------------------------------------------------------
+    def initial_state(self, u: tuple, screw_speed: float = 0.0, screw_angle: float = 0.0,
+                      carrier_ratio: float | None = 0.0) -> list[float]:
+        """State at the start of a run.
+
+        Parameters
+        ----------
+        u : tuple
+            Inputs at the start (the speed drive takes its screw speed from ``u[0]``).
+        screw_speed : float
+            Initial screw speed for the torque drive [rad/s].
+        screw_angle : float
+            Initial screw angle [rad].
+        carrier_ratio : float or None
+            Initial carrier speed / screw speed [-] for the dynamic level; ``None`` puts the
+            carriers at their equilibrium ratio.  Default 0: carriers at rest (seed 000's start).
+
+        Returns
+        -------
+        list of float
+        """
+        omega = float(u[0]) if self.drive == "speed" else float(screw_speed)
+        x = [float(screw_angle)]
+        if self.drive == "torque":
+            x.append(omega)
+        for s in self.mechanism.stages[: self.n_carrier_states]:
+            ratio = s.zeta_geometric if carrier_ratio is None else float(carrier_ratio)
+            x.append(ratio * omega)
+        return x + [0.0, 0.0, 0.0]
+
+    def _unpack(self, x, u):
+        if self.drive == "torque":
+            omega = x[1]
+            return omega, x[2:2 + self.n_carrier_states], u[1]
+        return float(u[0]), x[1:1 + self.n_carrier_states], u[1]
+
+    def _solve(self, x, u, detail: bool):
+        omega, wp, load = self._unpack(x, u)
+        loss = self._extra_loss_torque(omega, load)
+        if self.drive == "torque":
+            sol = self.mechanism.solve(omega, wp, load, torque=u[0] - loss, detail=detail)
+            motor = u[0]
+        else:
+            acc = u[2] if len(u) > 2 else 0.0
+            sol = self.mechanism.solve(omega, wp, load, acceleration=acc, detail=detail)
+            motor = sol.motor_torque + loss
+        return omega, wp, load, motor, loss, sol
+
+    def rhs(self, t: float, x: list[float], u: tuple) -> list[float]:
+        """Time derivative of the state (the hot path).
+
+        Parameters
+        ----------
+        t : float
+            Time [s] (the model is autonomous; kept for the stepper interface).
+        x : list of float
+            State (layout: module docstring).
+        u : tuple
+            Inputs held over the step.
+
+        Returns
+        -------
+        list of float
+        """
+        omega, wp, load, motor, loss, sol = self._solve(x, u, False)
+        dx = [omega]
+        if self.drive == "torque":
+            dx.append(sol.screw_acceleration)
+        if self.n_carrier_states:
+            dx.extend(sol.carrier_accelerations)
+        dx.append(motor * omega)
+        dx.append(load * self.mechanism.c_out * omega)
+        dx.append(sol.friction_power + loss * omega)
+        return dx
+
+    def outputs(self, t: float, x: list[float], u: tuple) -> dict[str, float]:
+        """All outputs (DESIGN.md §4 names), consistent with :meth:`rhs`.
+
+        Returns
+        -------
+        dict
+            Output name → value in SI units.
+        """
+        omega, wp, load, motor, loss, sol = self._solve(x, u, True)
+        mech = self.mechanism
+        wps = mech.carrier_speeds(omega, wp)
+        c_out = mech.c_out
+        v_rod = c_out * omega
+        p_in = motor * omega
+        p_out = load * v_rod
+        y = {
+            "screw_speed": omega, "screw_angle": x[0],
+            "screw_acceleration": sol.screw_acceleration if self.drive == "torque" else (
+                u[2] if len(u) > 2 else 0.0),
+            "screw_torque": motor, "rod_position": c_out * x[0], "rod_velocity": v_rod,
+            "load_force": load,
+        }
+        for k in range(len(mech.stages)):
+            pre = f"stage[{k + 1}]."
+            y[pre + "contact_force"] = sol.contact_force[k]
+            y[pre + "normal_force"] = sol.normal_force[k]
+            y[pre + "driven_torque"] = motor if k == 0 else sol.driven_torque[k]
+            y[pre + "spline_friction"] = sol.spline_friction[k]
+            y[pre + "carrier_speed"] = wps[k]
+            y[pre + "carrier_speed_ratio"] = wps[k] / omega if omega != 0.0 else 0.0
+        y["efficiency"] = efficiency(p_in, p_out)
+        y["friction_power"] = sol.friction_power + loss * omega
+        y["input_power"] = p_in
+        y["output_power"] = p_out
+        ie = self._i_energy
+        y["input_work"], y["output_work"], y["friction_work"] = x[ie], x[ie + 1], x[ie + 2]
+        y["kinetic_energy"] = self.kinetic_energy(x, u)
+        return y
+
+    def kinetic_energy(self, x: list[float], u: tuple) -> float:
+        """Kinetic energy of all moving parts [J]."""
+        omega, wp, _ = self._unpack(x, u)
+        return self.mechanism.kinetic_energy(omega, wp)
+
+    def fastest_time_constant(self, x: list[float], u: tuple) -> float:
+        """Fastest time constant of the state at this point [s] (carriers; inf if none)."""
+        omega, wp, load = self._unpack(x, u)
+        return self.mechanism.fastest_time_constant(omega, wp, load)
+
+
+def efficiency(p_in: float, p_out: float) -> float:
+    """Instantaneous efficiency [-] from motor power and load power [W].
+
+    Forward drive (motor delivers power, load absorbs it): P_out / P_in, which is seed 000
+    Eq. 28 η = F_N Σ L / (2π M_S1).  Back-driving (load delivers power, motor absorbs it):
+    P_in / P_out.  Otherwise (standstill, or both sides delivering or absorbing): 0.
+    """
+    if p_in > 0.0 and p_out >= 0.0:
+        return p_out / p_in
+    if p_in < 0.0 and p_out < 0.0:
+        return p_in / p_out
+    return 0.0
+
+
+def is_finite_state(x) -> bool:
+    """Whether every state component is finite."""
+    return all(math.isfinite(v) for v in x)

@@ -1,0 +1,249 @@
+"""Parameters of a multi-stage planetary roller screw mechanism (PRSM), in SI units.
+
+Conventions (stated once here, in README.md and in docs/model.md):
+
+* Stage 1 is driven by the motor; stage ``n`` carries the output (the rod).
+* Screws, rollers and nuts are right-handed (seed ``000_a07c98907360be8b.txt`` §2.1).
+* A *standard* PRSM stage has a single-start roller whose lead equals the screw pitch
+  ``L_S / n_S``, a nut with the screw's number of starts, and radii that satisfy both
+  ``r_N = r_S + 2 r_R`` (the rollers fit between screw and nut) and ``r_N = n_S r_R``
+  (roller and nut share the helix angle, so the roller rolls on the nut without axial
+  drift).  Both are checked by :meth:`StageParams.validate`.
+* Every length is in metres, every mass in kilograms, every moment of inertia in
+  kg·m², every angle in radians.  Presets convert the papers' mm and kg·mm².
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+#: relative tolerance of the geometric consistency checks (radii, leads)
+GEOMETRY_RTOL = 1e-6
+
+
+def _check_positive(name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
+
+
+def _check_non_negative(name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{name} = {value!r} is out of range: must be a finite number >= 0")
+
+
+def _check_friction(name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and 0.0 <= value < 1.0):
+        raise ValueError(f"{name} = {value!r} is out of range: friction coefficient must be in [0, 1)")
+
+
+def _check_int_at_least(name: str, value: Any, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{name} = {value!r} is out of range: must be an integer >= {minimum}")
+
+
+@dataclass(frozen=True)
+class StageParams:
+    """Geometry, masses and inertias of one single-stage PRSM inside a multi-stage mechanism.
+
+    Parameters
+    ----------
+    screw_radius : float
+        Nominal (pitch) radius of the screw, r_S [m].
+    roller_radius : float
+        Nominal (pitch) radius of a roller, r_R [m].
+    nut_radius : float
+        Nominal (pitch) radius of the nut, r_N [m].
+    screw_lead : float
+        Lead of the screw, L_S = n_S · pitch [m].
+    screw_starts : int
+        Number of thread starts of the screw (and of the nut), n_S [-].
+    flank_angle : float
+        Flank angle β of the thread, between flank and radial plane [rad], in (0, π/2).
+    n_rollers : int
+        Number of rollers N_R [-].
+    screw_mass, nut_mass, roller_mass, carrier_mass : float
+        m_S, m_N, m_R, m_P [kg].  ``carrier_mass`` is per carrier; ``carriers`` carriers per stage.
+        ``screw_mass`` of stage 1 does not enter the dynamics (screw 1 does not translate).
+    screw_inertia, roller_inertia, carrier_inertia : float
+        J_S, J_R, J_P about their own axes [kg·m²]; ``carrier_inertia`` is per carrier.
+    spline_radius : float
+        Nominal radius r_SS of the spline teeth that drive this screw from the previous one
+        [m]; unused for stage 1.
+    bearing_radius : float
+        Effective friction radius r_NS of the thrust bearing between this stage's nut and the
+        next stage's screw [m]; unused for the last stage.
+    carriers : int
+        Carriers per stage (one at each roller end in seed 000), default 2.
+    """
+
+    screw_radius: float
+    roller_radius: float
+    nut_radius: float
+    screw_lead: float
+    screw_starts: int
+    flank_angle: float
+    n_rollers: int
+    screw_mass: float
+    nut_mass: float
+    roller_mass: float
+    carrier_mass: float
+    screw_inertia: float
+    roller_inertia: float
+    carrier_inertia: float
+    spline_radius: float = 0.0
+    bearing_radius: float = 0.0
+    carriers: int = 2
+
+    # ---- derived quantities -------------------------------------------------------------
+    @property
+    def pitch(self) -> float:
+        """Thread pitch p = L_S / n_S [m], also the roller's lead (single-start roller)."""
+        return self.screw_lead / self.screw_starts
+
+    @property
+    def roller_lead(self) -> float:
+        """Lead of the single-start roller thread [m] (equal to the pitch)."""
+        return self.pitch
+
+    @property
+    def carrier_orbit_radius(self) -> float:
+        """Distance between screw axis and roller axis, r_S + r_R [m]."""
+        return self.screw_radius + self.roller_radius
+
+    def validate(self, name: str = "stage") -> "StageParams":
+        """Check every field against its physical range.
+
+        Parameters
+        ----------
+        name : str
+            Prefix used in error messages, e.g. ``"stage[2]"``.
+
+        Returns
+        -------
+        StageParams
+            ``self``, so that calls can be chained.
+
+        Raises
+        ------
+        ValueError
+            Naming the field, its value and the allowed range.
+        """
+        for f in ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_mass",
+                  "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
+                  "roller_inertia", "carrier_inertia"):
+            _check_positive(f"{name}.{f}", getattr(self, f))
+        for f in ("spline_radius", "bearing_radius"):
+            _check_non_negative(f"{name}.{f}", getattr(self, f))
+        _check_int_at_least(f"{name}.screw_starts", self.screw_starts, 1)
+        _check_int_at_least(f"{name}.n_rollers", self.n_rollers, 1)
+        _check_int_at_least(f"{name}.carriers", self.carriers, 1)
+        beta = self.flank_angle
+        if not (isinstance(beta, (int, float)) and math.isfinite(beta) and 0.0 < beta < math.pi / 2):
+            raise ValueError(
+                f"{name}.flank_angle = {beta!r} rad is out of range: must be in (0, pi/2) rad, "
+                "i.e. (0°, 90°)")
+        fit = self.screw_radius + 2.0 * self.roller_radius
+        if abs(self.nut_radius - fit) > GEOMETRY_RTOL * fit:
+            raise ValueError(
+                f"{name}.nut_radius = {self.nut_radius!r} m is inconsistent with "
+                f"screw_radius + 2*roller_radius = {fit!r} m: must equal it "
+                f"(relative tolerance {GEOMETRY_RTOL:g})")
+        engaged = self.screw_starts * self.roller_radius
+        if abs(self.nut_radius - engaged) > GEOMETRY_RTOL * engaged:
+            raise ValueError(
+                f"{name}.nut_radius = {self.nut_radius!r} m is inconsistent with the roller lead: "
+                f"a single-start roller of lead pitch = screw_lead/screw_starts stays engaged with "
+                f"the nut only if nut_radius = screw_starts*roller_radius = {engaged!r} m "
+                f"(relative tolerance {GEOMETRY_RTOL:g})")
+        return self
+
+
+@dataclass(frozen=True)
+class MechanismParams:
+    """A multi-stage PRSM: its stages (stage 1 first) and its friction coefficients.
+
+    Parameters
+    ----------
+    stages : tuple of StageParams
+        At least one stage; stage 1 is driven, the last stage's nut is the output.
+    mu_screw_roller : float
+        Coulomb coefficient µ_SR at the screw–roller thread contacts [-], in [0, 1).
+    mu_spline : float
+        Coulomb coefficient µ_SS between the spline teeth of consecutive screws [-], in [0, 1).
+    mu_nut_screw : float
+        Coulomb coefficient µ_NS of the thrust bearings between nut k and screw k+1 [-]
+        (seed ``002_dfce4e5c6f831e77.txt``), in [0, 1).
+    slip_velocity_scale : float
+        Velocity v_ε [m/s] below which Coulomb friction is regularised (it becomes viscous
+        with coefficient µ·F/v_ε), so that the friction force is continuous through zero slip.
+    name, source : str
+        Registry key and citation (seed file and section) of the data.
+    """
+
+    stages: tuple[StageParams, ...]
+    mu_screw_roller: float = 0.05
+    mu_spline: float = 0.1
+    mu_nut_screw: float = 0.0
+    slip_velocity_scale: float = 1e-4
+    name: str = "custom"
+    source: str = ""
+    notes: str = field(default="", compare=False)
+
+    @property
+    def n_stages(self) -> int:
+        """Number of stages n_T [-]."""
+        return len(self.stages)
+
+    @property
+    def total_lead(self) -> float:
+        """Output (rod) travel per screw revolution, Σ L_Sk [m]."""
+        return sum(s.screw_lead for s in self.stages)
+
+    def validate(self) -> "MechanismParams":
+        """Check every stage and every friction parameter.
+
+        Returns
+        -------
+        MechanismParams
+            ``self``.
+
+        Raises
+        ------
+        ValueError
+            Naming the parameter (``stage[k].field`` with k from 1), its value and its range.
+        """
+        if not isinstance(self.stages, tuple) or len(self.stages) < 1:
+            raise ValueError(
+                f"stages = {self.stages!r} is out of range: need a tuple of at least 1 StageParams")
+        for k, st in enumerate(self.stages, start=1):
+            if not isinstance(st, StageParams):
+                raise ValueError(f"stage[{k}] = {st!r} is not a StageParams")
+            st.validate(f"stage[{k}]")
+            if k > 1 and self.mu_spline > 0.0:
+                _check_positive(f"stage[{k}].spline_radius", st.spline_radius)
+            if k < len(self.stages) and self.mu_nut_screw > 0.0:
+                _check_positive(f"stage[{k}].bearing_radius", st.bearing_radius)
+        _check_friction("mu_screw_roller", self.mu_screw_roller)
+        _check_friction("mu_spline", self.mu_spline)
+        _check_friction("mu_nut_screw", self.mu_nut_screw)
+        _check_positive("slip_velocity_scale", self.slip_velocity_scale)
+        return self
+
+    def with_changes(self, **changes: Any) -> "MechanismParams":
+        """Return a copy with mechanism-level fields replaced (e.g. ``mu_screw_roller=0.1``)."""
+        return replace(self, **changes)
+
+    def with_stage(self, k: int, **changes: Any) -> "MechanismParams":
+        """Return a copy whose stage ``k`` (1-based) has the given fields replaced."""
+        if not 1 <= k <= self.n_stages:
+            raise ValueError(f"k = {k!r} is out of range: must be in [1, {self.n_stages}]")
+        stages = list(self.stages)
+        stages[k - 1] = replace(stages[k - 1], **changes)
+        return replace(self, stages=tuple(stages))
+
+
+def stage_field_names() -> tuple[str, ...]:
+    """Names of the per-stage fields, in declaration order (used by the FMU's parameter table)."""
+    return tuple(f.name for f in fields(StageParams))

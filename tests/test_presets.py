@@ -1,0 +1,181 @@
+"""Presets: every registered parameter set loads, validates and carries the seeds' numbers;
+invalid parameters are rejected with a message that names the field and its allowed range."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+import re
+
+import pytest
+
+from prsm_fmu import presets
+from prsm_fmu.kinematics import RecirculatingParams
+from prsm_fmu.params import MechanismParams, StageParams
+from prsm_fmu.presets import seed002, seed003
+
+MM = 1e-3
+KG_MM2 = 1e-9
+SEED_FILE = re.compile(r"00[0-4]_[0-9a-f]{16}\.txt")
+
+
+# ---- registry -------------------------------------------------------------------------------
+def test_registry_lists_one_key_per_source_sorted():
+    assert presets.names() == ("seed000_two_stage", "seed001_two_stage", "seed002_two_stage",
+                               "seed003_single_stage", "seed004_recirculating")
+
+
+@pytest.mark.parametrize("name", presets.names())
+def test_every_preset_loads_validates_and_cites_its_seed(name):
+    params = presets.load(name)
+    assert isinstance(params, (MechanismParams, RecirculatingParams))
+    assert params.validate() is params
+    assert params.name == name
+    assert SEED_FILE.search(params.source), params.source
+
+
+@pytest.mark.parametrize("module_name", presets.MODULES)
+def test_every_preset_module_docstring_cites_its_seed_file(module_name):
+    module = importlib.import_module(f"prsm_fmu.presets.{module_name}")
+    assert SEED_FILE.search(module.__doc__ or "")
+    assert set(module.PRESETS) <= set(presets.names())
+
+
+def test_unknown_preset_is_a_value_error_listing_the_known_names():
+    with pytest.raises(ValueError) as info:
+        presets.load("no_such_machine")
+    for name in presets.names():
+        assert name in str(info.value)
+
+
+# ---- validation rules, one per case ----------------------------------------------------------
+def _bad_stage(k: int, **changes):
+    return presets.load("seed002_two_stage").with_stage(k, **changes)
+
+
+def _bad_mechanism(**changes):
+    return presets.load("seed002_two_stage").with_changes(**changes)
+
+
+POSITIVE_STAGE_FIELDS = ("screw_radius", "roller_radius", "nut_radius", "screw_lead",
+                         "screw_mass", "nut_mass", "roller_mass", "carrier_mass",
+                         "screw_inertia", "roller_inertia", "carrier_inertia")
+
+CASES = [
+    *[pytest.param(_bad_stage(1, **{f: v}), f"stage[1].{f}", "> 0", id=f"{f}={v}")
+      for f in POSITIVE_STAGE_FIELDS for v in (0.0, -1e-3)],
+    pytest.param(_bad_stage(2, nut_mass=float("nan")), "stage[2].nut_mass", "> 0",
+                 id="nut_mass=nan"),
+    pytest.param(_bad_stage(1, screw_starts=0), "stage[1].screw_starts", ">= 1", id="starts=0"),
+    pytest.param(_bad_stage(1, n_rollers=0), "stage[1].n_rollers", ">= 1", id="rollers=0"),
+    pytest.param(_bad_stage(1, carriers=0), "stage[1].carriers", ">= 1", id="carriers=0"),
+    *[pytest.param(_bad_stage(2, flank_angle=v), "stage[2].flank_angle", "(0, pi/2)",
+                   id=f"flank={v:.3f}") for v in (0.0, -0.1, math.pi / 2, 2.0)],
+    *[pytest.param(_bad_mechanism(**{f: v}), f, "[0, 1)", id=f"{f}={v}")
+      for f in ("mu_screw_roller", "mu_spline", "mu_nut_screw") for v in (-0.01, 1.0)],
+    pytest.param(_bad_stage(1, nut_radius=17.0 * MM), "stage[1].nut_radius",
+                 "screw_radius + 2*roller_radius", id="nut_radius_does_not_fit"),
+    pytest.param(_bad_stage(2, screw_starts=4, screw_lead=8.0 * MM), "stage[2].nut_radius",
+                 "screw_starts*roller_radius", id="nut_radius_not_starts_times_roller"),
+    pytest.param(_bad_stage(2, spline_radius=0.0), "stage[2].spline_radius", "> 0",
+                 id="spline_radius_missing"),
+    pytest.param(_bad_stage(1, bearing_radius=0.0), "stage[1].bearing_radius", "> 0",
+                 id="bearing_radius_missing"),
+    pytest.param(_bad_mechanism(stages=()), "stages", "at least 1", id="zero_stages"),
+]
+
+
+@pytest.mark.parametrize(("params", "field", "allowed"), CASES)
+def test_invalid_parameter_is_rejected_naming_field_and_range(params, field, allowed):
+    with pytest.raises(ValueError) as info:
+        params.validate()
+    message = str(info.value)
+    assert message.startswith(field + " = "), message
+    assert allowed in message, message
+
+
+RECIRCULATING_CASES = [
+    *[pytest.param({f: v}, f, "> 0", id=f"{f}={v}")
+      for f in ("screw_diameter", "nut_diameter", "roller_diameter", "screw_lead")
+      for v in (0.0, -1.0)],
+    pytest.param({"screw_starts": 0}, "screw_starts", ">= 1", id="starts=0"),
+    pytest.param({"n_rollers": 0}, "n_rollers", ">= 1", id="rollers=0"),
+    pytest.param({"nut_diameter": 30e-3, "roller_diameter": 1e-3}, "nut_diameter",
+                 "> screw_diameter", id="nut_inside_screw"),
+    pytest.param({"roller_diameter": 6.63e-3 / 2}, "nut_diameter",
+                 "screw_diameter + 2*roller_diameter", id="radius_typed_for_diameter"),
+]
+
+
+@pytest.mark.parametrize(("changes", "field", "allowed"), RECIRCULATING_CASES)
+def test_invalid_recirculating_parameter_is_rejected_naming_field_and_range(changes, field,
+                                                                            allowed):
+    params = dataclasses.replace(presets.load("seed004_recirculating"), **changes)
+    with pytest.raises(ValueError) as info:
+        params.validate()
+    assert str(info.value).startswith(field + " = "), str(info.value)
+    assert allowed in str(info.value)
+
+
+# ---- the seeds' numbers ----------------------------------------------------------------------
+def test_seed002_preset_holds_the_published_masses_and_inertias_in_si():
+    p = presets.load("seed002_two_stage")
+    s1, s2 = p.stages
+    published = {
+        (s1, "roller_mass"): 0.014, (s2, "roller_mass"): 0.039,
+        (s1, "screw_mass"): 0.051, (s2, "screw_mass"): 0.761,
+        (s1, "nut_mass"): 2.2, (s2, "nut_mass"): 20.0,
+        (s1, "roller_inertia"): 0.077 * KG_MM2, (s2, "roller_inertia"): 0.471 * KG_MM2,
+        (s1, "screw_inertia"): 51.94 * KG_MM2, (s2, "screw_inertia"): 172.3 * KG_MM2,
+        (s1, "carrier_inertia"): 2.95 * KG_MM2, (s2, "carrier_inertia"): 19.88 * KG_MM2,
+        (s1, "screw_radius"): 9.75 * MM, (s2, "screw_radius"): 16.5 * MM,
+        (s2, "spline_radius"): 13.0 * MM,
+    }
+    for (stage, field), value in published.items():
+        assert getattr(stage, field) == pytest.approx(value, rel=1e-12), field
+    assert (p.mu_screw_roller, p.mu_spline, p.mu_nut_screw) == (0.05, 0.10, 0.005)
+
+
+def test_seed002_lead_angles_reproduce_its_printed_helix_angles_within_rounding():
+    # seed 002 prints 9.27° and 5.51°: atan(L_S / (2π r_S)) to ±0.005° (rounding to 0.01°)
+    s1, s2 = presets.load("seed002_two_stage").stages
+    for stage, printed in ((s1, 9.27), (s2, 5.51)):
+        angle = math.degrees(math.atan(stage.screw_lead / (2 * math.pi * stage.screw_radius)))
+        assert abs(angle - printed) <= 0.005
+
+
+def test_seed002_friction_scenarios_change_only_the_inter_stage_coefficients():
+    base = seed002.two_stage("base")
+    high_ns = seed002.two_stage("high_mu_ns").validate()
+    assert (high_ns.mu_spline, high_ns.mu_nut_screw) == (0.10, 0.105)
+    assert high_ns.stages == base.stages
+    with pytest.raises(ValueError, match="scenario"):
+        seed002.two_stage("nope")
+
+
+def test_seed003_published_set_is_rejected_on_nut_radius():
+    with pytest.raises(ValueError, match=r"^stage\.nut_radius = 0\.015 m"):
+        seed003.published_stage().validate()
+
+
+def test_seed003_preset_is_the_nearest_standard_prsm():
+    (stage,) = presets.load("seed003_single_stage").stages
+    assert stage.screw_radius == seed003.PUBLISHED["screw_radius"]
+    assert stage.roller_radius == seed003.PUBLISHED["roller_radius"]
+    assert stage.pitch == pytest.approx(seed003.PUBLISHED["pitch"], rel=1e-12)
+    assert stage.screw_starts == 4
+    assert stage.screw_lead == pytest.approx(8.0 * MM, rel=1e-12)
+    assert stage.nut_radius == pytest.approx(20.0 * MM, rel=1e-12)
+    assert stage.screw_radius == pytest.approx((stage.screw_starts - 2) * stage.roller_radius)
+    for field in ("screw_mass", "nut_mass", "roller_mass", "carrier_mass"):
+        assert getattr(stage, field) == seed003.PUBLISHED[field]
+
+
+def test_seed004_preset_holds_table_2_in_si():
+    p = presets.load("seed004_recirculating")
+    assert (p.screw_diameter, p.nut_diameter, p.roller_diameter) == pytest.approx(
+        (31.13 * MM, 44.14 * MM, 6.63 * MM), rel=1e-12)
+    assert (p.screw_lead, p.screw_starts, p.n_rollers) == (pytest.approx(1.0 * MM), 1, 12)
+    # the published diameters misfit by 0.25 mm (d_s + 2 d_r = 44.39 mm against 44.14 mm)
+    assert p.fit_mismatch == pytest.approx(-0.25 * MM, rel=1e-9)
