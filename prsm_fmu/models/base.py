@@ -4,9 +4,10 @@ Drive modes
 -----------
 ``torque``  (the FMU's): inputs u = (screw_torque [N·m], load_force [N]); the screw speed is a
             state.
-``speed``   (the papers'): inputs u = (screw_speed [rad/s], load_force [N]) or
-            (screw_speed, load_force, screw_acceleration [rad/s²]); the screw speed is
-            prescribed and the driven torques are outputs.
+``speed``   (the papers'): inputs u = (screw_speed [rad/s], load_force [N]); the screw speed is
+            prescribed, constant over each step (a change between steps is a step change,
+            whose kinetic-energy jump no work term accounts for), and the driven torques
+            are outputs.
 
 State layout: ``screw_angle`` [rad], ``screw_speed`` [rad/s] (torque drive only), the carrier
 speeds ``carrier_k_speed`` [rad/s] (dynamic level only), then the energy accumulators
@@ -118,8 +119,7 @@ class Model(ABC):
             sol = self.mechanism.solve(omega, wp, load, torque=u[0] - loss, detail=detail)
             motor = u[0]
         else:
-            acc = u[2] if len(u) > 2 else 0.0
-            sol = self.mechanism.solve(omega, wp, load, acceleration=acc, detail=detail)
+            sol = self.mechanism.solve(omega, wp, load, acceleration=0.0, detail=detail)
             motor = sol.motor_torque + loss
         return omega, wp, load, motor, loss, sol
 
@@ -167,8 +167,7 @@ class Model(ABC):
         p_out = load * v_rod
         y = {
             "screw_speed": omega, "screw_angle": x[0],
-            "screw_acceleration": sol.screw_acceleration if self.drive == "torque" else (
-                u[2] if len(u) > 2 else 0.0),
+            "screw_acceleration": sol.screw_acceleration,
             "screw_torque": motor, "rod_position": c_out * x[0], "rod_velocity": v_rod,
             "load_force": load,
         }

@@ -1,0 +1,763 @@
+"""Tests of prsm_fmu.steppers against closed-form solutions.
+
+Every expected value comes from a closed form (exponentials, harmonic oscillator, a
+limit cycle with known radius, stability polynomials) or from the published order
+conditions; no test compares a stepper with its own earlier output, except the
+memory round trip, which is about bit-for-bit reproducibility.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+
+from prsm_fmu.steppers import (
+    EXPLICIT_TABLEAUS,
+    ROS_ALPHA,
+    ROS_B,
+    ROS_BHAT,
+    ROS_GAMMA,
+    ROS_GAMMA_IJ,
+    RK4,
+    STEPPER_NAMES,
+    ExplicitAdaptive,
+    Rosenbrock,
+    ScipyRadau,
+    Stepper,
+    StepFailure,
+    StepStats,
+    _lu_factor,
+    _lu_solve,
+    make_stepper,
+)
+
+RK4_REAL_LIMIT = 2.785  # |h lambda| limit of classic RK4 on the negative real axis
+
+
+# ----------------------------------------------------------------------------------
+# test models
+# ----------------------------------------------------------------------------------
+
+
+class Decay:
+    """x' = -lam x + u[0];  x(t) = u/lam + (x0 - u/lam) exp(-lam t)."""
+
+    n_states = 1
+    state_scale = (1.0,)
+
+    def __init__(self, lam: float = 2.0) -> None:
+        self.lam = lam
+
+    def rhs(self, t, x, u):
+        return [-self.lam * x[0] + u[0]]
+
+    def exact(self, t, x0, u):
+        xs = u[0] / self.lam
+        return xs + (x0 - xs) * math.exp(-self.lam * t)
+
+
+class DecayJ(Decay):
+    def jacobian(self, t, x, u):
+        return [[-self.lam]]
+
+
+class Oscillator:
+    """x'' = -w^2 x as [x, v] in m and m/s; period 2 pi / w."""
+
+    n_states = 2
+
+    def __init__(self, freq: float = 50.0, amp: float = 1e-3) -> None:
+        self.w = 2.0 * math.pi * freq
+        self.state_scale = (amp, amp * self.w)
+
+    def rhs(self, t, x, u):
+        return [x[1], -self.w * self.w * x[0]]
+
+    def jacobian(self, t, x, u):
+        return [[0.0, 1.0], [-self.w * self.w, 0.0]]
+
+    def exact(self, t, x0):
+        c, s = math.cos(self.w * t), math.sin(self.w * t)
+        return [x0[0] * c + x0[1] / self.w * s, -x0[0] * self.w * s + x0[1] * c]
+
+
+class LimitCycle:
+    """Nonlinear 2-state system with closed form (radius -> 1, angle = angle0 + t)."""
+
+    n_states = 2
+    state_scale = (1.0, 1.0)
+
+    def rhs(self, t, x, u):
+        a, b = x
+        q = 1.0 - a * a - b * b
+        return [-b + a * q, a + b * q]
+
+    @staticmethod
+    def exact(t, x0):
+        r0 = math.hypot(x0[0], x0[1])
+        th = math.atan2(x0[1], x0[0]) + t
+        r = 1.0 / math.sqrt(1.0 + (1.0 / r0**2 - 1.0) * math.exp(-2.0 * t))
+        return [r * math.cos(th), r * math.sin(th)]
+
+
+class LimitCycleJ(LimitCycle):
+    def jacobian(self, t, x, u):
+        a, b = x
+        q = 1.0 - a * a - b * b
+        return [[q - 2 * a * a, -1 - 2 * a * b], [1 - 2 * a * b, q - 2 * b * b]]
+
+
+class LimitCycleWrongJ(LimitCycle):
+    """Deliberately wrong constant Jacobian (tests the W-method property)."""
+
+    def jacobian(self, t, x, u):
+        return [[-1.0, 0.3], [0.0, -2.0]]
+
+
+class Stiff2:
+    """y1' = -y1, y2' = -L (y2 - y1): eigenvalues -1 and -L."""
+
+    n_states = 2
+    state_scale = (1.0, 1.0)
+    L = 1e6
+    A = [[-1.0, 0.0], [1e6, -1e6]]
+
+    def rhs(self, t, x, u):
+        return [-x[0], -self.L * (x[1] - x[0])]
+
+    def jacobian(self, t, x, u):
+        return [list(r) for r in self.A]
+
+    def exact(self, t, y0):
+        a = self.L / (self.L - 1.0)
+        b = y0[1] - a * y0[0]
+        return [y0[0] * math.exp(-t), a * y0[0] * math.exp(-t) + b * math.exp(-self.L * t)]
+
+
+class Prothero:
+    """x' = -L (x - cos t): stiff, explicitly time dependent."""
+
+    n_states = 1
+    state_scale = (1.0,)
+    L = 1e6
+
+    def rhs(self, t, x, u):
+        return [-self.L * (x[0] - math.cos(t))]
+
+    def exact(self, t, x0):
+        L = self.L
+        p = (L * L * math.cos(t) + L * math.sin(t)) / (L * L + 1.0)
+        return p + (x0 - L * L / (L * L + 1.0)) * math.exp(-L * t)
+
+
+class NanModel:
+    """rhs becomes nan for t > t_bad."""
+
+    n_states = 2
+    state_scale = (1.0, 1.0)
+
+    def __init__(self, t_bad: float) -> None:
+        self.t_bad = t_bad
+
+    def rhs(self, t, x, u):
+        return [math.nan if t > self.t_bad else -x[0], -x[1]]
+
+
+class Quadrature:
+    """x1' = -x1 and an energy-like quadrature x2' = x1**2 with a tiny scale."""
+
+    n_states = 2
+    state_scale = (1.0, 1e-9)
+
+    def __init__(self, mask=None) -> None:
+        if mask is not None:
+            self.error_mask = mask
+
+    def rhs(self, t, x, u):
+        return [-x[0], x[0] * x[0] + math.sin(50.0 * t)]
+
+
+def all_steppers(model_j, model_nojac=None):
+    """One stepper of every kind (and variant) for a model."""
+    m2 = model_nojac if model_nojac is not None else model_j
+    return [
+        RK4(model_j, substeps=20),
+        ExplicitAdaptive(model_j),
+        ExplicitAdaptive(model_j, order=3),
+        Rosenbrock(model_j),
+        Rosenbrock(m2, jacobian="fd"),
+        ScipyRadau(model_j),
+    ]
+
+
+def observed_orders(errors):
+    return [math.log2(errors[i] / errors[i + 1]) for i in range(len(errors) - 1)]
+
+
+# ----------------------------------------------------------------------------------
+# scalar decay
+# ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("stepper", all_steppers(DecayJ(), Decay()), ids=lambda s: f"{s.name}")
+def test_decay_with_input_matches_exponential(stepper):
+    m = stepper.model
+    x0, u, h = [1.5], (0.8,), 0.5
+    x, stats = stepper.advance(0.0, x0, u, h)
+    exact = m.exact(h, x0[0], u)
+    assert abs(x[0] - exact) <= 1e-5 * abs(exact)
+    assert x0 == [1.5]
+    assert isinstance(stats, StepStats) and stats.substeps >= 1
+
+
+def test_rk4_observed_order_is_four():
+    m = Decay(lam=1.0)
+    errs = []
+    for n in (8, 16, 32):
+        x, _ = RK4(m, substeps=n).advance(0.0, [1.0], (0.0,), 1.0)
+        errs.append(abs(x[0] - m.exact(1.0, 1.0, (0.0,))))
+    for p in observed_orders(errs):
+        assert abs(p - 4.0) <= 0.3
+
+
+@pytest.mark.parametrize("cls", [ExplicitAdaptive, Rosenbrock])
+def test_adaptive_meets_tolerance_and_converges(cls):
+    m = DecayJ(lam=3.0)
+    u = (0.5,)
+    errors = []
+    for rtol in (1e-4, 1e-6, 1e-8):
+        s = cls(m, rtol=rtol, atol=1e-14)
+        x, t, H = [2.0], 0.0, 0.1
+        worst = 0.0
+        for i in range(10):  # ten communication steps: the step-size proposal is carried
+            x, stats = s.advance(t, x, u, H)
+            t = (i + 1) * H
+            exact = m.exact(t, 2.0, u)
+            worst = max(worst, abs(x[0] - exact) / abs(exact))
+            assert stats.error_estimate <= 1.0
+        assert worst <= 10.0 * rtol
+        errors.append(worst)
+    assert errors[0] > errors[1] > errors[2]
+
+
+@pytest.mark.parametrize(
+    "make, order",
+    [
+        (lambda m, n: ExplicitAdaptive(m, fixed_substeps=n), 5),
+        (lambda m, n: ExplicitAdaptive(m, fixed_substeps=n, order=3), 3),
+        (lambda m, n: Rosenbrock(m, fixed_substeps=n), 3),
+    ],
+    ids=["dopri5", "bs3", "ros34pw2"],
+)
+def test_embedded_pair_observed_order_on_decay(make, order):
+    m = DecayJ(lam=1.0)
+    errs = []
+    for n in (4, 8, 16):
+        x, _ = make(m, n).advance(0.0, [1.0], (0.0,), 1.0)
+        errs.append(abs(x[0] - m.exact(1.0, 1.0, (0.0,))))
+    assert abs(observed_orders(errs)[-1] - order) <= 0.3
+
+
+# ----------------------------------------------------------------------------------
+# order on a nonlinear system (checks the tableaus beyond linear problems)
+# ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "make, order, ns",
+    [
+        (lambda n: RK4(LimitCycle(), substeps=n), 4, (20, 40)),
+        (lambda n: ExplicitAdaptive(LimitCycle(), fixed_substeps=n), 5, (40, 80)),
+        (lambda n: ExplicitAdaptive(LimitCycle(), fixed_substeps=n, order=3), 3, (40, 80)),
+        (lambda n: Rosenbrock(LimitCycleJ(), fixed_substeps=n), 3, (40, 80)),
+        (lambda n: Rosenbrock(LimitCycle(), fixed_substeps=n, jacobian="fd"), 3, (40, 80)),
+        # W-method: order 3 is kept with a wrong Jacobian, hence also without df/dt
+        (lambda n: Rosenbrock(LimitCycleWrongJ(), fixed_substeps=n), 3, (80, 160)),
+    ],
+    ids=["rk4", "dopri5", "bs3", "ros-analytic", "ros-fd", "ros-wrong-jacobian"],
+)
+def test_observed_order_nonlinear(make, order, ns):
+    x0, T = [0.3, 0.1], 1.0
+    ex = LimitCycle.exact(T, x0)
+    errs = []
+    for n in ns:
+        x, _ = make(n).advance(0.0, x0, (), T)
+        errs.append(math.hypot(x[0] - ex[0], x[1] - ex[1]))
+    assert abs(observed_orders(errs)[0] - order) <= 0.3
+
+
+@pytest.mark.parametrize(
+    "make, local_order",
+    [
+        (lambda: ExplicitAdaptive(LimitCycle(), fixed_substeps=1), 5),  # embedded order 4
+        (lambda: ExplicitAdaptive(LimitCycle(), fixed_substeps=1, order=3), 3),  # embedded 2
+        (lambda: Rosenbrock(LimitCycleJ(), fixed_substeps=1), 3),  # embedded 2
+    ],
+    ids=["dopri5", "bs3", "ros34pw2"],
+)
+def test_error_estimate_has_local_order_of_embedded_method(make, local_order):
+    est = [make().advance(0.0, [0.3, 0.1], (), h)[1].error_estimate for h in (0.05, 0.025)]
+    assert abs(math.log2(est[0] / est[1]) - local_order) <= 0.3
+
+
+@pytest.mark.parametrize("order", [5, 3])
+def test_explicit_tableau_conditions(order):
+    c, a, b, bh = EXPLICIT_TABLEAUS[order]
+    for ci, row in zip(c, a):
+        assert abs(sum(row) - ci) <= 1e-15
+    p_hat = order - 1
+    for k in range(1, order + 1):
+        assert abs(sum(bi * ci ** (k - 1) for bi, ci in zip(b, c)) - 1.0 / k) <= 1e-14
+    for k in range(1, p_hat + 1):
+        assert abs(sum(bi * ci ** (k - 1) for bi, ci in zip(bh, c)) - 1.0 / k) <= 1e-14
+    # FSAL: the last stage is evaluated at the new solution
+    assert tuple(a[-1]) == tuple(b[: len(a[-1])]) and c[-1] == 1.0
+
+
+def _ros_matrices():
+    s = 4
+    alpha = np.array(ROS_ALPHA)
+    gam = np.array(ROS_GAMMA_IJ) + ROS_GAMMA * np.eye(s)
+    return alpha, gam, np.array(ROS_B), np.array(ROS_BHAT)
+
+
+def test_rosenbrock_order_conditions():
+    """Hairer & Wanner II, Table IV.7.1: order 3 for b, order 2 for b_hat, not more."""
+    alpha, gam, b, bh = _ros_matrices()
+    g = ROS_GAMMA
+    beta = alpha + gam - g * np.eye(4)  # strictly lower alpha_ij + gamma_ij
+    a_i = alpha.sum(axis=1)
+    beta_i = beta.sum(axis=1)
+
+    def conds(w):
+        return [
+            w.sum() - 1.0,
+            w @ beta_i - (0.5 - g),
+            w @ a_i**2 - 1.0 / 3.0,
+            w @ beta @ beta_i - (1.0 / 6.0 - g + g * g),
+        ]
+
+    assert max(abs(v) for v in conds(b)) <= 1e-14
+    assert max(abs(v) for v in conds(bh)[:2]) <= 1e-14
+    assert max(abs(v) for v in conds(bh)[2:]) > 1e-3  # embedded is genuinely order 2
+    assert abs(b @ a_i**3 - 0.25) > 1e-3  # main is genuinely order 3
+    # stiffly accurate: b equals the last row of alpha + gamma
+    assert np.allclose(b, (alpha + gam)[-1], rtol=0, atol=1e-15)
+
+
+def test_rosenbrock_stability_function():
+    alpha, gam, b, bh = _ros_matrices()
+
+    def R(z, w):
+        return 1.0 + z * (w @ np.linalg.solve(np.eye(4) - z * (alpha + gam), np.ones(4)))
+
+    assert abs(R(-1e12, b)) <= 1e-9  # L-stable: R(-inf) = 0
+    ys = np.logspace(-3, 6, 200)
+    assert max(abs(R(1j * y, b)) for y in ys) <= 1.0 + 1e-12  # A-stable on the imaginary axis
+    assert max(abs(R(1j * y, bh)) for y in ys) <= 1.0 + 1e-12
+    assert abs(R(-1e12, bh)) < 1.0
+    for z in (-0.1, -1.0, -10.0, -1e3):  # damping on the real axis
+        assert abs(R(z, b)) < 1.0
+
+
+# ----------------------------------------------------------------------------------
+# harmonic oscillator
+# ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "make, rel",
+    [
+        (lambda m: RK4(m, substeps=50), 1e-5),
+        (lambda m: ExplicitAdaptive(m, rtol=1e-8, atol=1e-10), 1e-6),
+        (lambda m: ExplicitAdaptive(m, rtol=1e-8, atol=1e-10, order=3), 1e-6),
+        (lambda m: Rosenbrock(m, rtol=1e-8, atol=1e-10), 1e-6),
+        (lambda m: Rosenbrock(m, rtol=1e-8, atol=1e-10, jacobian="fd"), 1e-6),
+        (lambda m: ScipyRadau(m, rtol=1e-8, atol=1e-10), 1e-6),
+    ],
+    ids=["rk4", "dopri5", "bs3", "ros", "ros-fd", "radau"],
+)
+def test_harmonic_oscillator_one_period(make, rel):
+    m = Oscillator(freq=50.0, amp=1e-3)
+    s = make(m)
+    x0 = [1e-3, 0.1]
+    x, t, H = list(x0), 0.0, 1e-3  # 20 communication steps of 1 ms = one period
+    for i in range(20):
+        x, _ = s.advance(t, x, (), H)
+        t = (i + 1) * H
+        ex = m.exact(t, x0)
+        assert abs(x[0] - ex[0]) <= rel * m.state_scale[0] * 10
+    ex = m.exact(0.02, x0)
+    assert abs(ex[0] - x0[0]) <= 1e-15 and abs(ex[1] - x0[1]) <= 1e-12
+    for i in range(2):
+        assert abs(x[i] - x0[i]) <= rel * (abs(x0[i]) + m.state_scale[i])
+
+
+# ----------------------------------------------------------------------------------
+# stiffness and stability
+# ----------------------------------------------------------------------------------
+
+
+def _stiff_limit():
+    lam = np.linalg.eigvals(np.array(Stiff2.A))
+    assert sorted(lam.real) == pytest.approx([-1e6, -1.0])
+    return RK4_REAL_LIMIT / max(abs(lam))
+
+
+@pytest.mark.parametrize("jacobian", ["analytic", "fd"])
+def test_rosenbrock_stable_at_100x_explicit_limit(jacobian):
+    m = Stiff2()
+    h_step = 100.0 * _stiff_limit()
+    steps_per_comm = 10
+    H = steps_per_comm * h_step
+    s = Rosenbrock(m, fixed_substeps=steps_per_comm, jacobian=jacobian)
+    y0 = [1.0, 0.0]  # far off the slow manifold y2 = a y1
+    x, t = list(y0), 0.0
+    for i in range(18):
+        x, stats = s.advance(t, x, (), H)
+        t = (i + 1) * H
+        assert max(abs(v) for v in x) <= 1.01  # bounded
+    ex = m.exact(t, y0)
+    assert abs(x[0] - ex[0]) <= 1e-9 and abs(x[1] - ex[1]) <= 1e-9
+    a = m.L / (m.L - 1.0)
+    assert abs(x[1] - a * x[0]) <= 1e-9  # the fast transient is gone
+    assert stats.lu_decompositions == steps_per_comm
+
+
+def test_rosenbrock_converges_to_slow_solution_as_step_shrinks():
+    m = Stiff2()
+    y0, T = [1.0, 0.0], 0.05
+    ex = m.exact(T, y0)
+    errs = []
+    for mult in (1e4, 1e3, 1e2):
+        n = round(T / (mult * _stiff_limit()))
+        x, _ = Rosenbrock(m, fixed_substeps=n).advance(0.0, y0, (), T)
+        errs.append(max(abs(x[0] - ex[0]), abs(x[1] - ex[1])))
+    assert errs[0] > errs[1] > errs[2]
+    assert errs[-1] <= 1e-9
+
+
+@pytest.mark.parametrize("factor, grows", [(1.25, True), (0.8, False)])
+def test_rk4_stability_limit(factor, grows):
+    m = Stiff2()
+    n = 40
+    h_step = factor * _stiff_limit()
+    x, _ = RK4(m, substeps=n).advance(0.0, [1.0, 0.0], (), n * h_step)
+    deviation = abs(x[1] - m.L / (m.L - 1.0) * x[0])  # initially 1
+    if grows:
+        assert deviation > 1e6
+    else:
+        assert deviation < 1e-6
+
+
+def test_rosenbrock_adaptive_on_time_dependent_stiff_problem():
+    m = Prothero()
+    s = Rosenbrock(m, rtol=1e-6, atol=1e-12)
+    x, t, H = [0.0], 0.0, 0.01
+    total = 0
+    for i in range(50):
+        x, stats = s.advance(t, x, (), H)
+        t = (i + 1) * H
+        total += stats.substeps + stats.rejected
+        assert abs(x[0] - m.exact(t, 0.0)) <= 1e-5
+    explicit_steps = 0.5 / (RK4_REAL_LIMIT / m.L)
+    assert total < explicit_steps / 100
+
+
+# ----------------------------------------------------------------------------------
+# work counters
+# ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [1, 3, 10])
+def test_rk4_counts_four_rhs_calls_per_substep(n):
+    calls = []
+
+    class Counting(Decay):
+        def rhs(self, t, x, u):
+            calls.append(t)
+            return super().rhs(t, x, u)
+
+    x, stats = RK4(Counting(), substeps=n).advance(0.0, [1.0], (0.0,), 0.1)
+    assert stats.rhs_calls == 4 * n == len(calls)
+    assert stats.substeps == n
+    assert stats.jacobian_calls == stats.lu_decompositions == stats.rejected == 0
+    assert stats.error_estimate == 0.0
+
+
+class CountingCycle(LimitCycleJ):
+    def __init__(self):
+        self.rhs_calls = 0
+        self.jac_calls = 0
+
+    def rhs(self, t, x, u):
+        self.rhs_calls += 1
+        return super().rhs(t, x, u)
+
+    def jacobian(self, t, x, u):
+        self.jac_calls += 1
+        return super().jacobian(t, x, u)
+
+
+@pytest.mark.parametrize("jacobian", ["fd", "analytic"])
+def test_rosenbrock_fixed_step_counts(jacobian):
+    m = CountingCycle()
+    n_sub = 5
+    x, st = Rosenbrock(m, fixed_substeps=n_sub, jacobian=jacobian).advance(0.0, [0.3, 0.1], (), 0.1)
+    per_step = 4 + (m.n_states if jacobian == "fd" else 0)
+    assert st.rhs_calls == n_sub * per_step == m.rhs_calls
+    assert st.jacobian_calls == n_sub
+    assert m.jac_calls == (n_sub if jacobian == "analytic" else 0)
+    assert st.lu_decompositions == n_sub and st.substeps == n_sub
+
+
+def test_fd_jacobian_matches_analytic():
+    m = LimitCycleJ()
+    s = Rosenbrock(m, jacobian="fd")
+    st = StepStats()
+    x = [0.3, 0.1]
+    f0 = m.rhs(0.0, x, ())
+    jfd = s._jac(m.rhs, 0.0, x, f0, (), st)
+    jan = m.jacobian(0.0, x, ())
+    assert st.jacobian_calls == 1 and st.rhs_calls == m.n_states
+    for i in range(2):
+        for j in range(2):
+            assert abs(jfd[i][j] - jan[i][j]) <= 1e-6
+
+
+def test_adaptive_counts_are_consistent():
+    m = CountingCycle()
+    x, st = ExplicitAdaptive(m, rtol=1e-8).advance(0.0, [0.3, 0.1], (), 1.0)
+    assert st.rhs_calls == 1 + 6 * (st.substeps + st.rejected) == m.rhs_calls
+    m = CountingCycle()
+    x, st = ExplicitAdaptive(m, rtol=1e-6, order=3).advance(0.0, [0.3, 0.1], (), 1.0)
+    assert st.rhs_calls == 1 + 3 * (st.substeps + st.rejected) == m.rhs_calls
+    m = CountingCycle()
+    x, st = Rosenbrock(m, rtol=1e-6).advance(0.0, [0.3, 0.1], (), 1.0)
+    assert st.lu_decompositions == st.substeps + st.rejected
+    assert st.jacobian_calls == m.jac_calls <= st.lu_decompositions
+    assert st.rhs_calls == m.rhs_calls == st.jacobian_calls + 3 * st.lu_decompositions
+
+
+def test_fixed_explicit_counts():
+    m = CountingCycle()
+    x, st = ExplicitAdaptive(m, fixed_substeps=7).advance(0.0, [0.3, 0.1], (), 0.1)
+    assert st.rhs_calls == 1 + 6 * 7 == m.rhs_calls and st.substeps == 7 and st.rejected == 0
+
+
+def test_error_mask_excludes_quadrature_from_error_control():
+    with_all = ExplicitAdaptive(Quadrature(), rtol=1e-6, atol=1e-6)
+    masked = ExplicitAdaptive(Quadrature(mask=(True, False)), rtol=1e-6, atol=1e-6)
+    _, st_all = with_all.advance(0.0, [1.0, 0.0], (), 1.0)
+    x, st_masked = masked.advance(0.0, [1.0, 0.0], (), 1.0)
+    assert st_masked.substeps + st_masked.rejected < st_all.substeps + st_all.rejected
+    assert abs(x[0] - math.exp(-1.0)) <= 1e-5
+    with pytest.raises(ValueError, match="error_mask"):
+        ExplicitAdaptive(Quadrature(mask=(False, False)))
+
+
+def test_adaptive_lands_exactly_on_end_time():
+    class Clock:
+        n_states = 1
+        state_scale = (1.0,)
+
+        def rhs(self, t, x, u):
+            return [3.0 * t * t]  # x = t**3
+
+    for s in (ExplicitAdaptive(Clock(), rtol=1e-10), Rosenbrock(Clock(), rtol=1e-10)):
+        t, x = 0.0, [0.0]
+        for i in range(7):
+            x, _ = s.advance(t, x, (), 0.3)
+            t = (i + 1) * 0.3
+        assert x[0] == pytest.approx(t**3, rel=1e-9)
+
+
+# ----------------------------------------------------------------------------------
+# memory round trip
+# ----------------------------------------------------------------------------------
+
+
+def _memory_cases():
+    cyc, cycj = LimitCycle(), LimitCycleJ()
+    return [
+        RK4(cyc, substeps=3),
+        ExplicitAdaptive(cyc, rtol=1e-7),
+        ExplicitAdaptive(cyc, rtol=1e-5, order=3),
+        ExplicitAdaptive(cyc, fixed_substeps=4),
+        Rosenbrock(cycj, rtol=1e-6),
+        Rosenbrock(cyc, rtol=1e-5, jacobian="fd"),
+        Rosenbrock(cycj, fixed_substeps=4),
+        ScipyRadau(cycj),
+    ]
+
+
+@pytest.mark.parametrize("stepper", _memory_cases(), ids=lambda s: s.name)
+def test_memory_round_trip_is_bit_exact(stepper):
+    x1, _ = stepper.advance(0.0, [0.3, 0.1], (), 0.37)
+    mem = stepper.get_memory()
+    assert isinstance(mem, tuple)
+    a, sa = stepper.advance(0.37, x1, (), 0.21)
+    a2, _ = stepper.advance(0.58, a, (), 0.5)  # move the memory on
+    stepper.set_memory(mem)
+    b, sb = stepper.advance(0.37, x1, (), 0.21)
+    assert a == b  # bit for bit
+    assert sa == sb
+    stepper.reset()
+    stepper.reset()
+
+
+def test_adaptive_memory_carries_step_proposal():
+    s = ExplicitAdaptive(LimitCycle(), rtol=1e-8)
+    assert s.get_memory() == (None,)
+    s.advance(0.0, [0.3, 0.1], (), 0.3)
+    mem = s.get_memory()
+    assert mem[0] is not None and mem[0] > 0.0
+    _, st_warm = s.advance(0.3, [0.3, 0.1], (), 0.3)
+    s.reset()
+    assert s.get_memory() == (None,)
+    with pytest.raises(ValueError):
+        s.set_memory((1.0, 2.0))
+    with pytest.raises(ValueError):
+        s.set_memory((-1.0,))
+    with pytest.raises(ValueError):
+        RK4(LimitCycle()).set_memory((1.0,))
+
+
+# ----------------------------------------------------------------------------------
+# failures and argument checks
+# ----------------------------------------------------------------------------------
+
+
+def _nan_steppers(t_bad):
+    m = NanModel(t_bad)
+    return [
+        RK4(m, substeps=4),
+        ExplicitAdaptive(m),
+        ExplicitAdaptive(m, fixed_substeps=4),
+        Rosenbrock(m),
+        Rosenbrock(m, fixed_substeps=4),
+        ScipyRadau(m),
+    ]
+
+
+@pytest.mark.parametrize("t_bad", [-1.0, 0.3])
+def test_nan_rhs_raises_step_failure_and_keeps_input(t_bad):
+    for s in _nan_steppers(t_bad):
+        x = [1.0, 2.0]
+        with pytest.raises(StepFailure, match=r"t = .* internal step") as info:
+            s.advance(0.0, x, (), 1.0)
+        assert x == [1.0, 2.0], s.name
+        assert s.name in str(info.value)
+        msg = str(info.value)
+        assert "non-finite" in msg or "step size" in msg
+
+
+@pytest.mark.parametrize("bad_h", [0.0, -1e-3, math.nan, math.inf, -math.inf])
+def test_invalid_h_raises_value_error(bad_h):
+    for s in all_steppers(DecayJ()):
+        with pytest.raises(ValueError, match=r"\bh = "):
+            s.advance(0.0, [1.0], (0.0,), bad_h)
+
+
+def test_wrong_state_length_raises():
+    with pytest.raises(ValueError, match="n_states"):
+        RK4(Decay()).advance(0.0, [1.0, 2.0], (0.0,), 0.1)
+
+
+def test_max_substeps_raises():
+    s = ExplicitAdaptive(Stiff2(), rtol=1e-6, max_substeps=50)
+    x = [1.0, 0.0]
+    with pytest.raises(StepFailure, match="max_substeps"):
+        s.advance(0.0, x, (), 0.01)
+    assert x == [1.0, 0.0]
+
+
+def test_singular_iteration_matrix_raises():
+    h = 0.1
+    lam = 1.0 / (h * ROS_GAMMA)  # makes I/(h gamma) - J exactly zero
+
+    class Growth:
+        n_states = 1
+        state_scale = (1.0,)
+
+        def rhs(self, t, x, u):
+            return [lam * x[0]]
+
+        def jacobian(self, t, x, u):
+            return [[lam]]
+
+    with pytest.raises(StepFailure, match="singular"):
+        Rosenbrock(Growth(), fixed_substeps=1).advance(0.0, [1.0], (), h)
+
+
+def test_constructor_validation():
+    with pytest.raises(ValueError, match="substeps"):
+        RK4(Decay(), substeps=0)
+    with pytest.raises(ValueError, match="rtol"):
+        ExplicitAdaptive(Decay(), rtol=-1.0)
+    with pytest.raises(ValueError, match="atol"):
+        Rosenbrock(Decay(), atol=0.0)
+    with pytest.raises(ValueError, match="order"):
+        ExplicitAdaptive(Decay(), order=4)
+    with pytest.raises(ValueError, match="analytic"):
+        Rosenbrock(Decay(), jacobian="analytic")
+    with pytest.raises(ValueError, match="jacobian"):
+        Rosenbrock(Decay(), jacobian="exact")
+    assert Rosenbrock(Decay()).jacobian == "fd"
+    assert Rosenbrock(DecayJ()).jacobian == "analytic"
+
+
+# ----------------------------------------------------------------------------------
+# reference path and factory
+# ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("model", [DecayJ(), Decay()], ids=["jacobian", "no-jacobian"])
+def test_scipy_radau_matches_closed_form(model):
+    for rtol in (1e-5, 1e-8):
+        s = ScipyRadau(model, rtol=rtol, atol=1e-12)
+        x, st = s.advance(0.0, [1.5], (0.8,), 1.0)
+        exact = model.exact(1.0, 1.5, (0.8,))
+        assert abs(x[0] - exact) <= 10 * rtol * abs(exact)
+        assert st.rhs_calls > 0 and st.substeps > 0 and st.lu_decompositions > 0
+
+
+def test_make_stepper():
+    m = DecayJ()
+    assert isinstance(make_stepper("rk4", m, substeps=2), RK4)
+    assert isinstance(make_stepper("explicit_adaptive", m, rtol=1e-5, order=3), ExplicitAdaptive)
+    assert isinstance(make_stepper("rosenbrock", m, jacobian="fd"), Rosenbrock)
+    assert isinstance(make_stepper("radau", m), ScipyRadau)
+    for name in STEPPER_NAMES:
+        s = make_stepper(name, m)
+        assert isinstance(s, Stepper) and s.name == name
+    with pytest.raises(ValueError) as info:
+        make_stepper("euler", m)
+    for name in ("rk4", "explicit_adaptive", "rosenbrock", "radau"):
+        assert name in str(info.value)
+
+
+# ----------------------------------------------------------------------------------
+# dense LU
+# ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 12])
+def test_lu_solves_random_systems(n):
+    rng = random.Random(n)
+    a = [[rng.uniform(-1.0, 1.0) for _ in range(n)] for _ in range(n)]
+    if n > 1:
+        a[0][0] = 0.0  # needs pivoting
+    b = [rng.uniform(-1.0, 1.0) for _ in range(n)]
+    lu = _lu_factor([list(reversed(row)) for row in a])
+    x = _lu_solve(lu, b)
+    ref = np.linalg.solve(np.array(a), np.array(b))
+    assert np.allclose(x, ref, rtol=1e-10, atol=1e-12)
+
+
+def test_lu_detects_singular_matrix():
+    a = [[1.0, 2.0], [2.0, 4.0]]
+    assert _lu_factor([list(reversed(r)) for r in a]) is None
