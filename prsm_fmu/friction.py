@@ -1,13 +1,17 @@
-"""Friction laws shared by every fidelity level.
+"""Friction laws shared by every fidelity level and by the steady-state solver.
 
-All Coulomb laws are regularised the same way so that forces stay continuous through zero
-slip (documented in docs/model.md, "Friction"):
+All Coulomb laws are regularised the same way, here and only here, so that forces stay
+continuous through zero slip (docs/model.md §5). With v = |s| the slip speed and v_ε the
+slip-velocity scale, the friction force on the body whose velocity relative to the other is s is
 
-    f = -µ |N| · v / sqrt(|v|² + v_ε²)
+    f = −µ|N| · s · φ(v),   φ(v) = 1/v for v ≥ v_ε (exact Coulomb),
+                            φ(v) = (2 − v/v_ε)/v_ε for v < v_ε,
 
-Above the slip-velocity scale v_ε the force has the Coulomb magnitude µ|N| along −v (relative
-error ≤ v_ε²/(2|v|²)); below it the law is viscous with coefficient µ|N|/v_ε.  Stiction is not
-modelled.  The dissipated power µ|N| |v|² / sqrt(|v|² + v_ε²) is never negative.
+i.e. the magnitude µ|N|·r(2 − r) with r = v/v_ε inside the band: continuous with a continuous
+first derivative at v = v_ε, viscous (coefficient 2µ|N|/v_ε) at v → 0. Outside the band the law
+is exactly Coulomb, so a contact whose slip direction is fixed transmits a force independent of
+the slip speed (the quasi-static level then has exactly piecewise-constant accelerations).
+Stiction is not modelled. The dissipated power µ|N| v² φ(v) is never negative.
 """
 
 from __future__ import annotations
@@ -15,83 +19,40 @@ from __future__ import annotations
 import math
 
 
+def regularised_factor(speed: float, v_scale: float) -> float:
+    """Factor φ(v) of the regularised Coulomb law: the unit-ish direction is u = s·φ(|s|).
+
+    Parameters
+    ----------
+    speed : float
+        Slip speed |s| ≥ 0 [m/s] (or [rad/s] when ``v_scale`` is one too).
+    v_scale : float
+        Velocity scale v_ε > 0, same unit: the law is exactly Coulomb above it.
+
+    Returns
+    -------
+    float
+        φ [1/(m/s)]: 1/|s| outside the band, (2 − |s|/v_ε)/v_ε inside (finite at |s| = 0).
+    """
+    if speed >= v_scale:
+        return 1.0 / speed
+    return (2.0 - speed / v_scale) / v_scale
+
+
 def regularised_sign(v: float, v_scale: float) -> float:
-    """Continuous replacement of sign(v) for a Coulomb law, in (−1, 1).
+    """Continuous replacement of sign(v) for a one-dimensional Coulomb law, in [−1, 1].
 
     Parameters
     ----------
     v : float
         Sliding velocity [m/s] (or [rad/s] when ``v_scale`` is one too).
     v_scale : float
-        Velocity scale v_ε below which the law turns viscous, same unit as ``v``.
+        Velocity scale v_ε below which the law is blended (see module docstring).
 
     Returns
     -------
     float
-        v / sqrt(v² + v_ε²).
+        v·φ(|v|): exactly ±1 for |v| ≥ v_ε.
     """
-    return v / math.sqrt(v * v + v_scale * v_scale)
+    return v * regularised_factor(abs(v), v_scale)
 
-
-def regularised_direction(vx: float, vy: float, vz: float, v_scale: float) -> tuple[float, float, float, float]:
-    """Direction factor of a regularised Coulomb force for a slip velocity vector.
-
-    Parameters
-    ----------
-    vx, vy, vz : float
-        Slip velocity components [m/s].
-    v_scale : float
-        Slip-velocity scale v_ε [m/s].
-
-    Returns
-    -------
-    tuple
-        (ux, uy, uz, q): u = v / q with q = sqrt(|v|² + v_ε²) [m/s]; the friction force on the
-        body whose velocity relative to the other is v is −µ|N|·u.
-    """
-    q = math.sqrt(vx * vx + vy * vy + vz * vz + v_scale * v_scale)
-    return vx / q, vy / q, vz / q, q
-
-
-def spline_friction_force(mu: float, torque: float, radius: float, sign_of_slip: float) -> float:
-    """Axial friction force between the spline teeth of consecutive screws (seed 000 Eq. 12).
-
-    Parameters
-    ----------
-    mu : float
-        Friction coefficient µ_SS [-].
-    torque : float
-        Torque transmitted by the spline M_Sk [N·m]; the tooth normal force is |M_Sk| / r_SS.
-    radius : float
-        Nominal spline radius r_SS [m].
-    sign_of_slip : float
-        Regularised sign of the sliding velocity the force opposes, in [−1, 1].
-
-    Returns
-    -------
-    float
-        Friction force [N] with the sign of the slip it opposes reversed.
-    """
-    return -mu * abs(torque) / radius * sign_of_slip
-
-
-def bearing_friction_torque(mu: float, axial_force: float, radius: float, sign_of_speed: float) -> float:
-    """Friction torque of the thrust bearing between nut k and screw k+1 (seed 002).
-
-    Parameters
-    ----------
-    mu : float
-        Friction coefficient µ_NS [-].
-    axial_force : float
-        Axial force carried by the bearing [N].
-    radius : float
-        Effective friction radius r_NS [m].
-    sign_of_speed : float
-        Regularised sign of the screw's speed relative to the (non-rotating) nut, in [−1, 1].
-
-    Returns
-    -------
-    float
-        Torque on the screw [N·m], opposing its rotation.
-    """
-    return -mu * abs(axial_force) * radius * sign_of_speed

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .friction import regularised_sign
+from .friction import regularised_factor, regularised_sign
 from .geometry import contact_geometry
 from .kinematics import ideal_carrier_speed_ratio
 from .params import MechanismParams
@@ -213,8 +213,8 @@ class Mechanism:
         sx = omega * fl.ax + wp * fl.bx
         sy = omega * fl.ay + wp * fl.by
         sz = omega * fl.az
-        q = math.sqrt(sx * sx + sy * sy + sz * sz + self.v_eps * self.v_eps)
-        ux, uy, uz = sx / q, sy / q, sz / q
+        phi = regularised_factor(math.sqrt(sx * sx + sy * sy + sz * sz), self.v_eps)
+        ux, uy, uz = sx * phi, sy * phi, sz * phi
         nr = s.n_rollers
         d = nr * (fl.nz - mu * uz)
         kappa = nr * (fl.px * (fl.ny - mu * uy) - fl.py * (fl.nx - mu * ux)) / d
@@ -384,7 +384,9 @@ class Mechanism:
                 b = b0 + b1 * alpha
                 # spline: screw k slides at −ω ℓ_(k−1) relative to screw k−1; bearing: at ω r_NS
                 pk += h * omega * s.spline_speed_factor
-                pk += g * abs(b) * omega  # g = µ_NS r_NS sgñ(ω r_NS)
+                # g = µ_NS r_NS sgñ(ω r_NS); |B| = σ_B B with the sweep's sign (equal at the
+                # solution; keeps one record one affine law in α)
+                pk += g * sb * b * omega
             p_fric += pk
             if detail:
                 fl = s.flanks[fi]
@@ -419,13 +421,16 @@ class Mechanism:
             sx = omega * fl.ax + wp * fl.bx
             sy = omega * fl.ay + wp * fl.by
             sz = omega * fl.az
-            q2 = sx * sx + sy * sy + sz * sz + self.v_eps * self.v_eps
-            q = math.sqrt(q2)
+            v = math.sqrt(sx * sx + sy * sy + sz * sz)
+            phi = regularised_factor(v, self.v_eps)
+            # dφ/dv: −1/v² outside the band, −1/v_ε² inside (friction.py)
+            dphi = -1.0 / (v * v) if v >= self.v_eps else -1.0 / (self.v_eps * self.v_eps)
             sb = sx * fl.bx + sy * fl.by
             bb = fl.bx * fl.bx + fl.by * fl.by
             nr = s.n_rollers
-            d = abs(nr * (fl.nz - self.mu * sz / q))
-            rate = nr * self.mu * abs(a) / d * (bb / q - sb * sb / (q2 * q))
+            d = abs(nr * (fl.nz - self.mu * sz * phi))
+            # ∂(u·b)/∂ω_P with u = s φ(|s|): |b|² φ + φ'(v) (s·b)²/v
+            rate = nr * self.mu * abs(a) / d * (bb * phi + (dphi * sb * sb / v if v > 0.0 else 0.0))
             if rate > 0.0:
                 tau = min(tau, s.j_carrier / rate)
         return tau

@@ -13,7 +13,7 @@ Unknowns for an n-stage mechanism at screw speed ω ≠ 0 and load F (4n − 1 o
 * M_Sk, the torque driving screw k (M_S1 is the motor torque; k = 1..n);
 * B_k, the axial force of the thrust bearing between nut k and screw k+1 (k = 1..n−1).
 
-Residuals (4n − 1), with s_k = ω a_k + ζ_k ω b_k, u_k = s_k / sqrt(|s_k|² + v_ε²),
+Residuals (4n − 1), with s_k = ω a_k + ζ_k ω b_k, u_k = s_k φ(|s_k|) (friction.py),
 f_k = −µ_SR F_k u_k, ℓ_k = L_Sk / 2π, A_n = F and A_k = B_k (k < n):
 
 * carrier k:           G_Pk = N_Rk f_k · b_k = 0;
@@ -44,7 +44,7 @@ from typing import Optional, Sequence
 import numpy as np
 from scipy.optimize import root
 
-from .friction import regularised_sign
+from .friction import regularised_factor, regularised_sign
 from .geometry import ContactGeometry, contact_geometry
 from .params import MechanismParams
 
@@ -211,11 +211,11 @@ class _Problem:
 
     # -- pieces shared by residuals and post-processing ---------------------------------------
     def slip(self, k: int, zeta: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """(s_k, u_k, q_k) of stage k (1-based)."""
+        """(s_k, u_k, φ_k) of stage k (1-based): slip, regularised direction, law factor."""
         c = self.contacts[k - 1]
         s = self.omega * c.a + zeta * self.omega * c.b
-        q = math.sqrt(float(np.dot(s, s)) + self.v_eps ** 2)
-        return s, s / q, q
+        phi = regularised_factor(math.sqrt(float(np.dot(s, s))), self.v_eps)
+        return s, s * phi, phi
 
     def spline_friction(self, k: int, torque: float) -> float:
         """h_k [N] on screw k from screw k−1 (0 for k = 1)."""

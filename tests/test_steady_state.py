@@ -26,6 +26,7 @@ OMEGA, LOAD = 100.0, 5000.0          # seed 000 §3.1 operating point
 
 
 @pytest.fixture(scope="module")
+
 def p000():
     return seed000.two_stage()
 
@@ -34,6 +35,11 @@ def p000():
 def p002():
     return seed002.two_stage("high_mu_ns").validate()
 
+
+
+def law_factor(v: float, v_eps: float) -> float:
+    """docs/model.md §5 written out again: u = s·φ(|s|), Coulomb outside the band v_ε."""
+    return 1.0 / v if v >= v_eps else (2.0 - v / v_eps) / v_eps
 
 def c_n(params) -> float:
     return params.total_lead / (2.0 * math.pi)
@@ -61,7 +67,7 @@ def dissipation(params, r) -> float:
         s = w * a + r[f"stage[{k}].carrier_speed_ratio"] * w * b
         s2 = float(s @ s)
         total += (st.n_rollers * params.mu_screw_roller * r[f"stage[{k}].normal_force"]
-                  * s2 / math.sqrt(s2 + v_eps ** 2))
+                  * s2 * law_factor(math.sqrt(s2), v_eps))
         if k >= 2:
             ell_prev = params.stages[k - 2].screw_lead / (2 * math.pi)
             total += r[f"stage[{k}].spline_friction"] * w * ell_prev
@@ -72,7 +78,7 @@ def dissipation(params, r) -> float:
         axial = axial + r[f"stage[{k}].spline_friction"] - h_next    # = B_(k-1) = A_(k-1)
         r_ns = params.stages[k - 2].bearing_radius
         vb = w * r_ns
-        total += params.mu_nut_screw * abs(axial) * vb * vb / math.sqrt(vb * vb + v_eps ** 2)
+        total += params.mu_nut_screw * abs(axial) * vb * vb * law_factor(abs(vb), v_eps)
     return total
 
 
@@ -141,7 +147,7 @@ def test_matches_direct_back_substitution(p002):
     params, w, load = p002, 80.0, 7000.0
     r = steady_state(params, w, load)
     mu, v_eps = params.mu_screw_roller, params.slip_velocity_scale
-    sgn = lambda v: v / math.sqrt(v * v + v_eps ** 2)          # noqa: E731
+    sgn = lambda v: v * law_factor(abs(v), v_eps)          # noqa: E731
     n = params.n_stages
     axial, m_next, h_next = load, 0.0, 0.0
     for k in range(n, 0, -1):
@@ -150,7 +156,7 @@ def test_matches_direct_back_substitution(p002):
         a, b = (np.array(v) for v in g.slip_jacobians())
         zeta = -(a @ b) / (b @ b)
         s = w * a + zeta * w * b
-        u = s / math.sqrt(s @ s + v_eps ** 2)
+        u = s * law_factor(math.sqrt(s @ s), v_eps)
         nrm, p = np.array(g.normal), np.array(g.point)
         f_k = axial / (st.n_rollers * (nrm[2] - mu * u[2]))
         force = f_k * nrm - mu * f_k * u

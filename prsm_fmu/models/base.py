@@ -60,6 +60,9 @@ class Model(ABC):
         #: per-state absolute scale for error norms [rad, rad/s, rad/s, J]
         self.state_scale = tuple(1.0 for _ in names)
         self.error_mask = tuple(True for _ in names)
+        #: states that no derivative depends on (screw angle, work integrals): steppers may skip
+        #: their Jacobian columns
+        self.quadrature_states = (0, self._i_energy, self._i_energy + 1, self._i_energy + 2)
         stage_outputs = []
         for k in range(1, n + 1):
             stage_outputs += [f"stage[{k}].contact_force", f"stage[{k}].normal_force",

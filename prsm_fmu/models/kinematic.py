@@ -11,9 +11,10 @@ from __future__ import annotations
 from ..friction import regularised_sign
 from ..params import MechanismParams
 from .base import Model
+from .slaved import SlavedLevel
 
 
-class KinematicModel(Model):
+class KinematicModel(SlavedLevel, Model):
     """Ideal screw with the mechanism's inertias and an optional constant efficiency.
 
     Parameters

@@ -11,9 +11,10 @@ carriers' spin-up (seed 000 Fig. 3), which lasts ~5 carrier time constants.
 from __future__ import annotations
 
 from .base import Model
+from .slaved import SlavedLevel
 
 
-class QuasiStaticModel(Model):
+class QuasiStaticModel(SlavedLevel, Model):
     """Carriers slaved at their equilibrium ratio; friction and contact forces algebraic."""
 
     fidelity = "quasi-static"

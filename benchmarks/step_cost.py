@@ -1,0 +1,119 @@
+"""Cost of advancing the torque-driven two-stage machine across 1 ms steps, against restarted Radau.
+
+Scenarios: seed 000's two-stage PRSM, torque drive, starting at 100 rad/s with the carriers at
+equilibrium; the motor torque and the load change every 1 ms step, as they do inside a closed
+loop, over 100 steps; the load is F(t) = 5000 + 1000 sin(2π·25 t) N and the motor torque
+
+* ``moving`` (the figure of merit): M(t) = 19.75 F(t)/5000 + 1.0 sin(2π·40 t) N·m, the steady
+  torque of the load plus a ripple; the screw keeps turning (≈ 60…140 rad/s);
+* ``stop-and-go``: M(t) = 20 + 4 sin(2π·40 t) N·m, open loop; the screw stalls at zero speed
+  in the self-holding band between back-drive and forward torque, where the regularised
+  friction is stiff for every level (reported, not the figure of merit; see issue 5's
+  zero-speed study).
+
+For each fidelity level, each stepper advances the same steps with the same held inputs from
+the same reference state (so errors do not accumulate from step to step and every step is the
+same task for every method). The baseline is ``scipy.integrate.solve_ivp(method="Radau")``
+restarted on each step at rtol 1e-6. Error (DESIGN.md §5): max over steps and outputs of
+|y − y_ref| / max|y_ref|, against Radau at rtol 1e-12 on the same level. Cost: CPU seconds per
+step and rhs calls per step. Ratios are measured in this run, on this machine.
+
+Run: ``python benchmarks/step_cost.py`` (about 30 s).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+from prsm_fmu import presets
+from prsm_fmu.models import make_model
+from prsm_fmu.steppers import make_stepper
+
+H = 1e-3
+N_STEPS = 100
+OUTPUTS = ("screw_speed", "rod_position", "stage[1].contact_force", "stage[2].contact_force",
+           "stage[1].carrier_speed_ratio", "stage[2].carrier_speed_ratio", "screw_acceleration",
+           "friction_power")
+
+
+def load(t: float) -> float:
+    """Load force [N] held over the step starting at t [s]."""
+    return 5000.0 + 1000.0 * math.sin(2 * math.pi * 25 * t)
+
+
+SCENARIOS = {
+    "moving": lambda t: (19.75 * load(t) / 5000.0 + 1.0 * math.sin(2 * math.pi * 40 * t), load(t)),
+    "stop-and-go": lambda t: (20.0 + 4.0 * math.sin(2 * math.pi * 40 * t), load(t)),
+}
+inputs = SCENARIOS["moving"]
+
+
+def reference(model):
+    """States at every step start and end, from Radau at rtol 1e-12 [SI]."""
+    st = make_stepper("radau", model, rtol=1e-12, atol=1e-14)
+    x = model.initial_state(inputs(0.0), screw_speed=100.0, carrier_ratio=None)
+    starts, ends = [], []
+    for i in range(N_STEPS):
+        t = i * H
+        starts.append(x)
+        x, _ = st.advance(t, x, inputs(t), H)
+        ends.append(x)
+    return starts, ends
+
+
+def measure(model, name, opts, starts, ends):
+    """(CPU s per step, rhs calls per step, error) of one stepper over the reference's steps."""
+    st = make_stepper(name, model, **opts)
+    results = []
+    rhs = 0
+    cpu0 = time.process_time()
+    for i in range(N_STEPS):
+        st.reset()
+        x, stats = st.advance(i * H, starts[i], inputs(i * H), H)
+        results.append(x)
+        rhs += stats.rhs_calls
+    cpu = (time.process_time() - cpu0) / N_STEPS
+    err = 0.0
+    ys = [model.outputs((i + 1) * H, results[i], inputs(i * H)) for i in range(N_STEPS)]
+    yr = [model.outputs((i + 1) * H, ends[i], inputs(i * H)) for i in range(N_STEPS)]
+    for name_out in OUTPUTS:
+        scale = max(abs(y[name_out]) for y in yr) or 1.0
+        err = max(err, max(abs(a[name_out] - b[name_out]) for a, b in zip(ys, yr)) / scale)
+    return cpu, rhs / N_STEPS, err
+
+
+def main() -> None:
+    """Print the cost and error tables and the ratios against restarted Radau."""
+    global inputs
+    for scenario, fn in SCENARIOS.items():
+        inputs = fn
+        print(f"\n== scenario: {scenario} ==")
+        table()
+
+
+def table() -> None:
+    """One table: every level and stepper on the current scenario."""
+    params = presets.load("seed000_two_stage")
+    configs = {
+        "dynamic": [("rosenbrock", {"rtol": 1e-6, "atol": 1e-9}),
+                    ("explicit_adaptive", {"rtol": 1e-6, "atol": 1e-9})],
+        "quasi-static": [("explicit_adaptive", {"rtol": 1e-6, "atol": 1e-9, "order": 3}),
+                         ("explicit_adaptive", {"rtol": 1e-6, "atol": 1e-9}),
+                         ("rk4", {"substeps": 1})],
+    }
+    print(f"{'level':13s} {'stepper':28s} {'CPU/step':>10s} {'rhs/step':>9s} {'error':>9s} {'speed-up':>9s}")
+    for fidelity, candidates in configs.items():
+        model = make_model(params, fidelity, "torque")
+        starts, ends = reference(model)
+        base_cpu, base_rhs, base_err = measure(model, "radau", {"rtol": 1e-6, "atol": 1e-9}, starts, ends)
+        print(f"{fidelity:13s} {'radau (baseline, restarted)':28s} {base_cpu * 1e6:8.1f}µs {base_rhs:9.1f} {base_err:9.1e} {1.0:9.1f}")
+        for name, opts in candidates:
+            cpu, rhs, err = measure(model, name, opts, starts, ends)
+            label = name + (f" order {opts['order']}" if "order" in opts else "")
+            verdict = "" if err <= base_err else "  (error above baseline)"
+            print(f"{'':13s} {label:28s} {cpu * 1e6:8.1f}µs {rhs:9.1f} {err:9.1e} {base_cpu / cpu:8.1f}x{verdict}")
+
+
+if __name__ == "__main__":
+    main()

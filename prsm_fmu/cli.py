@@ -1,0 +1,530 @@
+"""The ``prsm-fmu`` command line.
+
+Subcommands::
+
+    prsm-fmu startup [--preset seed000_two_stage] [--fidelity dynamic] [--speed 100]
+                     [--load 5000] [--t-end 1e-3] [--interval 1e-6] [--out out]
+    prsm-fmu steady  [--preset seed000_two_stage] [--speed 100] [--load 5000]
+    prsm-fmu presets
+
+``startup`` runs the start-up scenario of seed 000 §3.1 (the screw speed stepped at t = 0 with
+the carriers at rest, a constant load on the last nut), prints a table, the carriers' settling
+times and the run's cost and energy balance, and writes ``startup.csv`` and ``startup.png``.
+``steady`` prints the steady state found by root finding (:func:`prsm_fmu.steady_state`).
+All quantities are SI (m, N, N·m, rad/s, s, W, J).
+
+The helpers :func:`settling_time`, :func:`energy_balance_residual`, :func:`write_csv` and
+:func:`plot_startup` are shared with :mod:`prsm_fmu.report`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import sys
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from . import presets as _presets
+from .models import FIDELITIES
+from .params import MechanismParams
+from .simulate import simulate
+from .steady_state import steady_state
+from .steppers import StepFailure
+
+__all__ = ["main", "build_parser", "settling_time", "is_settled", "energy_balance_residual", "unit_of",
+           "write_csv", "plot_startup", "startup_table"]
+
+#: relative band of the settling time (1 % of the final value)
+SETTLING_BAND = 0.01
+
+#: steppers accepted by ``--stepper`` (see prsm_fmu.steppers)
+STEPPERS = ("rk4", "explicit_adaptive", "rosenbrock", "radau")
+
+# unit of each output, by full name or by the part after "stage[k]."
+_UNITS = {
+    "time": "s", "screw_speed": "rad/s", "screw_angle": "rad", "screw_acceleration": "rad/s^2",
+    "screw_torque": "N·m", "rod_position": "m", "rod_velocity": "m/s", "load_force": "N",
+    "contact_force": "N", "normal_force": "N", "driven_torque": "N·m", "spline_friction": "N",
+    "carrier_speed": "rad/s", "carrier_speed_ratio": "-", "efficiency": "-",
+    "friction_power": "W", "input_power": "W", "output_power": "W", "input_work": "J",
+    "output_work": "J", "friction_work": "J", "kinetic_energy": "J", "rod_force": "N",
+    "bearing_force": "N", "residual_norm": "-",
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# analysis helpers (also used by prsm_fmu.report)
+# ---------------------------------------------------------------------------------------------
+def unit_of(name: str) -> str:
+    """SI unit of an output name, e.g. ``"stage[2].driven_torque"`` → ``"N·m"``.
+
+    Parameters
+    ----------
+    name : str
+        Output name of the vocabulary in README.md "Conventions" (``time`` included).
+
+    Returns
+    -------
+    str
+        The unit, ``"-"`` for dimensionless quantities, ``"?"`` if the name is not known.
+    """
+    base = name.split(".", 1)[1] if name.startswith("stage[") and "." in name else name
+    return _UNITS.get(base, "?")
+
+
+def settling_time(time: Sequence[float], value: Sequence[float],
+                  band: float = SETTLING_BAND) -> float:
+    """First time after which a signal stays within ``band`` of its final value.
+
+    The final value is the last sample, ζ_f.  The settling time is the first t_s such that
+    |ζ(t) − ζ_f| ≤ band·|ζ_f| for every sample t ≥ t_s; between the last sample outside the
+    band and the next one it is interpolated linearly, so it is not quantised to the output
+    grid.
+
+    Parameters
+    ----------
+    time : sequence of float
+        Sample times [s], increasing.
+    value : sequence of float
+        The signal at those times (e.g. a carrier speed ratio [-]).
+    band : float
+        Relative half-width of the band [-], default 0.01 (1 %).
+
+    Returns
+    -------
+    float
+        Settling time [s]; ``time[0]`` if the signal starts inside the band; NaN if the final
+        value is 0 or not finite (the relative band is undefined).
+    """
+    t = np.asarray(time, dtype=float)
+    z = np.asarray(value, dtype=float)
+    z_f = z[-1]
+    tol = band * abs(z_f)
+    if not math.isfinite(z_f) or tol == 0.0:
+        return math.nan
+    excess = np.abs(z - z_f) - tol
+    outside = np.nonzero(excess > 0.0)[0]
+    if outside.size == 0:
+        return float(t[0])
+    i = int(outside[-1])          # < len - 1, because the last sample is inside the band
+    e0, e1 = excess[i], excess[i + 1]
+    frac = e0 / (e0 - e1) if e0 != e1 else 1.0
+    return float(t[i] + frac * (t[i + 1] - t[i]))
+
+
+def is_settled(time: Sequence[float], value: Sequence[float],
+               band: float = SETTLING_BAND) -> bool:
+    """Whether a signal has reached its final value within the run.
+
+    True if it varies by at most a tenth of the settling band (0.1·band·|final value|) over
+    the last 20 % of the run, so that the final sample is a fair stand-in for the steady value
+    that :func:`settling_time` measures against.
+
+    Parameters
+    ----------
+    time, value : sequence of float
+        Sample times [s] and the signal, as for :func:`settling_time`.
+    band : float
+        Relative band [-].
+
+    Returns
+    -------
+    bool
+    """
+    t = np.asarray(time, dtype=float)
+    z = np.asarray(value, dtype=float)
+    tail = z[t >= t[0] + 0.8 * (t[-1] - t[0])]
+    if tail.size == 0 or not np.all(np.isfinite(tail)):
+        return False
+    return float(np.max(tail) - np.min(tail)) <= 0.1 * band * abs(z[-1])
+
+
+def energy_balance_residual(res: Mapping[str, np.ndarray]) -> float:
+    """Relative energy-balance residual |W_in − W_out − W_f − ΔT| / W_in at the end of a run.
+
+    Parameters
+    ----------
+    res : mapping
+        The result of :func:`prsm_fmu.simulate` (needs ``input_work``, ``output_work``,
+        ``friction_work`` [J] and ``kinetic_energy`` [J]).
+
+    Returns
+    -------
+    float
+        The residual [-]; the absolute residual [J] if W_in = 0.
+    """
+    w_in = float(res["input_work"][-1])
+    w_out = float(res["output_work"][-1])
+    w_f = float(res["friction_work"][-1])
+    d_t = float(res["kinetic_energy"][-1] - res["kinetic_energy"][0])
+    err = abs(w_in - w_out - w_f - d_t)
+    return err / abs(w_in) if w_in != 0.0 else err
+
+
+def _output_columns(res: Mapping[str, np.ndarray]) -> list[str]:
+    """Names of the time series in a simulate result (``time`` first, scalars left out)."""
+    return [k for k, v in res.items() if isinstance(v, np.ndarray) and v.ndim == 1]
+
+
+def write_csv(res: Mapping[str, np.ndarray], path: str) -> None:
+    """Write every time series of a simulate result to a CSV file.
+
+    The header names each column with its unit, e.g. ``time [s],screw_speed [rad/s],...``;
+    the values are written with 12 significant digits.  UTF-8 (the unit ``N·m``).
+
+    Parameters
+    ----------
+    res : mapping
+        The result of :func:`prsm_fmu.simulate`.
+    path : str
+        Output file.
+    """
+    cols = _output_columns(res)
+    data = np.column_stack([res[c] for c in cols])
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow([f"{c} [{unit_of(c)}]" for c in cols])
+        for row in data:
+            w.writerow([f"{v:.12g}" for v in row])
+
+
+def _n_stages(res: Mapping[str, np.ndarray]) -> int:
+    n = 0
+    while f"stage[{n + 1}].carrier_speed_ratio" in res:
+        n += 1
+    return n
+
+
+def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str,
+                 title: str = "") -> None:
+    """Save a 2×2 figure like seed 000 Fig. 3 for one or more start-up runs.
+
+    Panels: (a) carrier speed ratios ζ_k; (b) driven torques M_Sk [N·m]; (c) axial contact
+    forces per roller F_Srzk [N]; (d) efficiency η [-] (left axis) and spline friction f_Sk
+    [N] of stages k ≥ 2 (right axis, dotted), all against time in ms.  Stages are told apart
+    by colour, runs by line style.  Uses matplotlib's Agg backend (no display needed).
+
+    Parameters
+    ----------
+    runs : sequence of (label, result)
+        Results of :func:`prsm_fmu.simulate`; the label ("" for none) names the run in the
+        legends.
+    path : str
+        Output PNG file.
+    title : str
+        Figure title.
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    styles = ["-", "--", "-.", ":"]
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5), sharex=True)
+    ax_z, ax_m, ax_f, ax_e = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
+    ax_h = ax_e.twinx()
+    for j, (label, res) in enumerate(runs):
+        ls = styles[j % len(styles)]
+        suffix = f", {label}" if label else ""
+        t_ms = np.asarray(res["time"]) * 1e3
+        n = _n_stages(res)
+        for k in range(1, n + 1):
+            c = colours[(k - 1) % len(colours)]
+            ax_z.plot(t_ms, res[f"stage[{k}].carrier_speed_ratio"], ls, color=c,
+                      label=f"ζ_PS{k}{suffix}")
+            ax_m.plot(t_ms, res[f"stage[{k}].driven_torque"], ls, color=c,
+                      label=f"M_S{k}{suffix}")
+            ax_f.plot(t_ms, res[f"stage[{k}].contact_force"], ls, color=c,
+                      label=f"F_Srz{k}{suffix}")
+            if k >= 2:
+                ax_h.plot(t_ms, res[f"stage[{k}].spline_friction"], ls, color=c, alpha=0.8,
+                          label=f"f_S{k}{suffix}")
+        ax_e.plot(t_ms, res["efficiency"], ls, color="black", label=f"η{suffix}")
+    ax_z.set_ylabel("carrier speed ratio ζ_PSk [-]")
+    ax_z.set_title("(a) carrier speed ratios")
+    ax_m.set_ylabel("driven torque M_Sk [N·m]")
+    ax_m.set_title("(b) driven torques")
+    ax_f.set_ylabel("axial contact force per roller F_Srzk [N]")
+    ax_f.set_title("(c) screw–roller axial contact forces")
+    ax_e.set_ylabel("efficiency η [-]")
+    ax_h.set_ylabel("spline friction f_Sk [N]")
+    ax_e.set_title("(d) efficiency (black) and spline friction (colour)")
+    for ax in (ax_f, ax_e):
+        ax.set_xlabel("time [ms]")
+    for ax in (ax_z, ax_m, ax_f):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc="best")
+    ax_e.grid(True, alpha=0.3)
+    h1, l1 = ax_e.get_legend_handles_labels()
+    h2, l2 = ax_h.get_legend_handles_labels()
+    ax_e.legend(h1 + h2, l1 + l2, fontsize=8, loc="center right")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _sample_indices(time: np.ndarray, n_rows: int = 11) -> list[int]:
+    """Indices of the samples nearest to n_rows evenly spaced times over the run."""
+    targets = np.linspace(time[0], time[-1], n_rows)
+    idx = [int(np.argmin(np.abs(time - t))) for t in targets]
+    return sorted(set(idx))
+
+
+def startup_table(res: Mapping[str, np.ndarray], n_rows: int = 11) -> str:
+    """The start-up run as a fixed-width text table at ~``n_rows`` evenly spaced times.
+
+    Columns: time [ms], ζ_PSk [-], M_Sk [N·m], F_Srzk [N] for every stage k, f_Sk [N] for
+    k ≥ 2 and η [-].
+    """
+    t = np.asarray(res["time"])
+    n = _n_stages(res)
+    cols: list[tuple[str, Callable[[int], float]]] = [("time [ms]", lambda i: t[i] * 1e3)]
+    for k in range(1, n + 1):
+        cols.append((f"ζ_PS{k} [-]", lambda i, k=k: res[f"stage[{k}].carrier_speed_ratio"][i]))
+    for k in range(1, n + 1):
+        cols.append((f"M_S{k} [N·m]", lambda i, k=k: res[f"stage[{k}].driven_torque"][i]))
+    for k in range(1, n + 1):
+        cols.append((f"F_Srz{k} [N]", lambda i, k=k: res[f"stage[{k}].contact_force"][i]))
+    for k in range(2, n + 1):
+        cols.append((f"f_S{k} [N]", lambda i, k=k: res[f"stage[{k}].spline_friction"][i]))
+    cols.append(("η [-]", lambda i: res["efficiency"][i]))
+    widths = [max(len(h), 10) for h, _ in cols]
+    lines = ["  ".join(h.rjust(w) for (h, _), w in zip(cols, widths))]
+    for i in _sample_indices(t, n_rows):
+        cells = []
+        for (h, f), w in zip(cols, widths):
+            v = float(f(i))
+            cells.append((f"{v:.4f}" if h.startswith(("time", "ζ", "η")) else f"{v:.2f}").rjust(w))
+        lines.append("  ".join(cells))
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# argument types
+# ---------------------------------------------------------------------------------------------
+def _finite_float(text: str) -> float:
+    """argparse type: a finite number."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is out of range: must be a finite number")
+    return v
+
+
+def _nonzero_float(text: str) -> float:
+    """argparse type: a finite, non-zero number."""
+    v = _finite_float(text)
+    if v == 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is out of range: must be non-zero")
+    return v
+
+
+def _positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    v = _finite_float(text)
+    if not v > 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is out of range: must be > 0")
+    return v
+
+
+def _mechanism_names() -> list[str]:
+    """Presets that are multi-stage PRSMs (MechanismParams), i.e. usable by the models."""
+    return [n for n in _presets.names() if isinstance(_presets.load(n), MechanismParams)]
+
+
+def _preset(text: str) -> MechanismParams:
+    """argparse type: the name of a PRSM preset, loaded."""
+    try:
+        p = _presets.load(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if not isinstance(p, MechanismParams):
+        raise argparse.ArgumentTypeError(
+            f"preset {text!r} is not a planetary roller screw mechanism the models can run: "
+            f"must be one of {', '.join(_mechanism_names())}")
+    return p
+
+
+# ---------------------------------------------------------------------------------------------
+# subcommands
+# ---------------------------------------------------------------------------------------------
+def cmd_startup(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Run the seed 000 §3.1 start-up scenario; print a table; write CSV and PNG.
+
+    The screw speed is stepped to ``args.speed`` [rad/s] at t = 0 with the carriers at rest
+    (drive "speed") under a constant ``args.load`` [N] on the last nut, simulated to
+    ``args.t_end`` [s] with outputs every ``args.interval`` [s].
+
+    Returns
+    -------
+    int
+        0 on success, 2 for inconsistent arguments (after ``parser.error``), 1 if the
+        simulation fails.
+    """
+    n_steps = round(args.t_end / args.interval)
+    if n_steps < 1 or abs(n_steps * args.interval - args.t_end) > 1e-9 * args.t_end:
+        parser.error(f"argument --t-end: {args.t_end!r} s must be a whole multiple of "
+                     f"--interval {args.interval!r} s")
+    if n_steps > 10_000_000:
+        parser.error(f"argument --interval: {args.interval!r} s gives {n_steps} output "
+                     "intervals over --t-end; at most 10 000 000")
+    params: MechanismParams = args.preset
+    res = simulate(params, fidelity=args.fidelity, drive="speed", screw_speed=args.speed,
+                   load_force=args.load, t_end=args.t_end, output_interval=args.interval,
+                   stepper=args.stepper)
+    n = params.n_stages
+    print(f"start-up: preset {params.name}, fidelity {args.fidelity}, screw speed step to "
+          f"{args.speed:g} rad/s at t = 0 (carriers at rest), load {args.load:g} N, "
+          f"t_end {args.t_end:g} s, output interval {args.interval:g} s")
+    print(f"µ_SR = {params.mu_screw_roller:g}, µ_SS = {params.mu_spline:g}, "
+          f"µ_NS = {params.mu_nut_screw:g}")
+    print()
+    print(startup_table(res))
+    print()
+    t = res["time"]
+    for k in range(1, n + 1):
+        z = res[f"stage[{k}].carrier_speed_ratio"]
+        ts = settling_time(t, z)
+        note = ""
+        if not is_settled(t, z):
+            note = (" — NOT settled: ζ still drifts over the last 20 % of the run, so this "
+                    "time is relative to an unfinished transient; lengthen --t-end")
+        print(f"carrier {k}: settles (1 % band) at t = {ts * 1e3:.4f} ms, "
+              f"ζ_PS{k} final = {z[-1]:.5f}{note}")
+    print(f"efficiency: {res['efficiency'][0]:.4f} at t = 0, {res['efficiency'][-1]:.4f} at "
+          f"t = {t[-1] * 1e3:g} ms")
+    print(f"cost and accuracy: {res['rhs_calls']} rhs calls, {res['cpu_time']:.3f} s CPU, "
+          f"energy-balance residual |W_in − W_out − W_f − ΔT| / W_in = "
+          f"{energy_balance_residual(res):.2e}")
+    os.makedirs(args.out, exist_ok=True)
+    csv_path = os.path.join(args.out, "startup.csv")
+    png_path = os.path.join(args.out, "startup.png")
+    write_csv(res, csv_path)
+    plot_startup([("", res)], png_path,
+                 title=f"{params.name}: start-up to {args.speed:g} rad/s under "
+                       f"{args.load:g} N ({args.fidelity}; µ_SR {params.mu_screw_roller:g}, "
+                       f"µ_SS {params.mu_spline:g})")
+    print(f"wrote {csv_path} and {png_path}")
+    return 0
+
+
+def cmd_steady(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Print the steady state (:func:`prsm_fmu.steady_state`) as a table of name, value, unit.
+
+    Returns
+    -------
+    int
+        0.
+    """
+    params: MechanismParams = args.preset
+    ss = steady_state(params, screw_speed=args.speed, load_force=args.load)
+    print(f"steady state: preset {params.name}, screw speed {args.speed:g} rad/s, "
+          f"load {args.load:g} N")
+    width = max(len(k) for k in ss)
+    for k, v in ss.items():
+        print(f"{k.ljust(width)}  {v:>16.8g}  {unit_of(k)}")
+    return 0
+
+
+def cmd_presets(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Print the preset names, one per line.
+
+    Returns
+    -------
+    int
+        0.
+    """
+    for name in _presets.names():
+        print(name)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``prsm-fmu`` with its subcommands.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    parser = argparse.ArgumentParser(
+        prog="prsm-fmu",
+        description="Planetary roller screw mechanism (PRSM) dynamics. SI units throughout.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser(
+        "startup", help="seed 000 §3.1 start-up: screw speed step, carriers at rest",
+        description="Step the screw speed at t = 0 with the carriers at rest (seed 000 §3.1), "
+                    "print a table, the carriers' settling times and the energy balance, and "
+                    "write OUT/startup.csv and OUT/startup.png.")
+    p.add_argument("--preset", type=_preset, default="seed000_two_stage",
+                   help="preset name (see 'prsm-fmu presets'); default %(default)s")
+    p.add_argument("--fidelity", choices=FIDELITIES, default="dynamic",
+                   help="model level; default %(default)s")
+    p.add_argument("--speed", type=_nonzero_float, default=100.0,
+                   help="screw speed after the step [rad/s], non-zero; default %(default)g")
+    p.add_argument("--load", type=_finite_float, default=5000.0,
+                   help="load force on the last nut [N], positive resists extension; "
+                        "default %(default)g")
+    p.add_argument("--t-end", type=_positive_float, default=1e-3,
+                   help="simulated time [s], > 0; default %(default)g")
+    p.add_argument("--interval", type=_positive_float, default=1e-6,
+                   help="output interval [s], > 0, dividing --t-end; default %(default)g")
+    p.add_argument("--stepper", choices=STEPPERS, default=None,
+                   help="time stepper; default by fidelity (rosenbrock for dynamic)")
+    p.add_argument("--out", default="out",
+                   help="output directory for startup.csv and startup.png; default %(default)s")
+    p.set_defaults(func=cmd_startup, parser=p)
+
+    p = sub.add_parser("steady", help="steady state at constant speed and load",
+                       description="Print the steady state (root finding, no time stepping).")
+    p.add_argument("--preset", type=_preset, default="seed000_two_stage",
+                   help="preset name; default %(default)s")
+    p.add_argument("--speed", type=_nonzero_float, default=100.0,
+                   help="screw speed [rad/s], non-zero; default %(default)g")
+    p.add_argument("--load", type=_finite_float, default=5000.0,
+                   help="load force on the last nut [N], positive resists extension; "
+                        "default %(default)g")
+    p.set_defaults(func=cmd_steady, parser=p)
+
+    p = sub.add_parser("presets", help="list the preset names",
+                       description="List the preset names, one per line.")
+    p.set_defaults(func=cmd_presets, parser=p)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``prsm-fmu`` console script.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        Exit code: 0 on success, 2 for bad arguments (a message naming the argument is
+        printed on stderr), 1 if a simulation step fails.
+    """
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return int(args.func(args, args.parser))
+    except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
+        code = exc.code
+        return code if isinstance(code, int) else (0 if code is None else 2)
+    except StepFailure as exc:
+        print(f"prsm-fmu: error: the simulation failed: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

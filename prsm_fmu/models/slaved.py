@@ -1,0 +1,127 @@
+"""Closed-form advance of the levels whose carriers are slaved to the screw (quasi-static, kinematic).
+
+With the carriers at a fixed ratio, every slip direction is fixed by the sign of ω, and outside
+the friction band (every sliding speed ≥ v_ε, friction.py) the Coulomb law transmits forces that
+do not depend on the slip speed. The balances of mechanics.py are then linear and homogeneous in
+(load F, screw acceleration α) for a given sign pattern (which flank carries each stage, signs
+of the spline torques and bearing forces), so under held inputs
+
+    α = (M_motor − K_F F) / K_α                 (constant over the step)
+    P_friction / |ω| = Q_F F + Q_α α            (friction power proportional to speed)
+
+and the state after a step h is exact: θ += ω h + α h²/2, ω += α h, the work integrals are
+their power per unit speed times the angle travelled. The coefficients are taken from the
+general solver the first time a (sign ω, sign F) pair is met and re-validated against the sign
+pattern at every use; whenever the step would enter the band, change the sign of ω, or leave the
+pattern, :meth:`SlavedAdvance.advance` returns None and the caller integrates numerically.
+"""
+
+from __future__ import annotations
+
+import math
+
+
+class SlavedAdvance:
+    """Exact step of a torque-driven model with slaved carriers (see module docstring).
+
+    Parameters
+    ----------
+    model : Model
+        A quasi-static or kinematic model (``model.mechanism.zeta`` not None).
+    """
+
+    def __init__(self, model) -> None:
+        mech = model.mechanism
+        if mech.zeta is None:
+            raise ValueError("SlavedAdvance needs a level with slaved carriers (quasi-static, kinematic)")
+        self.model = model
+        self.mech = mech
+        # slowest sliding speed per unit screw speed [m/rad]: contacts, splines, bearings, loss
+        factors = []
+        for s, z in zip(mech.stages, mech.zeta):
+            for fl in s.flanks:
+                dx, dy, dz = fl.ax + z * fl.bx, fl.ay + z * fl.by, fl.az
+                factors.append(math.sqrt(dx * dx + dy * dy + dz * dz))
+            if s.e_spline:
+                factors.append(s.spline_speed_factor)
+            if s.g_bearing:
+                factors.append(s.bearing_speed_factor)
+        if getattr(model, "_loss_factor", 0.0):
+            factors.append(mech.c_out)
+        #: screw speed [rad/s] above which every law is exactly Coulomb
+        self.band_speed = mech.v_eps / min(factors)
+        self._cache: dict = {}
+
+    def _law(self, sign_w: float, omega: float, load: float, torque: float):
+        """Linear coefficients for this (sign ω, sign F), built from the general solver."""
+        key = (sign_w, load > 0.0)
+        law = self._cache.get(key)
+        if law is not None:
+            return law
+        mech = self.mech
+        loss = self.model._extra_loss_torque(omega, load)
+        cache = [[None, None] for _ in mech.stages]
+        sol = mech.solve(omega, (), load, torque=torque - loss)
+        rec = mech._sweep(omega, mech.carrier_speeds(omega, ()), load, sol.screw_acceleration, cache)
+        if not sol.consistent or not mech._signs_hold(rec, sol.screw_acceleration):
+            return None
+        (m0, m1), per_stage = rec
+        checks = []
+        for fi, a0, a1, co, x0, x1, h0, h1, b0, b1, e, g, sm, sb in per_stage:
+            checks.append((a0 / load, a1, fi == 0))
+            if e or g:
+                checks.append((x0 / load, x1, sm > 0))
+                checks.append((b0 / load, b1, sb > 0))
+        wps = mech.carrier_speeds(omega, ())
+        a_ref = sol.screw_acceleration if sol.screw_acceleration != 0.0 else 1.0
+        p_0 = mech._assemble(omega, wps, load, 0.0, rec, False).friction_power
+        p_a = mech._assemble(omega, wps, load, a_ref, rec, False).friction_power
+        speed = abs(omega)
+        q_alpha = (p_a - p_0) / a_ref / speed
+        q_load = p_0 / load / speed
+        loss_per_load = abs(loss / load)      # kinematic level's Coulomb loss torque per |F|
+        law = (m0 / load, m1, q_load, q_alpha, tuple(checks), loss_per_load)
+        self._cache[key] = law
+        return law
+
+    def advance(self, x: list[float], u: tuple, h: float) -> list[float] | None:
+        """State after a step h [s] with inputs u held, or None if not exact (see module doc)."""
+        w0 = x[1]
+        torque, load = u[0], u[1]
+        band = self.band_speed
+        if abs(w0) < band or load == 0.0:
+            return None
+        sign_w = 1.0 if w0 > 0.0 else -1.0
+        law = self._law(sign_w, w0, load, torque)
+        if law is None:
+            return None
+        k_load, k_alpha, q_load, q_alpha, checks, loss_per_load = law
+        loss = loss_per_load * abs(load) * sign_w
+        alpha = (torque - loss - k_load * load) / k_alpha
+        for c_load, c_alpha, positive in checks:
+            if (c_load * load + c_alpha * alpha >= 0.0) != positive:
+                return None
+        w1 = w0 + alpha * h
+        if w1 * sign_w < band:
+            return None
+        dth = (w0 + 0.5 * alpha * h) * h
+        p_per_speed = q_load * load + q_alpha * alpha + loss_per_load * abs(load)
+        return [x[0] + dth, w1, x[2] + torque * dth, x[3] + load * self.mech.c_out * dth,
+                x[4] + p_per_speed * sign_w * dth]
+
+
+class SlavedLevel:
+    """Mixin for levels with slaved carriers: exposes the closed-form step to the steppers."""
+
+    def closed_form_advance(self, t: float, x: list[float], u: tuple, h: float) -> list[float] | None:
+        """State after a step h [s] in closed form, or None where it is not exact.
+
+        Speed drive: the derivative is constant over the step (ω held, no carrier state), so
+        one Euler step is exact. Torque drive: :class:`SlavedAdvance`.
+        """
+        if self.drive == "speed":
+            return [xi + h * di for xi, di in zip(x, self.rhs(t, x, u))]
+        adv = self.__dict__.get("_slaved_advance")
+        if adv is None:
+            adv = self._slaved_advance = SlavedAdvance(self)
+        return adv.advance(x, u, h)
