@@ -13,9 +13,11 @@ loop, over 100 steps; the load is F(t) = 5000 + 1000 sin(2π·25 t) N and the mo
 
 For each fidelity level, each stepper advances the same steps with the same held inputs from
 the same reference state (so errors do not accumulate from step to step and every step is the
-same task for every method). The baseline is ``scipy.integrate.solve_ivp(method="Radau")``
+same task for every method); a stepper keeps its memory (step-size proposal) from one step to
+the next, as it does inside the FMU. The baseline is ``scipy.integrate.solve_ivp(method="Radau")``
 restarted on each step at rtol 1e-6. Error (DESIGN.md §5): max over steps and outputs of
-|y − y_ref| / max|y_ref|, against Radau at rtol 1e-12 on the same level. Cost: CPU seconds per
+|y − y_ref| / max|y_ref| over the FMU's outputs (DESIGN.md §4), against Radau at rtol 1e-12 on
+the same level. Cost: CPU seconds per
 step and rhs calls per step. Ratios are measured in this run, on this machine.
 
 Run: ``python benchmarks/step_cost.py`` (about 30 s).
@@ -28,13 +30,14 @@ import time
 
 from prsm_fmu import presets
 from prsm_fmu.models import make_model
-from prsm_fmu.steppers import make_stepper
+from prsm_fmu.steppers import StepFailure, make_stepper
 
 H = 1e-3
 N_STEPS = 100
-OUTPUTS = ("screw_speed", "rod_position", "stage[1].contact_force", "stage[2].contact_force",
-           "stage[1].carrier_speed_ratio", "stage[2].carrier_speed_ratio", "screw_acceleration",
-           "friction_power")
+#: the FMU's outputs (DESIGN.md §4) for two stages: the error is taken over all of them
+OUTPUTS = ("screw_speed", "screw_angle", "rod_position", "rod_velocity", "efficiency", "friction_power") + tuple(
+    f"stage[{k}].{q}" for k in (1, 2)
+    for q in ("contact_force", "driven_torque", "spline_friction", "carrier_speed_ratio"))
 
 
 def load(t: float) -> float:
@@ -63,16 +66,20 @@ def reference(model):
 
 
 def measure(model, name, opts, starts, ends):
-    """(CPU s per step, rhs calls per step, error) of one stepper over the reference's steps."""
+    """(CPU s per step, rhs calls per step, error) of one stepper over the reference's steps;
+    None when a step fails (the failure is printed)."""
     st = make_stepper(name, model, **opts)
     results = []
     rhs = 0
     cpu0 = time.process_time()
-    for i in range(N_STEPS):
-        st.reset()
-        x, stats = st.advance(i * H, starts[i], inputs(i * H), H)
-        results.append(x)
-        rhs += stats.rhs_calls
+    try:
+        for i in range(N_STEPS):
+            x, stats = st.advance(i * H, starts[i], inputs(i * H), H)
+            results.append(x)
+            rhs += stats.rhs_calls
+    except StepFailure as exc:
+        print(f"{'':13s} {name:28s} failed: {str(exc)[:90]}")
+        return None
     cpu = (time.process_time() - cpu0) / N_STEPS
     err = 0.0
     ys = [model.outputs((i + 1) * H, results[i], inputs(i * H)) for i in range(N_STEPS)]
@@ -97,9 +104,12 @@ def table() -> None:
     params = presets.load("seed000_two_stage")
     configs = {
         "dynamic": [("rosenbrock", {"rtol": 1e-6, "atol": 1e-9}),
+
+                    ("rosenbrock", {"rtol": 3e-6, "atol": 3e-9}),
+                    ("rosenbrock", {"rtol": 1e-5, "atol": 1e-8}),
                     ("explicit_adaptive", {"rtol": 1e-6, "atol": 1e-9})],
-        "quasi-static": [("explicit_adaptive", {"rtol": 1e-6, "atol": 1e-9, "order": 3}),
-                         ("explicit_adaptive", {"rtol": 1e-6, "atol": 1e-9}),
+        "quasi-static": [("closed_form", {"rtol": 1e-6, "atol": 1e-9}),
+                         ("explicit_adaptive", {"rtol": 1e-6, "atol": 1e-9, "order": 3}),
                          ("rk4", {"substeps": 1})],
     }
     print(f"{'level':13s} {'stepper':28s} {'CPU/step':>10s} {'rhs/step':>9s} {'error':>9s} {'speed-up':>9s}")
@@ -107,11 +117,17 @@ def table() -> None:
         model = make_model(params, fidelity, "torque")
         starts, ends = reference(model)
         base_cpu, base_rhs, base_err = measure(model, "radau", {"rtol": 1e-6, "atol": 1e-9}, starts, ends)
+        # the figure of merit: the cheapest configuration at equal or smaller error
         print(f"{fidelity:13s} {'radau (baseline, restarted)':28s} {base_cpu * 1e6:8.1f}µs {base_rhs:9.1f} {base_err:9.1e} {1.0:9.1f}")
         for name, opts in candidates:
-            cpu, rhs, err = measure(model, name, opts, starts, ends)
+            got = measure(model, name, opts, starts, ends)
+            if got is None:
+                continue
+            cpu, rhs, err = got
             label = name + (f" order {opts['order']}" if "order" in opts else "")
-            verdict = "" if err <= base_err else "  (error above baseline)"
+            label += f" rtol {opts['rtol']:g}" if "rtol" in opts and name != "closed_form" else ""
+            # errors below 1e-13 are round-off: equal
+            verdict = "" if max(err, 1e-13) <= max(base_err, 1e-13) else "  (error above baseline)"
             print(f"{'':13s} {label:28s} {cpu * 1e6:8.1f}µs {rhs:9.1f} {err:9.1e} {base_cpu / cpu:8.1f}x{verdict}")
 
 

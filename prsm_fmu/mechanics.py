@@ -246,10 +246,8 @@ class Mechanism:
         -------
         Solution
         """
-        stages = self.stages
-        n = len(stages)
-        wps = self.carrier_speeds(omega, carrier_state)
-        cache: list = [[None, None] for _ in range(n)]
+        wps = carrier_state if self.zeta is None else self.carrier_speeds(omega, carrier_state)
+        cache: list = [None] * (2 * len(self.stages))
         alpha_guess = acceleration if acceleration is not None else 0.0
         consistent = True
         visited = []
@@ -315,9 +313,9 @@ class Mechanism:
         for k in range(n - 1, -1, -1):
             s = stages[k]
             fi = 0 if a0 + a1 * ag >= 0.0 else 1
-            co = cache[k][fi]
+            co = cache[2 * k + fi]
             if co is None:
-                co = cache[k][fi] = self._coefficients(s, s.flanks[fi], omega, wps[k])
+                co = cache[2 * k + fi] = self._coefficients(s, s.flanks[fi], omega, wps[k])
             kappa = co[0]
             x0 = mn0 - kappa * a0
             x1 = s.j_screw + mn1 - kappa * a1
@@ -326,21 +324,30 @@ class Mechanism:
                 return (x0, x1), per_stage
             y0 = a0 - hn0
             y1 = a1 - hn1 + s.m_screw * s.c_prev
-            e = s.e_spline * regularised_sign(omega * s.spline_speed_factor, self.v_eps)
-            g = s.g_bearing * regularised_sign(omega * s.bearing_speed_factor, self.v_eps)
-            sm = 1.0 if x0 + x1 * ag >= 0.0 else -1.0
-            sb = 1.0 if y0 + y1 * ag >= 0.0 else -1.0
-            for _ in range(3):
-                den = 1.0 - g * sb * e * sm
-                m0 = (x0 + g * sb * y0) / den
-                m1 = (x1 + g * sb * y1) / den
+            e = (s.e_spline * regularised_sign(omega * s.spline_speed_factor, self.v_eps)
+                 if s.e_spline else 0.0)
+            if s.g_bearing:
+                g = s.g_bearing * regularised_sign(omega * s.bearing_speed_factor, self.v_eps)
+                sm = 1.0 if x0 + x1 * ag >= 0.0 else -1.0
+                sb = 1.0 if y0 + y1 * ag >= 0.0 else -1.0
+                for _ in range(3):
+                    den = 1.0 - g * sb * e * sm
+                    m0 = (x0 + g * sb * y0) / den
+                    m1 = (x1 + g * sb * y1) / den
+                    b0 = y0 + e * sm * m0
+                    b1 = y1 + e * sm * m1
+                    sm_new = 1.0 if m0 + m1 * ag >= 0.0 else -1.0
+                    sb_new = 1.0 if b0 + b1 * ag >= 0.0 else -1.0
+                    if sm_new == sm and sb_new == sb:
+                        break
+                    sm, sb = sm_new, sb_new
+            else:
+                # no bearing friction: M_Sk does not depend on B_(k−1)
+                g, sb = 0.0, 1.0
+                m0, m1 = x0, x1
+                sm = 1.0 if x0 + x1 * ag >= 0.0 else -1.0
                 b0 = y0 + e * sm * m0
                 b1 = y1 + e * sm * m1
-                sm_new = 1.0 if m0 + m1 * ag >= 0.0 else -1.0
-                sb_new = 1.0 if b0 + b1 * ag >= 0.0 else -1.0
-                if sm_new == sm and sb_new == sb:
-                    break
-                sm, sb = sm_new, sb_new
             h0, h1 = e * sm * m0, e * sm * m1
             per_stage[k] = (fi, a0, a1, co, m0, m1, h0, h1, b0, b1, e, g, sm, sb)
             prev = stages[k - 1]
@@ -366,6 +373,8 @@ class Mechanism:
         n = len(stages)
         (m0, m1), per_stage = rec
         motor = m0 + m1 * alpha
+        if not detail:
+            return self._rates(omega, alpha, motor, per_stage)
         dyn = self.zeta is None
         acc = [0.0] * n
         p_fric = 0.0
@@ -406,6 +415,24 @@ class Mechanism:
             sol.driven_torque, sol.spline_friction, sol.bearing_force = torque, spline, bearing
             sol.stage_friction_power = stage_p
         return sol
+
+    def _rates(self, omega, alpha, motor, per_stage) -> Solution:
+        """The hot path of :meth:`_assemble`: accelerations and friction power only."""
+        dyn = self.zeta is None
+        acc = []
+        p_fric = 0.0
+        for s, (fi, a0, a1, co, x0, x1, h0, h1, b0, b1, e, g, sm, sb) in zip(self.stages, per_stage):
+            a = a0 + a1 * alpha
+            if dyn:
+                acc.append(co[1] * a / s.j_carrier)
+            p_fric += co[2] * a
+            if e:
+                p_fric += (h0 + h1 * alpha) * omega * s.spline_speed_factor
+            if g:
+                p_fric += g * sb * (b0 + b1 * alpha) * omega
+        if not dyn:
+            acc = [0.0] * len(self.stages)
+        return Solution(alpha, acc, motor, p_fric)
 
     def fastest_time_constant(self, omega: float, carrier_state, load: float) -> float:
         """Smallest carrier time constant J_Pk / |∂G_Pk/∂ω_Pk| at this point [s] (inf if none).

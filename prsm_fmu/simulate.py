@@ -19,8 +19,8 @@ from .steppers import StepStats, make_stepper
 Signal = Union[float, Callable[[float], float]]
 
 #: default stepper per fidelity level
-DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "explicit_adaptive",
-                   "kinematic": "explicit_adaptive"}
+DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
+                   "kinematic": "closed_form"}
 
 
 def _signal(value: Signal, name: str) -> Callable[[float], float]:
@@ -58,7 +58,8 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     output_interval : float
         Output (and input-hold) interval h [s], > 0.
     stepper : str, optional
-        ``rk4``, ``explicit_adaptive``, ``rosenbrock`` or ``radau``; default by fidelity.
+        ``rk4``, ``explicit_adaptive``, ``rosenbrock``, ``radau`` or ``closed_form``
+        (slaved-carrier levels only); default by fidelity (:data:`DEFAULT_STEPPER`).
     rtol, atol : float
         Tolerances of adaptive steppers [-], [state units].
     initial_screw_speed : float

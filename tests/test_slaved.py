@@ -55,3 +55,23 @@ def test_closed_form_declines_a_step_through_zero_speed():
 
 def test_dynamic_level_offers_no_closed_form():
     assert not hasattr(make_model(SEED000, "dynamic"), "closed_form_advance")
+
+
+def test_closed_form_stepper_falls_back_through_zero_speed_and_conserves_energy():
+    from prsm_fmu import simulate
+    r = simulate(SEED000, "quasi-static", "torque", screw_torque=5.0, load_force=5000.0,
+                 t_end=2e-3, output_interval=1e-4, initial_screw_speed=30.0, stepper="closed_form",
+                 rtol=1e-9, atol=1e-12)
+    assert r["screw_speed"][0] > 0 > r["screw_speed"][-1]
+    ref = simulate(SEED000, "quasi-static", "torque", screw_torque=5.0, load_force=5000.0,
+                   t_end=2e-3, output_interval=1e-4, initial_screw_speed=30.0, stepper="radau",
+                   rtol=1e-12, atol=1e-14)
+    assert r["screw_speed"] == pytest.approx(ref["screw_speed"], rel=1e-6, abs=1e-6)
+    balance = r["input_work"] - r["output_work"] - r["friction_work"] - (r["kinetic_energy"] - r["kinetic_energy"][0])
+    assert max(abs(balance)) <= 1e-6 * max(abs(r["input_work"]))
+
+
+def test_closed_form_stepper_refuses_a_model_without_a_closed_form():
+    from prsm_fmu.steppers import make_stepper as mk
+    with pytest.raises(ValueError, match="closed_form_advance"):
+        mk("closed_form", make_model(SEED000, "dynamic"))

@@ -29,6 +29,7 @@ from prsm_fmu.steppers import (
     Stepper,
     StepFailure,
     StepStats,
+    _SMALL_LU,
     _lu_factor,
     _lu_solve,
     make_stepper,
@@ -520,7 +521,8 @@ def test_fd_jacobian_matches_analytic():
     st = StepStats()
     x = [0.3, 0.1]
     f0 = m.rhs(0.0, x, ())
-    jfd = s._jac(m.rhs, 0.0, x, f0, (), st)
+    jfd, jqd = s._jac(m.rhs, 0.0, x, f0, (), st)
+    assert jqd == ()
     jan = m.jacobian(0.0, x, ())
     assert st.jacobian_calls == 1 and st.rhs_calls == m.n_states
     for i in range(2):
@@ -573,6 +575,267 @@ def test_adaptive_lands_exactly_on_end_time():
             x, _ = s.advance(t, x, (), 0.3)
             t = (i + 1) * 0.3
         assert x[0] == pytest.approx(t**3, rel=1e-9)
+
+
+# ----------------------------------------------------------------------------------
+# quadrature states (Rosenbrock)
+# ----------------------------------------------------------------------------------
+
+
+class StiffQuad:
+    """Stiff nonlinear core (v, w) with two quadratures: an angle theta' = v (state 0)
+    and an energy E' = v**2 + w**2 (state 3); neither enters any rhs component."""
+
+    n_states = 4
+    state_scale = (1.0, 1.0, 1.0, 1.0)
+    L = 1e4
+
+    def __init__(self, declare: bool) -> None:
+        if declare:
+            self.quadrature_states = (3, 0)  # any order
+
+    def rhs(self, t, x, u):
+        _, v, w, _ = x
+        return [v, u[0] - v + 0.5 * w - 0.1 * v**3, -self.L * (w - math.sin(v)), v * v + w * w]
+
+
+class StiffQuadJ(StiffQuad):
+    def jacobian(self, t, x, u):
+        _, v, w, _ = x
+        return [
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, -1.0 - 0.3 * v * v, 0.5, 0.0],
+            [0.0, self.L * math.cos(v), -self.L, 0.0],
+            [0.0, 2.0 * v, 2.0 * w, 0.0],
+        ]
+
+
+def _close(a, b, rel=1e-12):
+    return all(abs(p - q) <= rel * (1.0 + abs(q)) for p, q in zip(a, b))
+
+
+@pytest.mark.parametrize("jacobian", ["fd", "analytic"])
+def test_quadrature_declaration_changes_only_round_off(jacobian):
+    x0 = [0.3, 0.5, 0.2, 0.0]
+    cls = StiffQuadJ if jacobian == "analytic" else StiffQuad
+    # fixed steps
+    res = []
+    for declare in (False, True):
+        s = Rosenbrock(cls(declare), fixed_substeps=10, jacobian=jacobian)
+        res.append(s.advance(0.0, x0, (1.0,), 0.01))
+    (a, sa), (b, sb) = res
+    assert _close(b, a)
+    n_q = 2
+    assert sa.rhs_calls - sb.rhs_calls == (n_q * 10 if jacobian == "fd" else 0)
+    # adaptive, memory carried, the input changing from advance to advance
+    res = []
+    for declare in (False, True):
+        s = Rosenbrock(cls(declare), rtol=1e-7, atol=1e-10, jacobian=jacobian)
+        x, t, out = list(x0), 0.0, []
+        for i in range(5):
+            x, st = s.advance(t, x, (1.0 + 0.3 * math.sin(i),), 2e-3)
+            t += 2e-3
+            out.append((x, st))
+        res.append(out)
+    for (a, sa), (b, sb) in zip(*res):
+        assert _close(b, a)
+        assert (sb.substeps, sb.rejected, sb.jacobian_calls) == (sa.substeps, sa.rejected, sa.jacobian_calls)
+        extra = n_q * sa.jacobian_calls if jacobian == "fd" else 0
+        assert sa.rhs_calls - sb.rhs_calls == extra
+
+
+def test_quadrature_fd_jacobian_has_only_the_other_columns():
+    m = StiffQuad(declare=True)
+    s = Rosenbrock(m, jacobian="fd")
+    x = [0.3, 0.5, 0.2, 7.0]
+    st = StepStats()
+    jdd, jqd = s._jac(m.rhs, 0.0, x, m.rhs(0.0, x, (1.0,)), (1.0,), st)
+    exact = StiffQuadJ(declare=False).jacobian(0.0, x, (1.0,))
+    assert st.rhs_calls == 2 and st.jacobian_calls == 1
+    for rows, idx in ((jdd, (1, 2)), (jqd, (0, 3))):
+        for row, i in zip(rows, idx):
+            assert len(row) == 2
+            for v, j in zip(row, (1, 2)):
+                assert abs(v - exact[i][j]) <= 1e-6 * (1.0 + abs(exact[i][j]))
+
+
+class _RandomLinear:
+    """x' = J x with a given J (for the linear-algebra checks)."""
+
+    def __init__(self, jac, quad):
+        self.n_states = len(jac)
+        self.state_scale = (1.0,) * self.n_states
+        self.J = jac
+        if quad:
+            self.quadrature_states = quad
+
+    def rhs(self, t, x, u):
+        return [sum(a * b for a, b in zip(row, x)) for row in self.J]
+
+    def jacobian(self, t, x, u):
+        return self.J
+
+
+@pytest.mark.parametrize(
+    "n, quad",
+    [(1, ()), (2, ()), (3, ()), (5, ()), (3, (1,)), (4, (0, 2)), (6, (0, 4, 5)), (8, (7, 0, 3)), (2, (0, 1))],
+)
+def test_block_solve_matches_dense_solve(n, quad):
+    rng = random.Random(10 * n + len(quad))
+    jac = [[0.0 if j in quad else rng.uniform(-1e3, 1e3) for j in range(n)] for i in range(n)]
+    s = Rosenbrock(_RandomLinear(jac, quad))
+    b = [rng.uniform(-1.0, 1.0) for _ in range(n)]
+    for hs in (1e-5, 1e-2, 10.0):
+        parts = s._jac(None, 0.0, [0.0] * n, None, (), StepStats())
+        k = s._solve(s._lu(parts, hs), b)
+        ref = np.linalg.solve(np.eye(n) / (hs * ROS_GAMMA) - np.array(jac), np.array(b))
+        assert np.allclose(k, ref, rtol=1e-10, atol=1e-14 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_unrolled_lu_matches_numpy_with_pivoting(n):
+    lu_small, solve_small = _SMALL_LU[n]
+    rng = random.Random(n)
+    for trial in range(50):
+        d = rng.uniform(0.5, 2.0)
+        jac = [[rng.uniform(-3.0, 3.0) for _ in range(n)] for _ in range(n)]
+        if trial % 2:
+            jac[0][0] = d  # zero in the first pivot position: needs a row exchange
+        idx = [5, 2, 0][:n]
+        b = [rng.uniform(-1.0, 1.0) for _ in range(6)]
+        a = d * np.eye(n) - np.array(jac)
+        if n == 1 and trial % 2:
+            assert lu_small(jac, d, idx) is None
+            continue
+        y = solve_small(lu_small(jac, d, idx), b)
+        ref = np.linalg.solve(a, np.array([b[i] for i in idx]))
+        assert np.allclose(y, ref, rtol=1e-10, atol=1e-12)
+    # singular: d I - J = 0, and (for n > 1) the rank-1 matrix -ones
+    assert lu_small([[float(i == j) for j in range(n)] for i in range(n)], 1.0, list(range(n))) is None
+    if n > 1:
+        assert lu_small([[1.0] * n for _ in range(n)], 0.0, list(range(n))) is None
+
+
+def test_quadrature_linear_system_matches_matrix_exponential():
+    """5 coupled stiff states (general LU path) and 2 quadratures, against expm."""
+    from scipy.linalg import expm
+
+    rng = random.Random(7)
+    nd = 5
+    lam = [-1.0, -3.0, -10.0, -1e3, -1e4]
+    v = np.array([[rng.uniform(-1.0, 1.0) + 3.0 * (i == j) for j in range(nd)] for i in range(nd)])
+    a_dd = v @ np.diag(lam) @ np.linalg.inv(v)
+    c = np.array([[1.0, 0.5, 0.0, -0.2, 0.3], [0.0, 0.0, 2.0, 0.0, 1.0]])
+    # states: q0, d0, d1, q1, d2, d3, d4
+    d_idx, q_idx = [1, 2, 4, 5, 6], [0, 3]
+    jac = [[0.0] * 7 for _ in range(7)]
+    for r, i in enumerate(d_idx):
+        for s_, j in enumerate(d_idx):
+            jac[i][j] = a_dd[r, s_]
+    for r, i in enumerate(q_idx):
+        for s_, j in enumerate(d_idx):
+            jac[i][j] = c[r, s_]
+    m = _RandomLinear(jac, (0, 3))
+    x0 = [0.5, 1.0, -1.0, 2.0, 0.5, 0.3, -0.2]
+    T = 0.5
+    s = Rosenbrock(m, rtol=1e-8, atol=1e-10)
+    x, st = s.advance(0.0, x0, (), T)
+    xd0 = np.array([x0[i] for i in d_idx])
+    xd = expm(a_dd * T) @ xd0
+    xq = np.array([x0[i] for i in q_idx]) + c @ np.linalg.solve(a_dd, xd - xd0)
+    exact = [0.0] * 7
+    for r, i in enumerate(d_idx):
+        exact[i] = xd[r]
+    for r, i in enumerate(q_idx):
+        exact[i] = xq[r]
+    assert max(abs(p - q) for p, q in zip(x, exact)) <= 1e-6
+    assert st.jacobian_calls >= 1 and st.rhs_calls == st.jacobian_calls + 3 * (st.substeps + st.rejected)
+
+
+def test_all_states_quadrature():
+    class Clock:
+        n_states = 1
+        state_scale = (1.0,)
+        quadrature_states = (0,)
+
+        def rhs(self, t, x, u):
+            return [3.0 * t * t]
+
+    s = Rosenbrock(Clock(), rtol=1e-10)
+    x, st = s.advance(0.0, [0.0], (), 0.5)
+    assert x[0] == pytest.approx(0.125, rel=1e-9)
+    # no Jacobian columns to difference: one rhs call per accepted point plus 3 per trial
+    assert st.rhs_calls == st.substeps + 3 * (st.substeps + st.rejected)
+
+
+@pytest.mark.parametrize("bad", [(4,), (-1,), (1, 1), ("a",), (True,), 3, (1.0,)])
+def test_quadrature_states_validation(bad):
+    m = StiffQuad(declare=False)
+    m.quadrature_states = bad
+    with pytest.raises(ValueError, match="quadrature_states"):
+        Rosenbrock(m)
+
+
+def test_malformed_analytic_jacobian_raises_step_failure():
+    class Ragged(StiffQuadJ):
+        def jacobian(self, t, x, u):
+            return [row[:2] for row in super().jacobian(t, x, u)]
+
+    for declare in (False, True):
+        x = [0.3, 0.5, 0.2, 0.0]
+        with pytest.raises(StepFailure, match="jacobian"):
+            Rosenbrock(Ragged(declare)).advance(0.0, x, (1.0,), 1e-3)
+        assert x == [0.3, 0.5, 0.2, 0.0]
+
+
+# ----------------------------------------------------------------------------------
+# first step and memory after input changes (Rosenbrock)
+# ----------------------------------------------------------------------------------
+
+
+def test_rosenbrock_first_step_resolves_a_fast_transient():
+    """Slightly off the slow manifold of Stiff2: the first-step guess (with x'' = J f)
+    starts at the fast time scale; the explicit-method guess alone cost 14 rejections."""
+    m = Stiff2()
+    y0 = [1.0, m.L / (m.L - 1.0) * (1.0 + 1e-5)]
+    x, st = Rosenbrock(m, rtol=1e-6, atol=1e-9).advance(0.0, y0, (), 0.01)
+    ex = m.exact(0.01, y0)
+    assert max(abs(p - q) for p, q in zip(x, ex)) <= 1e-9
+    assert st.rejected <= 5
+
+
+class FastInput:
+    """x' = -L (x - u[0]);  x(t) = u + (x0 - u) exp(-L t)."""
+
+    n_states = 1
+    state_scale = (1.0,)
+    L = 1e4
+
+    def rhs(self, t, x, u):
+        return [-self.L * (x[0] - u[0])]
+
+    def jacobian(self, t, x, u):
+        return [[-self.L]]
+
+
+def test_rosenbrock_memory_is_the_first_step_proposal():
+    """Each advance starts with a fast transient (new input); the memory proposes the
+    first step's successor, so the next advance starts small instead of cascading
+    rejections down from the last step's size (which cost 54 rejections here)."""
+    m = FastInput()
+    s = Rosenbrock(m, rtol=1e-6, atol=1e-9)
+    x, t, H = [1.0], 0.0, 1e-3
+    rejected = 0
+    for i in range(20):
+        u = (1.0 + 0.01 * math.sin(0.7 * i),)
+        x0 = x[0]
+        x, st = s.advance(t, x, u, H)
+        t += H
+        rejected += st.rejected
+        assert abs(x[0] - (u[0] + (x0 - u[0]) * math.exp(-m.L * H))) <= 1e-6
+        if i > 0:  # a transient at the start of the advance: the proposal is far below H
+            assert s.get_memory()[0] < H / 5
+    assert rejected <= 20
 
 
 # ----------------------------------------------------------------------------------
@@ -732,6 +995,8 @@ def test_make_stepper():
     assert isinstance(make_stepper("rosenbrock", m, jacobian="fd"), Rosenbrock)
     assert isinstance(make_stepper("radau", m), ScipyRadau)
     for name in STEPPER_NAMES:
+        if name == "closed_form":   # needs a model with closed_form_advance (tests/test_slaved.py)
+            continue
         s = make_stepper(name, m)
         assert isinstance(s, Stepper) and s.name == name
     with pytest.raises(ValueError) as info:

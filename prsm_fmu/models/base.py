@@ -142,12 +142,21 @@ class Model(ABC):
         -------
         list of float
         """
-        omega, wp, load, motor, loss, sol = self._solve(x, u, False)
-        dx = [omega]
+        load = u[1]
         if self.drive == "torque":
-            dx.append(sol.screw_acceleration)
+            omega = x[1]
+            loss = self._extra_loss_torque(omega, load)
+            motor = u[0]
+            sol = self.mechanism.solve(omega, x[2:self._i_energy], load, torque=motor - loss)
+            dx = [omega, sol.screw_acceleration]
+        else:
+            omega = u[0]
+            loss = self._extra_loss_torque(omega, load)
+            sol = self.mechanism.solve(omega, x[1:self._i_energy], load, acceleration=0.0)
+            motor = sol.motor_torque + loss
+            dx = [omega]
         if self.n_carrier_states:
-            dx.extend(sol.carrier_accelerations)
+            dx += sol.carrier_accelerations
         dx.append(motor * omega)
         dx.append(load * self.mechanism.c_out * omega)
         dx.append(sol.friction_power + loss * omega)

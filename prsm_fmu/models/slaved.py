@@ -60,7 +60,7 @@ class SlavedAdvance:
             return law
         mech = self.mech
         loss = self.model._extra_loss_torque(omega, load)
-        cache = [[None, None] for _ in mech.stages]
+        cache = [None] * (2 * len(mech.stages))
         sol = mech.solve(omega, (), load, torque=torque - loss)
         rec = mech._sweep(omega, mech.carrier_speeds(omega, ()), load, sol.screw_acceleration, cache)
         if not sol.consistent or not mech._signs_hold(rec, sol.screw_acceleration):
