@@ -1,1 +1,34 @@
-"""Builds dist/PRSM<n>.fmu with pythonfmu, completes its modelDescription.xml and validates it (to come)."""
+"""Build the PRSM co-simulation FMUs (``dist/PRSM<n>.fmu``) with pythonfmu.
+
+``python -m fmu_build`` (console script ``prsm-fmu-build``) builds ``dist/PRSM2.fmu``;
+``python -m fmu_build PRSM1 PRSM3`` or ``--all`` builds the others, ``--preset NAME --name X``
+builds an FMU from any preset of :mod:`prsm_fmu.presets`.  See docs/fmu.md.
+
+Modules: :mod:`.mechanisms` (which parameters each FMU starts from), :mod:`.builder`
+(generate the slave module, run pythonfmu, complete and validate) and
+:mod:`.model_description` (what pythonfmu leaves out of modelDescription.xml).
+"""
+
+from __future__ import annotations
+
+from .builder import DEFAULT_EXPERIMENT, BuildError, build_fmu, validate
+from .mechanisms import FMUS, three_stage
+
+__all__ = ["build_fmu", "build_named", "validate", "BuildError", "FMUS", "three_stage",
+           "DEFAULT_EXPERIMENT"]
+
+
+def build_named(name: str, dest="dist", check: bool = True):
+    """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``.
+
+    Returns
+    -------
+    pathlib.Path
+        The FMU file.
+    """
+    try:
+        make, source = FMUS[name]
+    except KeyError:
+        raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
+                         "(or use --preset)") from None
+    return build_fmu(name, make(), source, dest, check)

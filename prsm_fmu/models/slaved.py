@@ -14,6 +14,12 @@ their power per unit speed times the angle travelled. The coefficients are taken
 general solver the first time a (sign ω, sign F) pair is met and re-validated against the sign
 pattern at every use; whenever the step would enter the band, change the sign of ω, or leave the
 pattern, :meth:`SlavedAdvance.advance` returns None and the caller integrates numerically.
+
+The coefficients of a (sign ω, sign F) pair are computed at a canonical point (|ω| = 100 band
+speeds, |F| = 1 kN, α = 0), never at the point where the pair is first met: mathematically they
+are the same everywhere outside the band, but computed at different points they would differ in
+the last bits, and the steps would depend on history (an FMU state restored into a new
+instance would then diverge).
 """
 
 from __future__ import annotations
@@ -52,18 +58,21 @@ class SlavedAdvance:
         self.band_speed = mech.v_eps / min(factors)
         self._cache: dict = {}
 
-    def _law(self, sign_w: float, omega: float, load: float, torque: float):
-        """Linear coefficients for this (sign ω, sign F), built from the general solver."""
-        key = (sign_w, load > 0.0)
-        law = self._cache.get(key)
-        if law is not None:
-            return law
+    def _law(self, sign_w: float, sign_load: float):
+        """Linear coefficients for this (sign ω, sign F), built from the general solver at the
+        canonical point of the module docstring (so they do not depend on history)."""
+        key = (sign_w, sign_load)
+        if key in self._cache:
+            return self._cache[key]
         mech = self.mech
+        omega = sign_w * 100.0 * self.band_speed
+        load = sign_load * 1000.0
         loss = self.model._extra_loss_torque(omega, load)
         cache = [None] * (2 * len(mech.stages))
-        sol = mech.solve(omega, (), load, torque=torque - loss)
-        rec = mech._sweep(omega, mech.carrier_speeds(omega, ()), load, sol.screw_acceleration, cache)
-        if not sol.consistent or not mech._signs_hold(rec, sol.screw_acceleration):
+        sol = mech.solve(omega, (), load, acceleration=0.0)
+        rec = mech._sweep(omega, mech.carrier_speeds(omega, ()), load, 0.0, cache)
+        if not sol.consistent or not mech._signs_hold(rec, 0.0):
+            self._cache[key] = None
             return None
         (m0, m1), per_stage = rec
         checks = []
@@ -73,7 +82,7 @@ class SlavedAdvance:
                 checks.append((x0 / load, x1, sm > 0))
                 checks.append((b0 / load, b1, sb > 0))
         wps = mech.carrier_speeds(omega, ())
-        a_ref = sol.screw_acceleration if sol.screw_acceleration != 0.0 else 1.0
+        a_ref = 1000.0
         p_0 = mech._assemble(omega, wps, load, 0.0, rec, False).friction_power
         p_a = mech._assemble(omega, wps, load, a_ref, rec, False).friction_power
         speed = abs(omega)
@@ -92,7 +101,7 @@ class SlavedAdvance:
         if abs(w0) < band or load == 0.0:
             return None
         sign_w = 1.0 if w0 > 0.0 else -1.0
-        law = self._law(sign_w, w0, load, torque)
+        law = self._law(sign_w, 1.0 if load > 0.0 else -1.0)
         if law is None:
             return None
         k_load, k_alpha, q_load, q_alpha, checks, loss_per_load = law
