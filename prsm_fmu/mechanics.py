@@ -41,7 +41,7 @@ MAX_SIGN_ITERATIONS = 8
 class _Flank:
     """Per-flank constants of one stage's screw–roller contact (plain floats for speed)."""
 
-    __slots__ = ("px", "py", "nx", "ny", "nz", "ax", "ay", "az", "bx", "by")
+    __slots__ = ("px", "py", "nx", "ny", "nz", "ax", "ay", "az", "bx", "by", "consts")
 
     def __init__(self, geo) -> None:
         (self.px, self.py, _), (self.nx, self.ny, self.nz) = geo.point, geo.normal
@@ -49,6 +49,10 @@ class _Flank:
         if abs(bz) > 1e-15:
             raise ValueError("carrier slip Jacobian has an axial part; geometry inconsistent")
         self.ax, self.ay, self.az, self.bx, self.by = ax, ay, az, bx, by
+        #: what :meth:`Mechanism._coefficients` needs, in one tuple: the slip Jacobians, the
+        #: contact point, the axial normal and [P × n]_z (the normal force's torque per unit)
+        self.consts = (ax, ay, az, bx, by, self.px, self.py, self.nz,
+                       self.px * self.ny - self.py * self.nx)
 
     def steady_ratio(self) -> float:
         """Carrier/screw speed ratio at which the slip has no component along b [-]."""
@@ -181,6 +185,20 @@ class Mechanism:
             for s, z in zip(self.stages, self.zeta):
                 # carriers slaved to the screw: their inertia is driven through the screw
                 s.j_screw = s.j_screw + s.j_carrier * z * z
+        # the hot path's constants, now final, as tuples: per stage in sweep order (last
+        # first) what _sweep reads -- the screw inertia, screw k's mass term m_Sk c_(k−1),
+        # spline and bearing friction with their sliding speeds per unit ω, the mass term
+        # m_A c of the stage below and both flanks' _Flank.consts -- and what _rates reads
+        plan = []
+        for k, s in enumerate(self.stages):
+            below = self.stages[k - 1].m_assembly * self.stages[k - 1].c if k > 0 else 0.0
+            plan.append((k, (s.j_screw, s.m_screw * s.c_prev, s.e_spline, s.spline_speed_factor,
+                             s.g_bearing, s.bearing_speed_factor, below,
+                             (s.flanks[0].consts, s.flanks[1].consts))))
+        self._plan = tuple(reversed(plan))
+        self._last_mass = self.stages[-1].m_assembly * self.stages[-1].c
+        self._n_cache = 2 * len(self.stages)
+        self._rate_consts = tuple((s.j_carrier, s.spline_speed_factor) for s in self.stages)
 
     # ------------------------------------------------------------------------------------
     def equivalent_inertia(self) -> float:
@@ -206,21 +224,25 @@ class Mechanism:
         return [z * omega for z in self.zeta]
 
     # ------------------------------------------------------------------------------------
-    def _coefficients(self, s: _Stage, fl: _Flank, omega: float, wp: float):
-        """Per unit axial force: torque on screw κ, carrier force γ, friction power π, and the
-        normal force per roller per unit axial force."""
-        mu = self.mu
-        sx = omega * fl.ax + wp * fl.bx
-        sy = omega * fl.ay + wp * fl.by
-        sz = omega * fl.az
-        phi = regularised_factor(math.sqrt(sx * sx + sy * sy + sz * sz), self.v_eps)
-        ux, uy, uz = sx * phi, sy * phi, sz * phi
-        nr = s.n_rollers
-        d = nr * (fl.nz - mu * uz)
-        kappa = nr * (fl.px * (fl.ny - mu * uy) - fl.py * (fl.nx - mu * ux)) / d
-        gamma = -nr * mu * (ux * fl.bx + uy * fl.by) / d
-        pw = nr * mu * (ux * sx + uy * sy + uz * sz) / d
-        return kappa, gamma, pw, 1.0 / d
+    def _coefficients(self, flank: tuple, omega: float, wp: float) -> tuple:
+        """Per unit axial force A of a stage's contact with the constants ``flank``
+        (:attr:`_Flank.consts`): torque on the screw κ, generalized force on the carrier γ,
+        friction power π, and q = 1/(n_z − µ u_z) (the normal force per roller is A q / N_R).
+
+        With u = s φ(|s|) the regularised slip direction: κ = [P × (n − µ u)]_z q,
+        γ = −µ (u·b) q and π = µ (u·s) q.
+        """
+        ax, ay, az, bx, by, px, py, nz, pn = flank
+        sx = omega * ax + wp * bx
+        sy = omega * ay + wp * by
+        sz = omega * az
+        v2 = sx * sx + sy * sy + sz * sz
+        v = math.sqrt(v2)
+        # φ(v) = 1/v outside the band (friction.py), written out on the hot path
+        mphi = self.mu * (1.0 / v if v >= self.v_eps else regularised_factor(v, self.v_eps))
+        q = 1.0 / (nz - mphi * sz)
+        return ((pn - mphi * (px * sy - py * sx)) * q, -mphi * (sx * bx + sy * by) * q,
+                mphi * v2 * q, q)
 
     def solve(self, omega: float, carrier_state, load: float, *, torque: float | None = None,
               acceleration: float | None = None, detail: bool = False) -> Solution:
@@ -247,23 +269,46 @@ class Mechanism:
         Solution
         """
         wps = carrier_state if self.zeta is None else self.carrier_speeds(omega, carrier_state)
-        cache: list = [None] * (2 * len(self.stages))
-        alpha_guess = acceleration if acceleration is not None else 0.0
-        consistent = True
+        alpha, rec, consistent = self._balance(omega, wps, load, torque, acceleration)
+        sol = self._assemble(omega, wps, load, alpha, rec, detail)
+        sol.consistent = consistent
+        return sol
+
+    def rates(self, omega: float, carrier_state, load: float, torque: float | None = None,
+              acceleration: float | None = None) -> tuple:
+        """The hot path of :meth:`solve` (``detail=False``) without the :class:`Solution`.
+
+        Parameters are those of :meth:`solve`.
+
+        Returns
+        -------
+        tuple
+            (α [rad/s²], motor torque M_S1 [N·m], carrier accelerations [rad/s²] (list),
+            friction power [W]).
+        """
+        wps = carrier_state if self.zeta is None else self.carrier_speeds(omega, carrier_state)
+        alpha, ((m0, m1), per_stage), _ = self._balance(omega, wps, load, torque, acceleration)
+        acc, p_fric = self._rates(omega, alpha, per_stage)
+        return alpha, m0 + m1 * alpha, acc, p_fric
+
+    def _balance(self, omega, wps, load, torque, acceleration):
+        """α, the sweep record whose signs hold at α, and the consistency flag: the sign
+        iteration of the module docstring, with :meth:`_bracket` when it cycles."""
+        # contact coefficients per (stage, flank), computed on first use (see _sweep)
+        cache = [None] * self._n_cache
+        if acceleration is not None:
+            return acceleration, self._sweep(omega, wps, load, acceleration, cache), True
+        alpha_guess = 0.0
         visited = []
         for _ in range(MAX_SIGN_ITERATIONS):
             rec = self._sweep(omega, wps, load, alpha_guess, cache)
             m0, m1 = rec[0]
-            alpha = acceleration if acceleration is not None else (torque - m0) / m1
-            if acceleration is not None or (m1 > 0.0 and self._signs_hold(rec, alpha)):
-                break
+            alpha = (torque - m0) / m1
+            if m1 > 0.0 and self._signs_hold(rec, alpha):
+                return alpha, rec, True
             visited.append(alpha_guess)
             alpha_guess = alpha
-        else:
-            alpha, rec, consistent = self._bracket(omega, wps, load, torque, visited, cache)
-        sol = self._assemble(omega, wps, load, alpha, rec, detail)
-        sol.consistent = consistent
-        return sol
+        return self._bracket(omega, wps, load, torque, visited, cache)
 
     def _bracket(self, omega, wps, load, torque, visited, cache):
         """Root of the continuous, piecewise-affine M_S1(α) − torque when the sign iteration
@@ -304,30 +349,35 @@ class Mechanism:
         return a, g(a)[1], False
 
     def _sweep(self, omega, wps, load, ag, cache):
-        """One pass from the last stage down with signs chosen at α = ag; returns a record."""
-        stages = self.stages
-        n = len(stages)
-        a0, a1 = load, stages[-1].m_assembly * stages[-1].c
+        """One pass from the last stage down with signs chosen at α = ag; returns the record
+        ((M_S1 at α = 0, dM_S1/dα), per-stage tuples (flank, A, coefficients, M_Sk, h_k,
+        B_(k−1) as (value, d/dα) pairs, spline and bearing factors, signs of M_Sk and B_(k−1)))."""
+        v_eps = self.v_eps
+        coefficients = self._coefficients
+        a0, a1 = load, self._last_mass
         mn0 = mn1 = hn0 = hn1 = 0.0
-        per_stage = [None] * n
-        for k in range(n - 1, -1, -1):
-            s = stages[k]
+        per_stage = [None] * len(self.stages)
+        for k, (j_screw, m_sc, e_spline, spline_f, g_bearing, bearing_f, mass_below,
+                flanks) in self._plan:
             fi = 0 if a0 + a1 * ag >= 0.0 else 1
             co = cache[2 * k + fi]
             if co is None:
-                co = cache[2 * k + fi] = self._coefficients(s, s.flanks[fi], omega, wps[k])
+                co = cache[2 * k + fi] = coefficients(flanks[fi], omega, wps[k])
             kappa = co[0]
             x0 = mn0 - kappa * a0
-            x1 = s.j_screw + mn1 - kappa * a1
+            x1 = j_screw + mn1 - kappa * a1
             if k == 0:
                 per_stage[0] = (fi, a0, a1, co, x0, x1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1, 1)
                 return (x0, x1), per_stage
             y0 = a0 - hn0
-            y1 = a1 - hn1 + s.m_screw * s.c_prev
-            e = (s.e_spline * regularised_sign(omega * s.spline_speed_factor, self.v_eps)
-                 if s.e_spline else 0.0)
-            if s.g_bearing:
-                g = s.g_bearing * regularised_sign(omega * s.bearing_speed_factor, self.v_eps)
+            y1 = a1 - hn1 + m_sc
+            e = 0.0
+            if e_spline:
+                v = omega * spline_f  # sgñ(v) = ±1 outside the band (friction.py)
+                e = (e_spline if v >= v_eps else -e_spline if v <= -v_eps
+                     else e_spline * regularised_sign(v, v_eps))
+            if g_bearing:
+                g = g_bearing * regularised_sign(omega * bearing_f, v_eps)
                 sm = 1.0 if x0 + x1 * ag >= 0.0 else -1.0
                 sb = 1.0 if y0 + y1 * ag >= 0.0 else -1.0
                 for _ in range(3):
@@ -350,21 +400,19 @@ class Mechanism:
                 b1 = y1 + e * sm * m1
             h0, h1 = e * sm * m0, e * sm * m1
             per_stage[k] = (fi, a0, a1, co, m0, m1, h0, h1, b0, b1, e, g, sm, sb)
-            prev = stages[k - 1]
-            a0, a1 = b0, b1 + prev.m_assembly * prev.c
+            a0, a1 = b0, b1 + mass_below
             mn0, mn1, hn0, hn1 = m0, m1, h0, h1
-        raise AssertionError("unreachable")
+        raise AssertionError("unreachable: the sweep returns at stage 1")
 
     @staticmethod
     def _signs_hold(rec, alpha) -> bool:
         """Whether the signs used in a sweep are those of the quantities at ``alpha``."""
-        for fi, a0, a1, co, m0, m1, h0, h1, b0, b1, e, g, sm, sb in rec[1]:
+        for fi, a0, a1, _, m0, m1, _, _, b0, b1, e, g, sm, sb in rec[1]:
             if (0 if a0 + a1 * alpha >= 0.0 else 1) != fi:
                 return False
             if e or g:
-                if (1.0 if m0 + m1 * alpha >= 0.0 else -1.0) != sm:
-                    return False
-                if (1.0 if b0 + b1 * alpha >= 0.0 else -1.0) != sb:
+                if ((1.0 if m0 + m1 * alpha >= 0.0 else -1.0) != sm
+                        or (1.0 if b0 + b1 * alpha >= 0.0 else -1.0) != sb):
                     return False
         return True
 
@@ -374,17 +422,17 @@ class Mechanism:
         (m0, m1), per_stage = rec
         motor = m0 + m1 * alpha
         if not detail:
-            return self._rates(omega, alpha, motor, per_stage)
+            acc, p_fric = self._rates(omega, alpha, per_stage)
+            return Solution(alpha, acc, motor, p_fric)
         dyn = self.zeta is None
         acc = [0.0] * n
         p_fric = 0.0
-        if detail:
-            axial, contact, normal, torque, spline, bearing, stage_p = ([0.0] * n for _ in range(7))
+        axial, contact, normal, torque, spline, bearing, stage_p = ([0.0] * n for _ in range(7))
         for k in range(n):
             fi, a0, a1, co, x0, x1, h0, h1, b0, b1, e, g, sm, sb = per_stage[k]
             s = stages[k]
             a = a0 + a1 * alpha
-            kappa, gamma, pw, inv_d = co
+            kappa, gamma, pw, q = co
             if dyn:
                 acc[k] = gamma * a / s.j_carrier
             pk = pw * a
@@ -397,42 +445,39 @@ class Mechanism:
                 # solution; keeps one record one affine law in α)
                 pk += g * sb * b * omega
             p_fric += pk
-            if detail:
-                fl = s.flanks[fi]
-                f_normal = a * inv_d
-                axial[k] = a
-                normal[k] = f_normal
-                contact[k] = f_normal * fl.nz
-                torque[k] = motor if k == 0 else x0 + x1 * alpha
-                spline[k] = 0.0 if k == 0 else h0 + h1 * alpha
-                if k > 0:
-                    bearing[k - 1] = b0 + b1 * alpha
-                stage_p[k] = pk
+            fl = s.flanks[fi]
+            f_normal = a * q / s.n_rollers
+            axial[k] = a
+            normal[k] = f_normal
+            contact[k] = f_normal * fl.nz
+            torque[k] = motor if k == 0 else x0 + x1 * alpha
+            spline[k] = 0.0 if k == 0 else h0 + h1 * alpha
+            if k > 0:
+                bearing[k - 1] = b0 + b1 * alpha
+            stage_p[k] = pk
         sol = Solution(alpha, acc, motor, p_fric)
-        if detail:
-            bearing[n - 1] = load
-            sol.stage_axial_force, sol.contact_force, sol.normal_force = axial, contact, normal
-            sol.driven_torque, sol.spline_friction, sol.bearing_force = torque, spline, bearing
-            sol.stage_friction_power = stage_p
+        bearing[n - 1] = load
+        sol.stage_axial_force, sol.contact_force, sol.normal_force = axial, contact, normal
+        sol.driven_torque, sol.spline_friction, sol.bearing_force = torque, spline, bearing
+        sol.stage_friction_power = stage_p
         return sol
 
-    def _rates(self, omega, alpha, motor, per_stage) -> Solution:
-        """The hot path of :meth:`_assemble`: accelerations and friction power only."""
-        dyn = self.zeta is None
-        acc = []
+    def _rates(self, omega, alpha, per_stage) -> tuple:
+        """The hot path of :meth:`_assemble`: (carrier accelerations, friction power)."""
         p_fric = 0.0
-        for s, (fi, a0, a1, co, x0, x1, h0, h1, b0, b1, e, g, sm, sb) in zip(self.stages, per_stage):
+        acc = []
+        for (j_carrier, spline_f), (_, a0, a1, co, _, _, h0, h1, b0, b1, e, g, _, sb) in zip(
+                self._rate_consts, per_stage):
             a = a0 + a1 * alpha
-            if dyn:
-                acc.append(co[1] * a / s.j_carrier)
+            acc.append(co[1] * a / j_carrier)
             p_fric += co[2] * a
             if e:
-                p_fric += (h0 + h1 * alpha) * omega * s.spline_speed_factor
+                p_fric += (h0 + h1 * alpha) * omega * spline_f
             if g:
                 p_fric += g * sb * (b0 + b1 * alpha) * omega
-        if not dyn:
-            acc = [0.0] * len(self.stages)
-        return Solution(alpha, acc, motor, p_fric)
+        if self.zeta is not None:
+            acc = [0.0] * len(per_stage)
+        return acc, p_fric
 
     def fastest_time_constant(self, omega: float, carrier_state, load: float) -> float:
         """Smallest carrier time constant J_Pk / |∂G_Pk/∂ω_Pk| at this point [s] (inf if none).

@@ -18,9 +18,34 @@ from .steppers import StepStats, make_stepper
 
 Signal = Union[float, Callable[[float], float]]
 
-#: default stepper per fidelity level
+#: default stepper per fidelity level (used by simulate and the FMU)
 DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
                    "kinematic": "closed_form"}
+
+#: options that make an adaptive stepper cheapest at equal accuracy on this model
+#: (benchmarks/step_cost.py: Jacobian reuse within a step while h·‖J‖·|Δx|/|x| ≤ 0.1, and a first
+#: internal step of at most 8/‖J‖ after an input change)
+TUNED_OPTIONS = {"rosenbrock": {"jacobian_reuse": 0.1, "first_step_stiffness": 8.0}}
+
+
+def tuned_stepper_options(name: str, rtol: float, atol: float) -> dict:
+    """Options of stepper ``name`` at the given tolerances, as simulate and the FMU use them.
+
+    Parameters
+    ----------
+    name : str
+        Stepper name (see :func:`prsm_fmu.steppers.make_stepper`).
+    rtol, atol : float
+        Relative [-] and absolute [state units] tolerances (ignored by ``rk4``).
+
+    Returns
+    -------
+    dict
+        Keyword arguments for :func:`~prsm_fmu.steppers.make_stepper`.
+    """
+    if name == "rk4":
+        return {}
+    return {"rtol": rtol, "atol": atol, **TUNED_OPTIONS.get(name, {})}
 
 
 def _signal(value: Signal, name: str) -> Callable[[float], float]:
@@ -95,10 +120,11 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
                            "screw_torque" if drive == "torque" else "screw_speed")
     load_signal = _signal(load_force, "load_force")
     name = stepper or DEFAULT_STEPPER[fidelity]
-    opts = dict(stepper_options or {})
-    if name != "rk4":
-        opts.setdefault("rtol", rtol)
-        opts.setdefault("atol", atol)
+    opts = tuned_stepper_options(name, rtol, atol)
+    opts.update(stepper_options or {})
+    if "fixed_substeps" in opts:
+        for key in TUNED_OPTIONS.get(name, {}):
+            opts.pop(key, None)
     st = make_stepper(name, model, **opts)
 
     def inputs(t: float) -> tuple:

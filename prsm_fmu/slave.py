@@ -49,6 +49,7 @@ from pythonfmu.enums import Fmi2Status
 from . import __version__
 from .models import FIDELITIES, make_model
 from .params import MechanismParams, StageParams, stage_field_names
+from .simulate import DEFAULT_STEPPER, tuned_stepper_options
 from .steppers import STEPPER_NAMES, StepFailure, make_stepper
 
 #: the FMU's fidelity choices; ``auto`` currently means ``AUTO_FIDELITY`` (see below)
@@ -62,7 +63,6 @@ AUTO_FIDELITY = "quasi-static"
 #: carriers (quasi-static, kinematic) and ``rosenbrock`` for the dynamic level
 FMU_STEPPERS = ("default",) + STEPPER_NAMES
 
-DEFAULT_STEPPER = {"quasi-static": "closed_form", "kinematic": "closed_form", "dynamic": "rosenbrock"}
 
 #: absolute tolerance of the adaptive steppers relative to ``tolerance`` (states are in rad,
 #: rad/s and J, each with scale 1): atol = ATOL_FACTOR * tolerance
@@ -568,7 +568,8 @@ class PRSMSlave(Fmi2Slave):
                                  "integer >= 1 (rk4 has no error control)")
             opts["substeps"] = substeps
         else:
-            opts.update(rtol=tol, atol=ATOL_FACTOR * tol)
+            opts.update(tuned_stepper_options(name, tol, ATOL_FACTOR * tol) if not substeps
+                        else {"rtol": tol, "atol": ATOL_FACTOR * tol})
             if name != "radau":
                 opts["max_substeps"] = max_substeps
             if substeps:

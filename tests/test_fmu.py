@@ -54,8 +54,7 @@ H = 1e-3                      # communication step [s]
 OK, DISCARD = 0, 2
 
 #: the steppers the FMU documents as its defaults (docs/fmu.md), and its tolerance mapping
-DEFAULT_STEPPER = {"kinematic": "closed_form", "quasi-static": "closed_form",
-                   "dynamic": "rosenbrock"}
+from prsm_fmu.simulate import DEFAULT_STEPPER, tuned_stepper_options  # noqa: E402 - as the FMU
 TOLERANCE = 1e-6              # the FMU's default ``tolerance``: rtol = tol, atol = 0.01 tol
 
 
@@ -192,7 +191,7 @@ def run_python(params, fidelity: str, n: int, names, stepper: str | None = None,
     """The same loop on the Python model with the stepper the FMU documents."""
     model = make_model(params, fidelity, "torque")
     name = stepper or DEFAULT_STEPPER[fidelity]
-    opts = stepper_opts or {"rtol": TOLERANCE, "atol": 0.01 * TOLERANCE}
+    opts = stepper_opts or tuned_stepper_options(name, TOLERANCE, 0.01 * TOLERANCE)
     st = make_stepper(name, model, **opts)
     x = model.initial_state((0.0, 0.0), screw_speed=0.0, carrier_ratio=0.0)
     speed, integral = model.outputs(0.0, x, (0.0, 0.0))["screw_speed"], 0.0
@@ -344,7 +343,8 @@ def test_variable_communication_steps_equal_the_python_model(fidelity):
     finally:
         host.free()
     model = make_model(presets.load("seed000_two_stage"), fidelity, "torque")
-    st = make_stepper(DEFAULT_STEPPER[fidelity], model, rtol=TOLERANCE, atol=0.01 * TOLERANCE)
+    name = DEFAULT_STEPPER[fidelity]
+    st = make_stepper(name, model, **tuned_stepper_options(name, TOLERANCE, 0.01 * TOLERANCE))
     x, ref, t = model.initial_state((0.0, 0.0)), [], 0.0
     for u, h in zip(inputs, steps):
         x, _ = st.advance(t, x, u, h)

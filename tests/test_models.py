@@ -83,6 +83,28 @@ def test_power_identity_closes_to_round_off_at_random_states(mech, fidelity, dri
 
 
 @pytest.mark.parametrize("mech", sorted(MECHANISMS))
+@pytest.mark.parametrize("fidelity", ["dynamic", "quasi-static", "kinematic"])
+def test_hot_path_rates_equal_the_detailed_solution(mech, fidelity):
+    """Mechanism.rates (the rhs's path) and Mechanism.solve with and without detail share
+    one recursion: the same acceleration, motor torque, carrier accelerations and friction
+    power, also in the friction band and where the sign iteration has to bracket."""
+    model = make_model(MECHANISMS[mech](), fidelity, "torque")
+    mech_ = model.mechanism
+    rng = random.Random(4321)
+    for _ in range(200):
+        omega = rng.choice([1.0, -1.0]) * 10 ** rng.uniform(-6, 2.5)
+        wp = [omega * rng.uniform(-0.5, 1.0) for _ in range(model.n_carrier_states)]
+        load, torque = rng.uniform(-8000.0, 8000.0), rng.uniform(-40.0, 40.0)
+        for drive in ({"torque": torque}, {"acceleration": rng.uniform(-1e4, 1e4)}):
+            alpha, motor, acc, p_fric = mech_.rates(omega, wp, load, **drive)
+            for detail in (False, True):
+                sol = mech_.solve(omega, wp, load, detail=detail, **drive)
+                assert (alpha, motor) == (sol.screw_acceleration, sol.motor_torque)
+                assert acc == pytest.approx(sol.carrier_accelerations, rel=1e-14, abs=0.0)
+                assert p_fric == pytest.approx(sol.friction_power, rel=1e-12, abs=1e-12 * abs(motor * omega))
+
+
+@pytest.mark.parametrize("mech", sorted(MECHANISMS))
 def test_carrier_accelerations_vanish_at_the_equilibrium_ratio(mech):
     params = MECHANISMS[mech]()
     dyn = make_model(params, "dynamic", "speed")

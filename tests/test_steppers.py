@@ -29,6 +29,8 @@ from prsm_fmu.steppers import (
     Stepper,
     StepFailure,
     StepStats,
+    _ROS_EQ,
+    _ROS_WQ,
     _SMALL_LU,
     _lu_factor,
     _lu_solve,
@@ -839,6 +841,124 @@ def test_rosenbrock_memory_is_the_first_step_proposal():
 
 
 # ----------------------------------------------------------------------------------
+# Jacobian reuse and the first-step bound (Rosenbrock)
+# ----------------------------------------------------------------------------------
+
+
+def test_quadrature_weights_are_the_b_weights():
+    """Untransformed, the quadrature rows read k_q,i = h f_q(X_i) + h J_qd sum_j
+    Gamma_ij k_d,j (the columns q of J are zero), so the weights of the stage values in
+    the result are b, and b - b_hat in the error estimate."""
+    assert np.allclose(_ROS_WQ, ROS_B, rtol=0, atol=1e-14)
+    assert np.allclose(_ROS_EQ, np.array(ROS_B) - np.array(ROS_BHAT), rtol=0, atol=1e-14)
+
+
+def _advances(stepper, x0, inputs, H):
+    x, t, out = list(x0), 0.0, []
+    for u in inputs:
+        x, st = stepper.advance(t, x, u, H)
+        t += H
+        out.append((x, st))
+    return out
+
+
+def test_jacobian_reuse_changes_nothing_but_the_count_for_a_constant_jacobian():
+    m = Stiff2()
+    y0 = [1.0, m.L / (m.L - 1.0) * (1.0 + 1e-5)]  # a fast transient at the start
+    ref = _advances(Rosenbrock(m, rtol=1e-6, atol=1e-9), y0, [()] * 5, 2e-3)
+    reuse = _advances(Rosenbrock(m, rtol=1e-6, atol=1e-9, jacobian_reuse=1e9), y0, [()] * 5, 2e-3)
+    for (a, sa), (b, sb) in zip(ref, reuse):
+        assert a == b  # the same Jacobian, so the same steps bit for bit
+        assert (sa.substeps, sa.rejected) == (sb.substeps, sb.rejected)
+        # one per advance, plus one after a rejection at a point whose Jacobian is older
+        assert sb.jacobian_calls <= 1 + sb.rejected < sa.jacobian_calls
+    ex = m.exact(5 * 2e-3, y0)
+    assert max(abs(p - q) for p, q in zip(reuse[-1][0], ex)) <= 1e-8
+
+
+@pytest.mark.parametrize("jacobian", ["fd", "analytic"])
+def test_jacobian_reuse_bound_refreshes_a_drifted_jacobian(jacobian):
+    """Stiff nonlinear core with quadratures and an input that changes every advance:
+    a vanishing bound refreshes the Jacobian at every new point (as without reuse); a
+    moderate one saves Jacobians and keeps the error at the level of the tolerance."""
+    cls = StiffQuadJ if jacobian == "analytic" else StiffQuad
+    inputs = [(1.0 + 0.3 * math.sin(i),) for i in range(6)]
+    x0 = [0.3, 0.5, 0.2, 0.0]
+    H = 2e-3
+
+    def run(reuse):
+        return _advances(Rosenbrock(cls(True), rtol=1e-6, atol=1e-9, jacobian=jacobian,
+                                    jacobian_reuse=reuse), x0, inputs, H)
+
+    plain, tiny, moderate = run(0.0), run(1e-300), run(0.1)
+    for (a, sa), (b, sb) in zip(plain, tiny):
+        assert a == b and sa == sb
+    assert sum(st.jacobian_calls for _, st in moderate) < sum(st.jacobian_calls for _, st in plain)
+    radau = ScipyRadau(cls(True), rtol=1e-11, atol=1e-13)
+    x = list(x0)
+    for i, (u, (xm, _)) in enumerate(zip(inputs, moderate)):
+        x, _ = radau.advance(i * H, x, u, H)
+        assert max(abs(p - q) / (1.0 + abs(q)) for p, q in zip(xm, x)) <= 1e-5
+
+
+def test_jacobian_reuse_does_not_trap_the_controller_in_a_friction_band():
+    """The PRSM braked through zero speed: in the friction band the carriers' time
+    constants collapse to nanoseconds while the states hardly change, so the drift bound
+    alone would keep a stale Jacobian through ever smaller steps (2.5x the rhs calls);
+    refreshing it after a shrinking step keeps reuse cheaper than none."""
+    from prsm_fmu import presets
+    from prsm_fmu.models import make_model
+
+    model = make_model(presets.load("seed000_two_stage"), "dynamic", "torque")
+    u = (5.0, 5000.0)  # the load back-drives the screw after ~0.54 ms
+    x0 = model.initial_state(u, screw_speed=30.0, carrier_ratio=None)
+    calls, ends = [], []
+    for reuse in (0.0, 0.1):
+        s = Rosenbrock(model, rtol=1e-7, atol=1e-10, jacobian_reuse=reuse)
+        out = _advances(s, x0, [u] * 150, 1e-5)
+        calls.append(sum(st.rhs_calls for _, st in out))
+        ends.append(out[-1][0])
+    assert ends[0][1] < 0.0 < x0[1]
+    assert calls[1] < calls[0]
+    assert max(abs(p - q) / (1.0 + abs(q)) for p, q in zip(*ends)) <= 1e-6
+
+
+def test_first_step_bound_caps_the_first_step_of_every_advance():
+    """h ||J|| <= first_step_stiffness for each advance's first step (an input change
+    starts a fast transient there) unless the memory proposes more than fac_max times
+    that; without memory the first step is the bound."""
+    m = FastInput()
+    c = 2.0
+    s = Rosenbrock(m, rtol=1e-6, atol=1e-9, first_step_stiffness=c)
+    trials = []
+    trial = s._trial
+
+    def record(f, t, x, f0, fac, hs, u):
+        trials.append((t, hs))
+        return trial(f, t, x, f0, fac, hs, u)
+
+    s._trial = record
+    x, t, H = [1.0], 0.0, 1e-3
+    for i in range(10):
+        u = (1.0 + 0.01 * math.sin(0.7 * i),)
+        x0 = x[0]
+        x, _ = s.advance(t, x, u, H)
+        assert abs(x[0] - (u[0] + (x0 - u[0]) * math.exp(-m.L * H))) <= 1e-6
+        first = [hs for ti, hs in trials if ti == t]
+        assert first and first[0] * m.L <= c * (1.0 + 1e-12)
+        if i == 0:
+            assert first[0] * m.L == pytest.approx(c, rel=1e-12)
+        t += H
+    # the bound is tighter than the memory alone would start with
+    assert max(hs for ti, hs in trials) * m.L > c
+    # ... but cuts the memory's proposal by at most fac_max
+    s.set_memory((H,))
+    trials.clear()
+    s.advance(t, x, (1.0,), H)
+    assert trials[0] == (t, H / s.fac_max)
+
+
+# ----------------------------------------------------------------------------------
 # memory round trip
 # ----------------------------------------------------------------------------------
 
@@ -971,6 +1091,10 @@ def test_constructor_validation():
         Rosenbrock(Decay(), jacobian="exact")
     assert Rosenbrock(Decay()).jacobian == "fd"
     assert Rosenbrock(DecayJ()).jacobian == "analytic"
+    for name in ("jacobian_reuse", "first_step_stiffness"):
+        for bad in (-1.0, math.nan, math.inf, "1"):
+            with pytest.raises(ValueError, match=name):
+                Rosenbrock(Decay(), **{name: bad})
 
 
 # ----------------------------------------------------------------------------------

@@ -56,6 +56,9 @@ class Model(ABC):
         self.state_names: tuple[str, ...] = tuple(names)
         self.n_states = len(names)
         self._i_carrier = 2 if drive == "torque" else 1
+        self._torque_drive = drive == "torque"
+        #: no losses outside the mechanism model (the hot path skips the hook)
+        self._lossless = type(self)._extra_loss_torque is Model._extra_loss_torque
         self._i_energy = self._i_carrier + self.n_carrier_states
         #: per-state absolute scale for error norms [rad, rad/s, rad/s, J]
         self.state_scale = tuple(1.0 for _ in names)
@@ -143,23 +146,22 @@ class Model(ABC):
         list of float
         """
         load = u[1]
-        if self.drive == "torque":
+        mech = self.mechanism
+        if self._torque_drive:
             omega = x[1]
-            loss = self._extra_loss_torque(omega, load)
             motor = u[0]
-            sol = self.mechanism.solve(omega, x[2:self._i_energy], load, torque=motor - loss)
-            dx = [omega, sol.screw_acceleration]
+            loss = 0.0 if self._lossless else self._extra_loss_torque(omega, load)
+            alpha, _, acc, p_fric = mech.rates(omega, x[2:self._i_energy], load, motor - loss)
+            dx = [omega, alpha]
         else:
             omega = u[0]
             loss = self._extra_loss_torque(omega, load)
-            sol = self.mechanism.solve(omega, x[1:self._i_energy], load, acceleration=0.0)
-            motor = sol.motor_torque + loss
+            _, motor, acc, p_fric = mech.rates(omega, x[1:self._i_energy], load, acceleration=0.0)
+            motor += loss
             dx = [omega]
         if self.n_carrier_states:
-            dx += sol.carrier_accelerations
-        dx.append(motor * omega)
-        dx.append(load * self.mechanism.c_out * omega)
-        dx.append(sol.friction_power + loss * omega)
+            dx += acc
+        dx += (motor * omega, load * mech.c_out * omega, p_fric + loss * omega)
         return dx
 
     def outputs(self, t: float, x: list[float], u: tuple) -> dict[str, float]:
