@@ -410,10 +410,12 @@ class Mechanism:
         for fi, a0, a1, _, m0, m1, _, _, b0, b1, e, g, sm, sb in rec[1]:
             if (0 if a0 + a1 * alpha >= 0.0 else 1) != fi:
                 return False
-            if e or g:
-                if ((1.0 if m0 + m1 * alpha >= 0.0 else -1.0) != sm
-                        or (1.0 if b0 + b1 * alpha >= 0.0 else -1.0) != sb):
-                    return False
+            # the spline friction uses the sign of M_Sk; the bearing friction that of B_(k−1)
+            # (without bearing friction the sweep does not use B's sign at all)
+            if (e or g) and (1.0 if m0 + m1 * alpha >= 0.0 else -1.0) != sm:
+                return False
+            if g and (1.0 if b0 + b1 * alpha >= 0.0 else -1.0) != sb:
+                return False
         return True
 
     def _assemble(self, omega, wps, load, alpha, rec, detail) -> Solution:

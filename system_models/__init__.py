@@ -1,1 +1,26 @@
-"""The electromechanical actuator around the PRSM FMU: motor, controller, load, co-simulation master (to come)."""
+"""The electromechanical actuator around the PRSM FMU: motor, controller, load, co-simulation master.
+
+Modules (docs/ema.md):
+
+* :mod:`.blocks` — the small block interface every part implements (FMU or plain Python);
+* :mod:`.fmu` — any FMI 2.0 co-simulation FMU as a block through fmpy's ``FMU2Slave``, and
+  :func:`~system_models.fmu.ensure_fmu` (builds ``dist/PRSM2.fmu`` in a child process);
+* :mod:`.prsm` — the PRSM block: the FMU, or the same mechanism as a plain Python model;
+* :mod:`.motor`, :mod:`.controller`, :mod:`.load` — PMSM in dq, cascaded digital controller,
+  spring/damper/external-force load, with their parameters and reasons;
+* :mod:`.master` — fixed-step Jacobi / Gauss–Seidel master with input extrapolation and
+  roll-back/retry;
+* :mod:`.ema` — a scene turned into blocks and connections; :mod:`.run` — run and check a scene;
+* :mod:`.scenes`, :mod:`.signals` — scenes as TOML data, time profiles;
+* :mod:`.analysis`, :mod:`.output`, :mod:`.progress`, :mod:`.cli` — checks and power
+  bookkeeping, CSV and plots, progress bar, the ``prsm-ema`` command.
+
+The physics of the mechanism stays in :mod:`prsm_fmu`; nothing here imports pythonfmu.
+"""
+
+from .master import CoSimulationError, Master, Result, RetryPolicy
+from .run import SceneRun, run_scene
+from .scenes import list_scenes, load_scene
+
+__all__ = ["Master", "RetryPolicy", "Result", "CoSimulationError", "run_scene", "SceneRun",
+           "load_scene", "list_scenes"]

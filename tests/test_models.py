@@ -223,3 +223,20 @@ def test_rigid_contact_solution_exists_near_the_carrier_equilibrium(mu_ns):
         wp = [omega * (z + rng.uniform(-0.05, 0.05)) for z in zeta]
         sol = model.mechanism.solve(omega, wp, rng.uniform(-8000, 8000), torque=rng.uniform(-40, 40))
         assert sol.consistent
+
+
+def test_sign_iteration_converges_without_bracketing_when_bearing_force_is_negative():
+    # seed 000 has spline friction but no bearing friction: the sign of the bearing force is
+    # irrelevant and must not keep a converged iteration from being accepted (regression: the
+    # fallback root search ran at every evaluation of a braking heavy load)
+    model = make_model(two_stage(), "quasi-static", "torque")
+    mech = model.mechanism
+    calls = []
+    original = mech._bracket
+    mech._bracket = lambda *a: calls.append(a) or original(*a)
+    omega, load, torque = -18.42, 36.09, -0.05667
+    sol = mech.solve(omega, (), load, torque=torque, detail=True)
+    assert sol.consistent and not calls
+    assert sol.bearing_force[0] < 0     # the case that used to cycle
+    # and the acceleration balances the motor torque exactly
+    assert model.mechanism.solve(omega, (), load, acceleration=sol.screw_acceleration).motor_torque == pytest.approx(torque, rel=1e-12)

@@ -1,0 +1,147 @@
+"""The ``prsm-ema`` command line: run the electromechanical actuator's scenes.
+
+::
+
+    prsm-ema list
+    prsm-ema run --scene NAME|FILE.toml [--fidelity kinematic|quasi-static|dynamic|auto]
+                 [--step H] [--out DIR] [--prsm fmu|python] [--fmu PATH]
+                 [--order jacobi|gauss-seidel] [--extrapolation 0|1] [--retry N]
+                 [--no-plots]
+
+``run`` builds ``dist/PRSM2.fmu`` first if it is missing or older than the sources (with
+``python -m fmu_build`` in a child process), co-simulates the scene with fmpy stepping the FMU,
+prints the scene's checks (each with the measured value and its limit) and the power
+bookkeeping, and writes ``DIR/<scene>.csv`` (every output, units in the header),
+``DIR/<scene>_*.png`` and ``DIR/<scene>_summary.json``.  A progress bar appears on runs longer
+than two seconds.
+
+Exit status: 0 every check passed; 1 a check failed, or the co-simulation stopped (a refused
+step: the message names the time, the block and the reason); 2 bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["main", "build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="prsm-ema", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="list the scenes (./scenes first, then the built-in ones)")
+    r = sub.add_parser("run", help="run a scene, print its checks, write CSV and plots")
+    r.add_argument("--scene", required=True, help="scene name (see 'prsm-ema list') or a .toml file")
+    r.add_argument("--fidelity", choices=["kinematic", "quasi-static", "dynamic", "auto"],
+                   help="PRSM fidelity level (default: the scene's)")
+    r.add_argument("--step", type=float, help="communication step h [s] (default: the scene's)")
+    r.add_argument("--out", default="out", help="output directory (default: out)")
+    r.add_argument("--prsm", choices=["fmu", "python"], default="fmu",
+                   help="the PRSM as the FMU stepped by fmpy (default) or as the plain Python model")
+    r.add_argument("--fmu", help="the FMU file (default: dist/<mechanism>.fmu, built if missing)")
+    r.add_argument("--order", choices=["jacobi", "gauss-seidel"], help="coupling order")
+    r.add_argument("--extrapolation", type=int, choices=[0, 1], help="input extrapolation order")
+    r.add_argument("--retry", type=int, metavar="N",
+                   help="retry a refused step up to N times with halved substeps (default: scene)")
+    r.add_argument("--no-plots", action="store_true", help="write the CSV and summary only")
+    return ap
+
+
+def _cmd_list() -> int:
+    from .scenes import list_scenes
+
+    rows = list_scenes()
+    w = max(len(n) for n, _ in rows) if rows else 0
+    for name, desc in rows:
+        print(f"{name:<{w}}  {desc}")
+    return 0
+
+
+def _cmd_run(args, ap) -> int:
+    from .fmu import FMUError, ensure_fmu
+    from .master import CoSimulationError, RetryPolicy
+    from .output import write_csv, write_plots, write_summary
+    from .progress import Progress
+    from .run import run_scene
+    from .scenes import load_scene
+
+    try:
+        scene = load_scene(args.scene)
+    except ValueError as exc:
+        ap.error(str(exc))
+    if args.step is not None and not args.step > 0:
+        ap.error(f"--step {args.step!r}: must be > 0")
+    retry = None
+    if args.retry is not None:
+        if args.retry < 0:
+            ap.error(f"--retry {args.retry}: must be >= 0")
+        retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
+    fmu_path = None
+    if args.prsm == "fmu":
+        mech = scene.prsm.get("mechanism", "PRSM2")
+        try:
+            fmu_path = ensure_fmu(args.fmu or f"dist/{mech}.fmu", rebuild_stale=args.fmu is None)
+        except FMUError as exc:
+            print(f"prsm-ema: {exc}", file=sys.stderr)
+            return 1
+    print(f"scene {scene.name}: {scene.description}")
+    prog = Progress(t_start=scene.t0)
+    try:
+        run = run_scene(scene, prsm=args.prsm, fmu_path=fmu_path, fidelity=args.fidelity,
+                        step=args.step, order=args.order, extrapolation=args.extrapolation,
+                        retry=retry, progress=prog)
+    except CoSimulationError as exc:
+        prog.close()
+        print(f"prsm-ema: {exc}", file=sys.stderr)
+        return 1
+    except (ValueError, FMUError) as exc:
+        prog.close()
+        print(f"prsm-ema: {exc}", file=sys.stderr)
+        return 1 if isinstance(exc, FMUError) else 2
+    prog.close()
+    s = run.summary()
+    st = s["stats"]
+    what = f"FMU {fmu_path}" if args.prsm == "fmu" else "plain Python model"
+    print(f"PRSM: {what}, fidelity {s['fidelity']}; master: {s['order']}, extrapolation order "
+          f"{s['extrapolation']}, h = {s['step']:g} s, {st['macro_steps']} steps "
+          f"({st['retries']} retries) in {st['wall_time']:.2f} s")
+    d = s["system"]
+    print(f"actuator: inertia on the screw {d['inertia_on_screw_kg_m2']:.4g} kg·m² "
+          f"(reflected mass {d['reflected_mass_kg']:.4g} kg), peak torque "
+          f"{d['motor_peak_torque_Nm']:.4g} N·m, controller sample time "
+          f"{1e6 * d['controller_sample_time_s']:.4g} µs")
+    if s["final"]:
+        print("at the end: " + ", ".join(f"{k} = {v:.6g} {run.result.units.get(k, '')}".rstrip()
+                                         for k, v in s["final"].items()))
+    for c in run.checks:
+        print(c.line())
+    e = run.energy
+    print(f"power bookkeeping: electrical input {e['electrical_input']:.6g} J = copper losses "
+          f"{e['copper_losses']:.6g} J + friction {e['friction_work']:.6g} J + load work "
+          f"{e['load_work']:.6g} J + Δstored {e['delta_magnetic_energy'] + e['delta_kinetic_energy']:.6g} J "
+          f"+ residual {e['residual']:.3g} J ({e['relative_residual']:.3g} relative)")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
+    if not args.no_plots:
+        files += write_plots(run.result, out, scene.name, run.system.reference,
+                             run.system.master.blocks[0].mode, run.system.motor.current_limit)
+    files.append(write_summary(out / f"{scene.name}_summary.json", s))
+    print("wrote " + ", ".join(str(f) for f in files))
+    print("all checks passed" if run.passed else "SOME CHECKS FAILED")
+    return 0 if run.passed else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``prsm-ema``; returns the exit status."""
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if args.command == "list":
+        return _cmd_list()
+    return _cmd_run(args, ap)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

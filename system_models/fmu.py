@@ -1,0 +1,279 @@
+"""Any FMI 2.0 co-simulation FMU as a :class:`~system_models.blocks.Block`, through fmpy.
+
+:class:`FMUBlock` drives fmpy's ``FMU2Slave``: instantiate (with a logger that keeps every
+message), ``setupExperiment``, parameters set in initialization mode, ``doStep``, ``getReal``
+(and ``getInteger`` for Integer outputs), ``getFMUstate``/``setFMUstate`` for roll-back.  It
+knows nothing about the PRSM.
+
+How it reacts to the FMU (docs/fmu.md, "Errors"):
+
+* ``doStep`` returns fmi2Discard → :class:`~system_models.blocks.StepRefused` with the FMU's
+  log messages of that call as the reason.  The FMU's state is as before the call, so the
+  master may retry (smaller step) or stop with an error naming the time and the reason.
+* any other failing call (fmi2Error, fmi2Fatal) → :class:`FMUError` with the messages; the
+  instance must not be used again.
+
+:func:`ensure_fmu` builds ``dist/PRSM<n>.fmu`` with ``python -m fmu_build`` in a child process
+when it is missing or older than the sources (a process that loads an FMU must not be the one
+that built it: pythonfmu imports the generated module while building).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+from .blocks import Block, Port, StepRefused
+
+__all__ = ["FMUBlock", "FMUError", "ensure_fmu", "fmu_is_stale"]
+
+_STATUS = ["ok", "warning", "discard", "error", "fatal", "pending"]
+
+
+class FMUError(RuntimeError):
+    """An FMU call failed with fmi2Error or fmi2Fatal (or the FMU cannot be loaded)."""
+
+
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _sources() -> list[Path]:
+    """The files an FMU is built from: prsm_fmu and fmu_build (Python sources)."""
+    files: list[Path] = []
+    for pkg in ("prsm_fmu", "fmu_build"):
+        d = _ROOT / pkg
+        if d.is_dir():
+            files += [p for p in d.rglob("*.py")]
+    return files
+
+
+def fmu_is_stale(path: str | os.PathLike) -> str | None:
+    """Why the FMU at ``path`` needs (re)building, or None if it is up to date."""
+    p = Path(path)
+    if not p.is_file():
+        return "missing"
+    built = p.stat().st_mtime
+    newer = [s for s in _sources() if s.stat().st_mtime > built]
+    if newer:
+        return f"older than {newer[0].relative_to(_ROOT)}"
+    return None
+
+
+def ensure_fmu(path: str | os.PathLike = "dist/PRSM2.fmu", rebuild_stale: bool = True,
+               stream=None) -> Path:
+    """Return ``path``, building it first if missing (or stale) in a child process.
+
+    The FMU's name (``PRSM1``, ``PRSM2``, ``PRSM3``) is the file's stem; the build runs
+    ``python -m fmu_build NAME --dest DIR`` with this interpreter.
+
+    Raises
+    ------
+    FMUError
+        If the build fails (its output is in the message), e.g. pythonfmu is not installed.
+    """
+    p = Path(path)
+    why = fmu_is_stale(p)
+    if why is None or (why != "missing" and not rebuild_stale):
+        return p
+    name = p.stem
+    stream = sys.stderr if stream is None else stream
+    print(f"building {p} ({why}) with python -m fmu_build {name} ...", file=stream, flush=True)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(_ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH")
+                                                        else []))
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", name, "--dest", str(p.parent or ".")],
+                          capture_output=True, text=True, env=env, timeout=600)
+    if proc.returncode != 0 or not p.is_file():
+        hint = ""
+        if "No module named 'pythonfmu'" in proc.stderr:
+            hint = " (install the fmu extra: pip install -e \".[fmu]\")"
+        raise FMUError(f"building {p} failed{hint}:\n{proc.stdout}{proc.stderr}".rstrip())
+    return p
+
+
+class FMUBlock(Block):
+    """One instance of an FMI 2.0 co-simulation FMU (module docstring).
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.fmu`` file.
+    name : str
+        Block (and FMU instance) name.
+    inputs, outputs : sequence of str, optional
+        Variables used as the block's ports (default: every Real input; every Real output).
+        Outputs may also be Integer variables (read as floats).
+    parameters : dict, optional
+        Start values set in initialization mode (Real, Integer, Boolean or String, by name).
+    start_time : float
+        ``setupExperiment`` start time [s].
+    """
+
+    interpolates_inputs = False    # FMI 2.0 inputs are held over the step (no input derivatives)
+    feedthrough = False
+
+    def __init__(self, path: str | os.PathLike, name: str = "fmu",
+                 inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None,
+                 parameters: dict[str, Any] | None = None, start_time: float = 0.0) -> None:
+        try:
+            from fmpy import extract, read_model_description
+            from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE,
+                                   fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                                   fmi2CallbackLoggerTYPE, free)
+        except ImportError as exc:
+            raise FMUError(f"fmpy is needed to run an FMU ({exc}): pip install -e \".[fmu]\", "
+                           "or run the PRSM as the plain Python model (--prsm python)") from None
+
+        self.name = name
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FMUError(f"{self.path}: no such FMU (build it with python -m fmu_build)")
+        md = read_model_description(str(self.path))
+        if md.coSimulation is None:
+            raise FMUError(f"{self.path} is not a co-simulation FMU")
+        self.model_description = md
+        self.vars = {v.name: v for v in md.modelVariables}
+        in_names = list(inputs) if inputs is not None else [
+            v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
+        out_names = list(outputs) if outputs is not None else [
+            v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        for n in in_names + out_names:
+            if n not in self.vars:
+                raise FMUError(f"{self.path}: no variable {n!r}")
+        self.inputs = tuple(self._port(n) for n in in_names)
+        self.outputs = tuple(self._port(n) for n in out_names)
+        self._vr_in = [self.vars[n].valueReference for n in in_names]
+        self._vr_real = [self.vars[n].valueReference for n in out_names
+                         if self.vars[n].type == "Real"]
+        self._vr_int = [self.vars[n].valueReference for n in out_names
+                        if self.vars[n].type != "Real"]
+        self._real_pos = [i for i, n in enumerate(out_names) if self.vars[n].type == "Real"]
+        self._int_pos = [i for i, n in enumerate(out_names) if self.vars[n].type != "Real"]
+        self.messages: list[tuple[str, str]] = []
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(self._log)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._callbacks = cb                     # keep the ctypes callbacks alive
+        self._unzipdir = extract(str(self.path))
+        self._alive = False
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
+                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        try:
+            self.fmu.instantiate(callbacks=cb, loggingOn=True)
+        except Exception as exc:
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            raise FMUError(f"{self.path}: instantiation failed: {exc}") from exc
+        self._alive = True
+        try:
+            self._call("setupExperiment", startTime=float(start_time))
+            self._call("enterInitializationMode")
+            self.set_values(parameters or {})
+            self._call("exitInitializationMode")
+        except FMUError:
+            self.terminate()
+            raise
+
+    # ---- helpers ------------------------------------------------------------------------------
+    def _port(self, name: str) -> Port:
+        v = self.vars[name]
+        unit = getattr(v, "unit", None) or (v.declaredType.unit if getattr(v, "declaredType", None)
+                                            else None) or ("1" if v.type != "Real" else "")
+        return Port(name, unit, v.description or "", discrete=v.variability == "discrete")
+
+    def _log(self, env, instance, status, category, message) -> None:
+        label = _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+        self.messages.append((label, message.decode("utf-8", "replace")))
+
+    def _call(self, fname: str, *args, **kwargs):
+        from fmpy.fmi1 import FMICallException
+
+        n0 = len(self.messages)
+        try:
+            return getattr(self.fmu, fname)(*args, **kwargs)
+        except FMICallException as exc:
+            raise FMUError(f"{self.name}: {fname} failed with status {exc.status} "
+                           f"({_STATUS[exc.status] if 0 <= exc.status < 6 else '?'})"
+                           + self._since(n0)) from exc
+
+    def _since(self, n0: int) -> str:
+        msgs = [m for _, m in self.messages[n0:]]
+        return (": " + "; ".join(msgs)) if msgs else " (the FMU logged no message)"
+
+    def set_values(self, values: dict[str, Any]) -> None:
+        """Set variables by name with the setter of their type."""
+        for n, value in values.items():
+            if n not in self.vars:
+                raise FMUError(f"{self.path}: no variable {n!r} (parameter {n} = {value!r})")
+            v = self.vars[n]
+            setter = {"Real": "setReal", "Integer": "setInteger", "Boolean": "setBoolean",
+                      "String": "setString", "Enumeration": "setInteger"}[v.type]
+            conv = {"Real": float, "Integer": int, "Boolean": bool, "String": str,
+                    "Enumeration": int}[v.type]
+            self._call(setter, [v.valueReference], [conv(value)])
+
+    def get_values(self, names: Sequence[str]) -> list[Any]:
+        """Read variables by name (any type)."""
+        out = []
+        for n in names:
+            v = self.vars[n]
+            getter = {"Real": "getReal", "Integer": "getInteger", "Boolean": "getBoolean",
+                      "String": "getString", "Enumeration": "getInteger"}[v.type]
+            value = self._call(getter, [v.valueReference])[0]
+            out.append(value.decode("utf-8") if isinstance(value, bytes) else value)
+        return out
+
+    # ---- Block interface ------------------------------------------------------------------
+    def set_inputs(self, values: Sequence[float], slopes: Sequence[float] | None = None) -> None:
+        self._call("setReal", self._vr_in, [float(v) for v in values])
+
+    def get_outputs(self) -> list[float]:
+        real = self._call("getReal", self._vr_real) if self._vr_real else []
+        if not self._vr_int:
+            return list(real)
+        out = [0.0] * len(self.outputs)
+        for i, v in zip(self._real_pos, real):
+            out[i] = v
+        for i, v in zip(self._int_pos, self._call("getInteger", self._vr_int)):
+            out[i] = float(v)
+        return out
+
+    def do_step(self, t: float, h: float) -> None:
+        from fmpy.fmi1 import FMICallException
+
+        n0 = len(self.messages)
+        try:
+            self.fmu.doStep(t, h)
+        except FMICallException as exc:
+            if exc.status == 2:      # fmi2Discard: state unchanged, may retry
+                raise StepRefused(self.name, t, h, self._since(n0)[2:]) from None
+            raise FMUError(f"{self.name}: doStep(t = {t!r} s, h = {h!r} s) failed with status "
+                           f"{exc.status} ({_STATUS[exc.status] if 0 <= exc.status < 6 else '?'})"
+                           + self._since(n0)) from exc
+
+    def get_state(self) -> Any:
+        return self._call("getFMUstate")
+
+    def set_state(self, state: Any) -> None:
+        self._call("setFMUstate", state)
+
+    def free_state(self, state: Any) -> None:
+        if self._alive:
+            self._call("freeFMUstate", state)
+
+    def terminate(self) -> None:
+        if self._alive:
+            self._alive = False
+            try:
+                self.fmu.terminate()
+            except Exception:  # noqa: BLE001 - an instance that failed may refuse; free anyway
+                pass
+            try:
+                self.fmu.freeInstance()
+            except Exception:  # noqa: BLE001
+                pass
+        shutil.rmtree(self._unzipdir, ignore_errors=True)

@@ -1,0 +1,215 @@
+"""The PRSM block, two ways: the FMU through fmpy, or the same mechanism as a plain Python model.
+
+Both take the FMU's vocabulary (docs/fmu.md): inputs ``screw_torque`` [N.m] and ``load_force``
+[N], held over each step; outputs ``screw_speed``, ``rod_position``, ``stage[k].contact_force``,
+… and the step counters ``step_rhs_calls``, ``step_substeps``; parameters by the FMU's names
+(``stage[1].screw_inertia``, ``fidelity``, ``tolerance``, ``initial_screw_speed``, …).
+
+:class:`PythonPRSM` does what the FMU's slave (``prsm_fmu/slave.py``) does with the same
+parameters: the model of :func:`prsm_fmu.models.make_model`, the stepper the FMU documents as
+its default, the same tolerances, the outputs computed from the state at the communication
+point and the inputs held over the last step.  So a scene run with either gives the same
+numbers (tests/test_system_cosim.py checks 1e-10; in practice they agree bit for bit).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from prsm_fmu import presets
+from prsm_fmu.models import make_model
+from prsm_fmu.params import MechanismParams, stage_field_names
+from prsm_fmu.simulate import DEFAULT_STEPPER, tuned_stepper_options
+from prsm_fmu.steppers import StepFailure, make_stepper
+
+from .blocks import Port, PythonBlock, StepRefused
+
+__all__ = ["PRSMConfig", "PythonPRSM", "make_prsm_block", "prsm_output_names", "mechanism_params",
+           "MECHANISMS", "DEFAULT_STEPPER", "AUTO_FIDELITY", "ATOL_FACTOR"]
+
+#: FMU name -> preset it is built from (fmu_build.mechanisms; PRSM3 is built by fmu_build)
+MECHANISMS = {"PRSM1": "seed003_single_stage", "PRSM2": "seed000_two_stage",
+              "PRSM3": "seed000_three_stage"}
+
+# The FMU's choices (prsm_fmu/slave.py: AUTO_FIDELITY, ATOL_FACTOR); repeated here so that the
+# Python block needs no pythonfmu, and checked equal by the tests.  The default steppers and their
+# options come from the one source the slave uses too (prsm_fmu.simulate).
+AUTO_FIDELITY = "quasi-static"
+ATOL_FACTOR = 1e-2
+
+_HEAD = {"screw_speed": "rad/s", "screw_angle": "rad", "screw_acceleration": "rad/s2",
+         "rod_position": "m", "rod_velocity": "m/s"}
+_STAGE = {"contact_force": "N", "normal_force": "N", "driven_torque": "N.m",
+          "spline_friction": "N", "carrier_speed": "rad/s", "carrier_speed_ratio": "1"}
+_TAIL = {"efficiency": "1", "friction_power": "W", "input_power": "W", "output_power": "W",
+         "input_work": "J", "output_work": "J", "friction_work": "J", "kinetic_energy": "J"}
+COUNTERS = ("step_rhs_calls", "step_substeps")
+
+
+def prsm_output_names(n_stages: int) -> list[str]:
+    """The FMU's Real outputs for ``n_stages`` stages, in its order (prsm_fmu.slave.output_names)."""
+    names = list(_HEAD)
+    for k in range(1, n_stages + 1):
+        names += [f"stage[{k}].{f}" for f in _STAGE]
+    return names + list(_TAIL)
+
+
+def _unit(name: str) -> str:
+    base = name.split(".", 1)[1] if name.startswith("stage[") else name
+    return {**_HEAD, **_STAGE, **_TAIL}.get(base, "1")
+
+
+def mechanism_params(mechanism: str) -> MechanismParams:
+    """The parameters an FMU ``PRSM<n>`` starts from (its build's preset)."""
+    if mechanism not in MECHANISMS:
+        raise ValueError(f"mechanism = {mechanism!r} is not allowed: must be one of "
+                         f"{', '.join(MECHANISMS)}")
+    if mechanism == "PRSM3":
+        from fmu_build.mechanisms import three_stage   # needs pythonfmu (fmu_build's package)
+
+        return three_stage()
+    return presets.load(MECHANISMS[mechanism])
+
+
+@dataclass
+class PRSMConfig:
+    """One PRSM block's configuration, in the FMU's parameter names.
+
+    Attributes
+    ----------
+    mechanism : str
+        ``PRSM1``, ``PRSM2`` or ``PRSM3`` (the FMU file's name; its preset for Python).
+    parameters : dict
+        Parameter values by FMU name (``stage[1].screw_inertia``, ``mu_screw_roller``,
+        ``fidelity``, ``tolerance``, ``initial_screw_speed``, ``initial_carrier_equilibrium``, …);
+        the rest keep the FMU's start values (the preset's).
+    initial_inputs : tuple
+        ``(screw_torque, load_force)`` at the start (set in initialization mode).
+    """
+
+    mechanism: str = "PRSM2"
+    parameters: dict[str, Any] = field(default_factory=dict)
+    initial_inputs: tuple[float, float] = (0.0, 0.0)
+
+    def params(self) -> MechanismParams:
+        """The mechanism with the physical parameter overrides applied, validated."""
+        p = mechanism_params(self.mechanism)
+        fields = set(stage_field_names())
+        mech = {"mu_screw_roller", "mu_spline", "mu_nut_screw", "slip_velocity_scale"}
+        for name, value in self.parameters.items():
+            if name.startswith("stage["):
+                k = int(name[6:name.index("]")])
+                f = name[name.index("].") + 2:]
+                if f not in fields:
+                    raise ValueError(f"{name}: no field {f!r} in StageParams")
+                cur = getattr(p.stages[k - 1], f)
+                p = p.with_stage(k, **{f: type(cur)(value)})
+            elif name in mech:
+                p = p.with_changes(**{name: float(value)})
+        return p.validate()
+
+    def solver(self) -> dict[str, Any]:
+        """The FMU's own parameters with their values (defaults of docs/fmu.md)."""
+        s = {"fidelity": "quasi-static", "tolerance": 1e-6, "stepper": "default", "substeps": 0,
+             "max_substeps": 100000, "kinematic_efficiency": 1.0, "initial_screw_speed": 0.0,
+             "initial_screw_angle": 0.0, "initial_carrier_equilibrium": False}
+        for name, value in self.parameters.items():
+            if name in s:
+                s[name] = type(s[name])(value)
+            elif not (name.startswith("stage[") or name in {
+                    "mu_screw_roller", "mu_spline", "mu_nut_screw", "slip_velocity_scale"}):
+                raise ValueError(f"{name!r} is not a parameter of the PRSM FMU")
+        return s
+
+    @property
+    def n_stages(self) -> int:
+        return mechanism_params(self.mechanism).n_stages
+
+
+class PythonPRSM(PythonBlock):
+    """The PRSM as a plain Python block that behaves like the FMU (module docstring)."""
+
+    interpolates_inputs = False
+    _state_attrs = ("x", "u_held", "t", "stats", "memory")
+
+    def __init__(self, config: PRSMConfig, name: str = "prsm", start_time: float = 0.0) -> None:
+        p = config.params()
+        s = config.solver()
+        n = p.n_stages
+        self.inputs = (Port("screw_torque", "N.m", "motor torque on screw 1"),
+                       Port("load_force", "N", "force on the last nut, positive resists extension"))
+        self._names = prsm_output_names(n)
+        self.outputs = tuple(Port(o, _unit(o)) for o in self._names) + tuple(
+            Port(c, "1", discrete=True) for c in COUNTERS)
+        super().__init__(name)
+        fidelity = s["fidelity"]
+        level = AUTO_FIDELITY if fidelity == "auto" else fidelity
+        stepper = DEFAULT_STEPPER[level] if s["stepper"] == "default" else s["stepper"]
+        tol = s["tolerance"]
+        opts: dict[str, Any] = {}
+        if stepper == "rk4":
+            opts["substeps"] = s["substeps"]
+        else:        # as prsm_fmu.slave.PRSMSlave._build
+            opts.update(tuned_stepper_options(stepper, tol, ATOL_FACTOR * tol) if not s["substeps"]
+                        else {"rtol": tol, "atol": ATOL_FACTOR * tol})
+            if stepper != "radau":
+                opts["max_substeps"] = s["max_substeps"]
+            if s["substeps"]:
+                opts["fixed_substeps"] = s["substeps"]
+        model_opts = {"efficiency": s["kinematic_efficiency"]} if level == "kinematic" else {}
+        self.model = make_model(p, level, "torque", **model_opts)
+        self.stepper = make_stepper(stepper, self.model, **opts)
+        self.u = [float(v) for v in config.initial_inputs]
+        self.u_held = tuple(self.u)
+        self.x = self.model.initial_state(
+            self.u_held, screw_speed=s["initial_screw_speed"], screw_angle=s["initial_screw_angle"],
+            carrier_ratio=None if s["initial_carrier_equilibrium"] else 0.0)
+        self.t = float(start_time)
+        self.stats = (0, 0)
+        self.memory = self.stepper.get_memory()
+
+    def do_step(self, t: float, h: float) -> None:
+        u = (self.u[0], self.u[1])
+        if not (0.0 < h < math.inf):
+            raise StepRefused(self.name, t, h, f"communication step size = {h!r} s is out of "
+                              "range: must be a finite number > 0")
+        if not (math.isfinite(u[0]) and math.isfinite(u[1])):
+            raise StepRefused(self.name, t, h, f"inputs screw_torque = {u[0]!r} N.m, load_force = "
+                              f"{u[1]!r} N: every input must be finite")
+        self.stepper.set_memory(self.memory)
+        try:
+            x, st = self.stepper.advance(t, self.x, u, h)
+        except StepFailure as exc:
+            self.stepper.set_memory(self.memory)
+            raise StepRefused(self.name, t, h, f"integration failed: {exc}") from None
+        self.x, self.t, self.u_held = x, t + h, u
+        self.stats = (st.rhs_calls, st.substeps)
+        self.memory = self.stepper.get_memory()
+
+    def get_outputs(self) -> list[float]:
+        y = self.model.outputs(self.t, self.x, self.u_held)
+        return [float(y[n]) for n in self._names] + [float(self.stats[0]), float(self.stats[1])]
+
+
+def make_prsm_block(config: PRSMConfig, kind: str = "fmu", fmu_path=None, name: str = "prsm",
+                    start_time: float = 0.0):
+    """The PRSM block of ``config``: ``kind = "fmu"`` (fmpy, FMU at ``fmu_path``) or ``"python"``.
+
+    The FMU block exposes the same ports as :class:`PythonPRSM`, in the same order.
+    """
+    if kind == "python":
+        return PythonPRSM(config, name=name, start_time=start_time)
+    if kind != "fmu":
+        raise ValueError(f"prsm = {kind!r} is not allowed: must be 'fmu' or 'python'")
+    from .fmu import FMUBlock
+
+    config.solver()            # refuse unknown parameter names before loading anything
+    n = config.n_stages
+    start = dict(config.parameters)
+    start["screw_torque"], start["load_force"] = config.initial_inputs
+    return FMUBlock(fmu_path or f"dist/{config.mechanism}.fmu", name=name,
+                    inputs=["screw_torque", "load_force"],
+                    outputs=prsm_output_names(n) + list(COUNTERS), parameters=start,
+                    start_time=start_time)

@@ -1,0 +1,69 @@
+"""Run a scene end to end: build the actuator, co-simulate, evaluate the scene's checks."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from .analysis import CheckResult, energy_balance, evaluate
+from .ema import System, build_system, describe
+from .master import Result, RetryPolicy
+from .scenes import Scene, load_scene
+
+__all__ = ["SceneRun", "run_scene"]
+
+
+@dataclass
+class SceneRun:
+    """A finished run: the system, its outputs, the checks and the energy bookkeeping."""
+
+    scene: Scene
+    system: System
+    result: Result
+    checks: list[CheckResult]
+    energy: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+    def summary(self) -> dict[str, Any]:
+        r = self.result
+        return {
+            "scene": self.scene.name, "description": self.scene.description,
+            "prsm": self.system.prsm_kind,
+            "fidelity": self.system.prsm.solver()["fidelity"],
+            "step": self.system.master.step, "order": self.system.master.order,
+            "extrapolation": self.system.master.extrapolation, "t_end": float(r.time[-1]),
+            "system": describe(self.system),
+            "stats": {k: v for k, v in r.stats.items()},
+            "final": {n: float(r[n][-1]) for n in self.scene.outputs if n in r},
+            "energy": self.energy,
+            "checks": [{"kind": c.kind, "signal": c.signal, "passed": c.passed,
+                        "measured": c.measured, "limits": c.limits, "text": c.text}
+                       for c in self.checks],
+            "passed": self.passed,
+        }
+
+
+def run_scene(scene: Scene | str, prsm: str = "fmu", fmu_path=None, fidelity: str | None = None,
+              step: float | None = None, order: str | None = None,
+              extrapolation: int | None = None, retry: RetryPolicy | None = None,
+              progress=None) -> SceneRun:
+    """Build and run ``scene`` (a :class:`Scene` or a name/path); evaluate its checks.
+
+    With ``prsm="fmu"`` the FMU at ``fmu_path`` (default ``dist/<mechanism>.fmu``) must exist:
+    :func:`system_models.fmu.ensure_fmu` builds it.
+
+    Raises
+    ------
+    system_models.master.CoSimulationError
+        If a step is refused and no retry can take it (time, block and reason in the message).
+    """
+    sc = load_scene(scene) if isinstance(scene, str) else scene
+    system = build_system(sc, prsm=prsm, fmu_path=fmu_path, fidelity=fidelity, step=step,
+                          order=order, extrapolation=extrapolation, retry=retry)
+    res = system.run(progress)
+    checks = evaluate(res, sc.checks, {"reference": system.reference,
+                                       "params": system.prsm.params()})
+    return SceneRun(sc, system, res, checks, energy_balance(res))
