@@ -6,11 +6,17 @@ Subcommands::
                      [--load 5000] [--t-end 1e-3] [--interval 1e-6] [--out out]
     prsm-fmu steady  [--preset seed000_two_stage] [--speed 100] [--load 5000]
     prsm-fmu presets
+    prsm-fmu sweep   STUDY.toml [--out DIR] [--workers N | --scheduler tcp://host:port |
+                     --no-dask] [--backend fmu|model] [--fmu-dir DIR] [--rerun-all]
+    prsm-fmu check   PRESET [--load N] [--length M] [--material NAME] [--safety-factor K]
+                     [--stability-factor N] [--ends ENDS] [--teeth Z_R,Z_IG] [--set NAME=VALUE]
 
 ``startup`` runs the start-up scenario of seed 000 §3.1 (the screw speed stepped at t = 0 with
 the carriers at rest, a constant load on the last nut), prints a table, the carriers' settling
 times and the run's cost and energy balance, and writes ``startup.csv`` and ``startup.png``.
 ``steady`` prints the steady state found by root finding (:func:`prsm_fmu.steady_state`).
+``sweep`` runs a parameter study (:mod:`prsm_fmu.sweep`, docs/sweeps.md) and ``check`` the
+design checks of seed 001 (:mod:`prsm_fmu.design_checks`).
 All quantities are SI (m, N, N·m, rad/s, s, W, J).
 
 The helpers :func:`settling_time`, :func:`energy_balance_residual`, :func:`write_csv` and
@@ -447,6 +453,140 @@ def cmd_presets(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     return 0
 
 
+def cmd_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Run a parameter study; print the claims' verdicts and where the results are.
+
+    Returns
+    -------
+    int
+        0 if every point ran, 1 if some point failed (it is recorded in the table with its
+        error), 2 for a bad study file or bad arguments.
+    """
+    from .sweep import StudyError, load_study, run_study
+
+    if args.scheduler and (args.workers or args.no_dask):
+        parser.error("argument --scheduler: not allowed with --workers or --no-dask")
+    if args.workers is not None and args.no_dask:
+        parser.error("argument --workers: not allowed with --no-dask")
+    try:
+        study = load_study(args.study, backend=args.backend)
+    except (OSError, StudyError) as exc:
+        parser.error(f"argument STUDY: {exc}")
+    n_points = len(study.points())
+    where = "this process" if args.no_dask else (
+        f"the Dask cluster at {args.scheduler}" if args.scheduler else
+        f"a local Dask cluster of {args.workers or os.cpu_count()} worker(s)")
+    print(f"study {study.name}: {study.title}")
+    print(f"{n_points} points ({', '.join(study.swept) or 'no swept parameter'}), preset "
+          f"{study.preset}, backend {study.backend}, on {where}")
+    try:
+        res = run_study(study, args.out, executor="loop" if args.no_dask else "dask",
+                        scheduler=args.scheduler, workers=args.workers, fmu_dir=args.fmu_dir,
+                        resume=not args.rerun_all, figures=not args.no_figures,
+                        progress=None if args.quiet else sys.stderr)
+    except (ValueError, RuntimeError, FileNotFoundError) as exc:
+        print(f"prsm-fmu: error: {exc}", file=sys.stderr)
+        return 1
+    n_ok = sum(1 for r in res.rows if r.get("status") == "ok")
+    print(f"{n_ok} of {len(res.rows)} points ok ({res.skipped} from an earlier run), "
+          f"{res.wall_time:.1f} s")
+    if res.trends:
+        print()
+        width = max(len(t.trend.statement) for t in res.trends)
+        for t in res.trends:
+            print(f"{t.verdict:>13}  {t.trend.statement.ljust(width)}  {t.observed}")
+    for r in res.failed:
+        print(f"point {int(r['point'])} failed: {r.get('error', '')}")
+    print()
+    print(f"wrote {res.table_path}, {os.path.join(res.out_dir, 'report.md')}"
+          + "".join(f", {f}" for f in res.figures))
+    return 0 if not res.failed else 1
+
+
+def _set_value(text: str) -> tuple[str, object]:
+    """argparse type of ``--set NAME=VALUE``: a mechanism or stage parameter (SI)."""
+    from .sweep.study import parameter_kind
+
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE")
+    try:
+        kind = parameter_kind(name)
+    except KeyError:
+        kind = ""
+    if kind not in ("mechanism", "stage"):
+        raise argparse.ArgumentTypeError(
+            f"{name!r} is not a mechanism or stage parameter (mu_screw_roller, mu_spline, "
+            "mu_nut_screw, slip_velocity_scale, stage[k].<field>, stage[k].pitch)")
+    integer = name.endswith((".screw_starts", ".n_rollers", ".carriers"))
+    try:
+        v: object = int(value) if integer else _finite_float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name} = {value!r} is not an integer") from None
+    return name, v
+
+
+def _teeth(text: str) -> tuple[int, int]:
+    """argparse type of ``--teeth Z_R,Z_IG``."""
+    try:
+        z_r, z_ig = (int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not two integers Z_R,Z_IG") from None
+    if z_r < 1 or z_ig < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is out of range: teeth must be >= 1")
+    return z_r, z_ig
+
+
+def _fractions(text: str) -> tuple[float, ...]:
+    """argparse type of ``--sections F1,F2,...``."""
+    try:
+        values = tuple(_positive_float(x) for x in text.split(","))
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc}") from None
+    return values
+
+
+def cmd_check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Print the seed 001 design checks of a preset (optionally modified with ``--set``).
+
+    Returns
+    -------
+    int
+        0 if no check fails, 1 if a condition is violated, 2 for bad arguments.
+    """
+    from .design_checks import (MATERIALS, DesignInputs, check_design, default_load,
+                                format_report)
+    from .sweep.study import apply_overrides, resolve_preset
+
+    try:
+        params = resolve_preset(args.preset)
+    except ValueError as exc:
+        parser.error(f"argument PRESET: {exc}")
+    try:
+        params = apply_overrides(params, dict(args.set or []))
+    except ValueError as exc:
+        parser.error(f"argument --set: {exc}")
+    if args.set:
+        params = params.with_changes(name=f"{params.name} with "
+                                          + ", ".join(f"{k} = {v}" for k, v in args.set))
+    load = args.load if args.load is not None else default_load(args.preset)
+    try:
+        inputs = DesignInputs(axial_load=load, extended_length=args.length,
+                              material=MATERIALS[args.material],
+                              safety_factor=args.safety_factor,
+                              stability_factor=args.stability_factor, ends=args.ends,
+                              section_fractions=args.sections, teeth=args.teeth)
+        report = check_design(params, inputs)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.load is None and load is not None:
+        print(f"(axial load: {load:g} N, the largest load of the preset's seed scenario; "
+              "--load to change)")
+    print(format_report(report))
+    return 0 if report.valid else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``prsm-fmu`` with its subcommands.
 
@@ -497,6 +637,64 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("presets", help="list the preset names",
                        description="List the preset names, one per line.")
     p.set_defaults(func=cmd_presets, parser=p)
+
+    p = sub.add_parser(
+        "sweep", help="run a parameter study (TOML) on the FMU or the model, locally or on Dask",
+        description="Run every point of a study (studies/*.toml; docs/sweeps.md) and write "
+                    "OUT/results.csv, OUT/report.md, the figures OUT/*.png and the series "
+                    "OUT/series/*.npz. Points already in OUT/results.csv are skipped. Exit "
+                    "status 1 if a point failed (it is recorded with its error).")
+    p.add_argument("study", metavar="STUDY", help="study file (TOML)")
+    p.add_argument("--out", default=None,
+                   help="output directory; default out/sweeps/<study name>")
+    p.add_argument("--backend", choices=("fmu", "model"), default=None,
+                   help="simulate the FMU (speed prescribed by the master) or the model "
+                        "(prsm_fmu.simulate); default: the study's")
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes of the local Dask cluster; default: the cores")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="address of an existing Dask scheduler, e.g. tcp://host:8786")
+    p.add_argument("--no-dask", action="store_true",
+                   help="run the points one after the other in this process")
+    p.add_argument("--fmu-dir", default=None,
+                   help="directory holding PRSM<n>.fmu (default: build them into OUT/fmu)")
+    p.add_argument("--rerun-all", action="store_true",
+                   help="run every point again, also those already done")
+    p.add_argument("--no-figures", action="store_true", help="do not draw the figures")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep, parser=p)
+
+    from .design_checks import END_FACTORS, MATERIALS
+
+    p = sub.add_parser(
+        "check", help="seed 001 design checks of a preset: meshing, lead, gears, strength, "
+                      "buckling",
+        description="Check a preset against seed 001's parameter-matching conditions and "
+                    "print a verdict naming every violated condition (exit status 1 if one "
+                    "is violated). Without --load the largest load of the preset's seed "
+                    "scenario is used; without --length the longest stable extension is "
+                    "reported.")
+    p.add_argument("preset", metavar="PRESET", help="preset name (see 'prsm-fmu presets')")
+    p.add_argument("--load", type=_positive_float, default=None,
+                   help="axial load F_a [N] (compressive for buckling)")
+    p.add_argument("--length", type=_positive_float, default=None,
+                   help="extended (unsupported) length L of the screw column [m]")
+    p.add_argument("--material", choices=tuple(MATERIALS), default="carbon_steel",
+                   help="screw material (straight-line buckling constants); default %(default)s")
+    p.add_argument("--safety-factor", type=_finite_float, default=2.0,
+                   help="K in [σ] = σ_s / K, >= 1; default %(default)g")
+    p.add_argument("--stability-factor", type=_finite_float, default=3.0,
+                   help="n_st in F_a <= F_cr / n_st, >= 1; default %(default)g")
+    p.add_argument("--ends", choices=tuple(END_FACTORS), default="pinned-pinned",
+                   help="end conditions of the column; default %(default)s")
+    p.add_argument("--sections", type=_fractions, default=None, metavar="F1,F2,...",
+                   help="share of L per screw section, stage 1 first; default equal")
+    p.add_argument("--teeth", type=_teeth, default=None, metavar="Z_R,Z_IG",
+                   help="teeth of the roller-end gear and of the ring gear")
+    p.add_argument("--set", type=_set_value, action="append", metavar="NAME=VALUE",
+                   help="change a parameter first, e.g. stage[2].screw_radius=0.015 (SI); "
+                        "repeatable")
+    p.set_defaults(func=cmd_check, parser=p)
     return parser
 
 

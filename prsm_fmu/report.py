@@ -32,11 +32,13 @@ import numpy as np
 from scipy.optimize import brentq
 
 from . import presets
-from .cli import energy_balance_residual, is_settled, plot_startup, settling_time
+from .cli import energy_balance_residual, plot_startup
 from .params import MechanismParams
 from .presets import seed002
 from .simulate import DEFAULT_STEPPER, simulate
 from .steady_state import steady_state
+from .sweep.metrics import settle, value_at
+from .sweep.plots import DEFAULT_PANELS, plot_time_panels
 
 __all__ = ["main", "generate", "COMMAND"]
 
@@ -75,16 +77,12 @@ def _run(params: MechanismParams, load: float) -> dict[str, np.ndarray]:
 
 def _at(res: Mapping[str, np.ndarray], name: str, t: float) -> float:
     """Value of an output at the sample nearest to time t [s]."""
-    i = int(np.argmin(np.abs(res["time"] - t)))
-    return float(res[name][i])
+    return value_at(res, name, t)
 
 
 def _settle(res: Mapping[str, np.ndarray], k: int) -> float:
     """Settling time [s] of carrier k (1 % band); NaN if the carrier has not settled."""
-    z = res[f"stage[{k}].carrier_speed_ratio"]
-    if not is_settled(res["time"], z):
-        return math.nan
-    return settling_time(res["time"], z)
+    return settle(res["time"], res[f"stage[{k}].carrier_speed_ratio"])
 
 
 def _always_greater(res: Mapping[str, np.ndarray], a: str, b: str) -> tuple[bool, float]:
@@ -124,48 +122,11 @@ def plot_runs(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str,
 
     Panels: (a) carrier speed ratios, (b) axial contact forces per roller F_Srzk [N],
     (c) efficiency η [-], (d) spline friction f_Sk [N] (k ≥ 2), against time in ms.  Runs are
-    told apart by colour, stages by line style (stage 1 solid, stage 2 dashed).
+    told apart by colour, stages by line style (stage 1 solid, stage 2 dashed).  This is
+    :func:`prsm_fmu.sweep.plots.plot_time_panels` with its default panels (the sweeps draw
+    the same figure).
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    stage_ls = ["-", "--", ":", "-."]
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5), sharex=True)
-    ax_z, ax_f, ax_e, ax_h = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
-    for j, (label, res) in enumerate(runs):
-        c = colours[j % len(colours)]
-        t_ms = np.asarray(res["time"]) * 1e3
-        k = 1
-        while f"stage[{k}].carrier_speed_ratio" in res:
-            ls = stage_ls[(k - 1) % len(stage_ls)]
-            lab = label if k == 1 else None
-            ax_z.plot(t_ms, res[f"stage[{k}].carrier_speed_ratio"], ls, color=c, label=lab)
-            ax_f.plot(t_ms, res[f"stage[{k}].contact_force"], ls, color=c, label=lab)
-            if k >= 2:
-                ax_h.plot(t_ms, res[f"stage[{k}].spline_friction"], ls, color=c,
-                          label=label if k == 2 else None)
-            k += 1
-        ax_e.plot(t_ms, res["efficiency"], "-", color=c, label=label)
-    ax_z.set_title("(a) carrier speed ratios ζ_PSk (solid k = 1, dashed k = 2)", fontsize=10)
-    ax_z.set_ylabel("ζ_PSk [-]")
-    ax_f.set_title("(b) axial contact force per roller F_Srzk", fontsize=10)
-    ax_f.set_ylabel("F_Srzk [N]")
-    ax_e.set_title("(c) efficiency η", fontsize=10)
-    ax_e.set_ylabel("η [-]")
-    ax_h.set_title("(d) spline friction f_S2 between screws 1 and 2", fontsize=10)
-    ax_h.set_ylabel("f_S2 [N]")
-    for ax in axes.flat:
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
-    for ax in (ax_e, ax_h):
-        ax.set_xlabel("time [ms]")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    plot_time_panels(runs, path, DEFAULT_PANELS, title)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,118 @@
+"""Scaling of a parameter study on Dask: speed-up of 2 workers over 1, and the per-point cost of
+the Dask path over a plain loop.
+
+Study: seed 000 §3.1's start-up on the FMU (PRSM2, dynamic level, 100 rad/s step, 5000 N,
+1 ms at 1 µs communication steps, the speed prescribed by the FMU master), over a grid of
+µ_SR × µ_SS (default 6 × 4 = 24 points, ≈ 0.3 s each).  Three runs of
+:func:`prsm_fmu.sweep.run_study` on fresh output directories, each timed from the call to its
+return (table, series and report written, figures off):
+
+* ``loop``: the points one after the other in this process (``executor="loop"``), the FMU
+  loaded once and reset between points — the reference;
+* ``dask 1``: a ``LocalCluster`` of 1 worker process (1 thread);
+* ``dask 2``: a ``LocalCluster`` of 2 worker processes (1 thread each).
+
+The clusters are started (and their workers have imported prsm_fmu) before the clock starts:
+starting a cluster (≈ 1 s) is paid once per study, not per point.  Each configuration is run
+``--repeat`` times and the fastest run counts.  Printed, measured in this run on this machine:
+
+* speed-up = t(dask 1) / t(dask 2)                        (target ≥ 1.7 on 2 cores);
+* overhead per point = (t(dask 1) − t(loop)) / points, and as a fraction of the loop's time
+  per point                                              (target ≤ 10 %).
+
+Run: ``python benchmarks/sweep_scaling.py [--points 24] [--repeat 2]`` (about a minute).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import textwrap
+import time
+
+
+def _study(path: str, n_points: int) -> None:
+    n_ss = 4
+    n_sr = max(1, n_points // n_ss)
+    mu_sr = [round(0.05 + 0.03 * i, 4) for i in range(n_sr)]
+    mu_ss = [round(0.1 + 0.05 * j, 4) for j in range(n_ss)]
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(textwrap.dedent(f"""
+            [study]
+            name = "scaling"
+            preset = "seed000_two_stage"
+            backend = "fmu"
+            [scenario]
+            fidelity = "dynamic"
+            screw_speed = 100.0
+            load_force = 5000.0
+            t_end = 1e-3
+            output_interval = 1e-6
+            [grid]
+            mu_screw_roller = {mu_sr}
+            mu_spline = {mu_ss}
+            """))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--points", type=int, default=24, help="about this many points (× 4)")
+    ap.add_argument("--repeat", type=int, default=2, help="runs per configuration (best counts)")
+    args = ap.parse_args()
+
+    from dask.distributed import Client, LocalCluster
+
+    from prsm_fmu.sweep import ensure_fmus, load_study, run_study
+
+    tmp = tempfile.mkdtemp(prefix="prsm_sweep_scaling_")
+    fmu_dir = os.path.join(tmp, "fmu")
+    ensure_fmus([2], fmu_dir)
+    study_path = os.path.join(tmp, "scaling.toml")
+    _study(study_path, args.points)
+    study = load_study(study_path)
+    n = len(study.points())
+    print(f"study: seed 000 start-up on PRSM2.fmu (dynamic, 1 ms at 1 µs steps), {n} points "
+          f"(µ_SR × µ_SS), {os.cpu_count()} cores")
+
+    def timed(label: str, **kw) -> float:
+        best = float("inf")
+        for r in range(args.repeat):
+            out = os.path.join(tmp, f"{label.replace(' ', '_')}_{r}")
+            t0 = time.perf_counter()
+            res = run_study(study, out, fmu_dir=fmu_dir, progress=None, figures=False,
+                            resume=False, **kw)
+            dt = time.perf_counter() - t0
+            assert all(row["status"] == "ok" for row in res.rows), res.failed
+            best = min(best, dt)
+            print(f"  {label:7s} run {r + 1}: {dt:7.3f} s  ({dt / n * 1e3:6.1f} ms per point)")
+        return best
+
+    t_loop = timed("loop", executor="loop")
+    clusters = {}
+    for workers in (1, 2):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=":0")
+        client = Client(cluster)
+        client.run(lambda: __import__("prsm_fmu.sweep.points"))    # imports done before timing
+        clusters[workers] = (cluster, client)
+    try:
+        t1 = timed("dask 1", client=clusters[1][1])
+        t2 = timed("dask 2", client=clusters[2][1])
+    finally:
+        for cluster, client in clusters.values():
+            client.close()
+            cluster.close()
+
+    speedup = t1 / t2
+    overhead = (t1 - t_loop) / n
+    print()
+    print(f"loop {t_loop:.3f} s, dask 1 worker {t1:.3f} s, dask 2 workers {t2:.3f} s "
+          f"(best of {args.repeat})")
+    print(f"speed-up of 2 workers over 1: {speedup:.2f}x   (target >= 1.7)")
+    print(f"Dask overhead per point over the plain loop: {overhead * 1e3:+.1f} ms = "
+          f"{overhead / (t_loop / n) * 100:+.1f} % of a point   (target <= 10 %)")
+
+
+if __name__ == "__main__":
+    main()

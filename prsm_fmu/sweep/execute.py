@@ -1,0 +1,484 @@
+"""Run a study: on a Dask cluster (a local one by default) or in a plain loop; resume; report.
+
+:func:`run_study` turns a :class:`~prsm_fmu.sweep.study.Study` into
+
+``OUT/results.csv``
+    the table (:mod:`prsm_fmu.sweep.table`), one row per point in point order;
+``OUT/series/<id>.npz``
+    each point's time series (for the figures and for later reading);
+``OUT/time.png``, ``OUT/steady.png``
+    the figures (:mod:`prsm_fmu.sweep.plots`);
+``OUT/report.md``
+    the study, the paper's claims with the table's verdicts, the failed points, the figures;
+``OUT/timing.csv``
+    where and how long each point of this run took (not part of the table);
+``OUT/fmu/PRSM<n>.fmu``
+    the FMUs the points ran on (built with ``python -m fmu_build`` in a child process unless
+    ``fmu_dir`` has them).
+
+Execution
+---------
+``executor="dask"`` (default): with ``scheduler=None`` a ``LocalCluster`` of ``workers``
+processes (default: the machine's cores) with one thread each is started and closed again;
+with ``scheduler="tcp://host:port"`` the points go to that cluster, and the FMU files are sent
+to its workers once (``Client.scatter(..., broadcast=True)``), since they may not share this
+machine's file system (they need ``prsm_fmu``, numpy, scipy, fmpy and pythonfmu installed).
+A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points one after the
+other in this process (the reference the Dask overhead is measured against).
+
+A point is submitted once (``retries=0``, ``pure=False``); its result comes back as soon as it
+is done and is appended to the table at once, so an interrupted study keeps every finished
+point.  A rerun with the same output directory skips the points whose id (a hash of the
+point's preset, parameters, scenario and backend) is already in the table with status ``ok``
+and whose series file exists; failed points are run again.  A point whose worker dies is
+recorded as failed with the scheduler's message.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence, TextIO
+
+import numpy as np
+
+from .metrics import standard_metrics
+from .points import FmuFile, PointResult, PointTask, run_point
+from .study import Study
+from .table import append_row, columns, numeric_rows, read_table, row_of, write_table
+from .trends import TrendResult, evaluate
+
+__all__ = ["run_study", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
+           "EXECUTORS", "Progress"]
+
+EXECUTORS = ("dask", "loop")
+
+#: most runs drawn in one time figure (evenly chosen over the points)
+MAX_TIME_RUNS = 12
+
+
+@dataclass
+class SweepResult:
+    """What :func:`run_study` did and where it put it."""
+
+    study: Study
+    out_dir: str
+    table_path: str
+    header: list[str]
+    rows: list[dict[str, Any]]                     # the table, numbers as floats
+    results: list[PointResult] = field(default_factory=list)    # the points run now
+    skipped: int = 0                               # points already done before this run
+    trends: list[TrendResult] = field(default_factory=list)
+    figures: list[str] = field(default_factory=list)
+    wall_time: float = 0.0
+    backend: str = ""
+
+    @property
+    def failed(self) -> list[dict[str, Any]]:
+        """Rows of failed points."""
+        return [r for r in self.rows if r.get("status") != "ok"]
+
+
+def metric_columns(study: Study) -> list[str]:
+    """The metric columns of a study's table."""
+    names = list(standard_metrics(study.max_stages(), study.scenario.get("sample_times", ())))
+    for m in study.metrics:
+        if m not in names:
+            names.append(m)
+    return names
+
+
+def _sha256(path: str) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
+def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
+                build: bool = True) -> dict[int, str]:
+    """Paths of ``PRSM<n>.fmu`` for every stage count, building the missing ones.
+
+    An FMU is taken from ``fmu_dir`` if it is there; otherwise it is built into ``dest`` with
+    ``python -m fmu_build PRSM<n> --dest DEST`` in a child process (pythonfmu imports the
+    generated slave module while building, docs/fmu.md).
+
+    Raises
+    ------
+    ValueError
+        For a stage count without a standard FMU (1 to 3).
+    RuntimeError
+        If the build fails (with its output).
+    """
+    paths: dict[int, str] = {}
+    missing = []
+    for n in sorted(set(counts)):
+        if n not in (1, 2, 3):
+            raise ValueError(f"no standard FMU has {n} stages (PRSM1 … PRSM3): use the model "
+                             "backend")
+        name = f"PRSM{n}"
+        if fmu_dir and os.path.isfile(os.path.join(fmu_dir, f"{name}.fmu")):
+            paths[n] = os.path.join(fmu_dir, f"{name}.fmu")
+        else:
+            missing.append(n)
+    if missing:
+        if not build:
+            raise FileNotFoundError(f"missing FMUs {', '.join(f'PRSM{n}' for n in missing)}")
+        os.makedirs(dest, exist_ok=True)
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]]
+                                                      if env.get("PYTHONPATH") else []))
+        cmd = [sys.executable, "-m", "fmu_build", *(f"PRSM{n}" for n in missing), "--dest", dest]
+        proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600,
+                              check=False)
+        if proc.returncode != 0:
+            raise RuntimeError(f"building the FMUs failed ({' '.join(cmd)}):\n{proc.stdout}"
+                               f"\n{proc.stderr}")
+        for n in missing:
+            paths[n] = os.path.join(dest, f"PRSM{n}.fmu")
+    return paths
+
+
+def load_series(out_dir: str, point_id: str) -> dict[str, np.ndarray] | None:
+    """The saved series of a point, or None."""
+    path = os.path.join(out_dir, "series", f"{point_id}.npz")
+    if not os.path.exists(path):
+        return None
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+class Progress:
+    """A text progress bar on ``stream`` (redrawn in place on a terminal, else every 10 %)."""
+
+    def __init__(self, total: int, skipped: int, stream: TextIO | None, width: int = 30) -> None:
+        self.total, self.skipped, self.stream, self.width = total, skipped, stream, width
+        self.done = self.failed = 0
+        self.t0 = time.perf_counter()
+        self.tty = bool(stream is not None and getattr(stream, "isatty", lambda: False)())
+        self._last_decile = -1
+        self._draw(force=True)
+
+    def update(self, ok: bool) -> None:
+        self.done += 1
+        self.failed += 0 if ok else 1
+        self._draw()
+
+    def _draw(self, force: bool = False) -> None:
+        if self.stream is None:
+            return
+        n = self.total
+        frac = 1.0 if n == 0 else self.done / n
+        decile = int(frac * 10)
+        if not self.tty and not force and decile == self._last_decile and self.done < n:
+            return
+        self._last_decile = decile
+        filled = round(frac * self.width)
+        bar = "#" * filled + "." * (self.width - filled)
+        text = (f"[{bar}] {self.done}/{n} points, {self.failed} failed"
+                f"{f', {self.skipped} already done' if self.skipped else ''}, "
+                f"{time.perf_counter() - self.t0:.1f} s")
+        if self.tty:
+            self.stream.write("\r" + text)
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.stream is not None and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _label(values: dict[str, Any]) -> str:
+    from .plots import short_label
+
+    return ", ".join(short_label(k, v) for k, v in values.items())
+
+
+def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
+                  ship_fmus: bool) -> tuple[Callable, Callable]:
+    """(iterator over results as they complete, closer) for the Dask executor."""
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise RuntimeError("dask.distributed is not installed: pip install 'prsm-fmu[sweep]', "
+                           "or run the points in a plain loop (--no-dask)") from None
+
+    own_cluster = own_client = None
+    if client is None:
+        if scheduler:
+            client = own_client = Client(scheduler)
+        else:
+            n = workers or os.cpu_count() or 1
+            own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0")
+            client = own_client = Client(own_cluster)
+    blobs = None
+    if ship_fmus:
+        files = {}
+        for t in tasks:
+            for ref in t.fmus.values():
+                files[ref.sha256] = ref.path
+        blobs = {}
+        for sha, path in files.items():
+            with open(path, "rb") as fh:
+                blobs[sha] = client.scatter(fh.read(), broadcast=True)
+    futures = {}
+    for t in tasks:
+        fut = client.submit(run_point, t, blobs, key=f"prsm-point-{t.id}-{t.index}",
+                            pure=False, retries=0)
+        futures[fut] = t
+
+    def results():
+        for fut in as_completed(list(futures)):
+            t = futures[fut]
+            try:
+                yield fut.result()
+            except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
+                yield PointResult(t.index, t.id, dict(t.values), "error",
+                                  f"{type(exc).__name__}: {exc}")
+            fut.release()
+
+    def close():
+        if own_client is not None:
+            own_client.close()
+        if own_cluster is not None:
+            own_cluster.close()
+
+    return results, close
+
+
+def run_study(study: Study, out_dir: str | None = None, *, backend: str | None = None,
+              executor: str = "dask", scheduler: str | None = None, workers: int | None = None,
+              client=None, fmu_dir: str | None = None, resume: bool = True,
+              figures: bool = True, progress: TextIO | None = sys.stderr,
+              ship_fmus: bool | None = None) -> SweepResult:
+    """Run every point of ``study`` that is not done yet; write the table, figures and report.
+
+    Parameters
+    ----------
+    study : Study
+        From :func:`~prsm_fmu.sweep.study.load_study`.
+    out_dir : str, optional
+        Output directory; default ``out/sweeps/<study name>``.
+    backend : {"fmu", "model"}, optional
+        Overrides the study's backend.
+    executor : {"dask", "loop"}
+        See the module docstring.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:port``).
+    workers : int, optional
+        Worker processes of the local cluster; default the number of cores.
+    client : dask.distributed.Client, optional
+        Use this client (and its cluster) instead of making one.
+    fmu_dir : str, optional
+        Directory holding ``PRSM<n>.fmu`` to use instead of building them.
+    resume : bool
+        Skip points already in the table with status ok (default); False runs all.
+    figures : bool
+        Draw the figures.
+    progress : text stream or None
+        Where the progress bar goes (None: nowhere).
+    ship_fmus : bool, optional
+        Send the FMU files to the workers (``Client.scatter``) instead of passing their paths;
+        default: only with ``scheduler`` (a remote cluster).  Set it for a ``client`` of a
+        cluster whose workers do not share this file system.
+
+    Returns
+    -------
+    SweepResult
+    """
+    if executor not in EXECUTORS:
+        raise ValueError(f"executor = {executor!r} is not allowed: must be one of "
+                         f"{', '.join(EXECUTORS)}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise ValueError(f"workers = {workers!r} is out of range: must be an integer >= 1")
+    t0 = time.perf_counter()
+    backend = backend or study.backend
+    out_dir = out_dir or os.path.join("out", "sweeps", study.name)
+    series_dir = os.path.join(out_dir, "series")
+    os.makedirs(series_dir, exist_ok=True)
+    table_path = os.path.join(out_dir, "results.csv")
+    points = study.points()
+    ids = [study.point_id(p.values, backend) for p in points]
+    header = columns(study.swept, metric_columns(study))
+
+    kept: dict[str, list[str]] = {}
+    if resume:
+        old_header, old_rows = read_table(table_path)
+        current = set(ids)
+        if old_header == header:
+            for r in old_rows:
+                if r.get("id") in current and r.get("status") == "ok" and os.path.exists(
+                        os.path.join(series_dir, f"{r['id']}.npz")):
+                    kept[r["id"]] = [r[c] for c in header]
+    pending = [(p, i) for p, i in zip(points, ids) if i not in kept]
+    index_of = {i: p.index for p, i in zip(points, ids)}
+    # the table restarts with what is kept (in point order); new rows are appended as they come
+    rows_by_id: dict[str, list[str]] = {}
+    for pid in sorted(kept, key=index_of.__getitem__):
+        row = kept[pid]
+        row[0] = str(index_of[pid])
+        rows_by_id[pid] = row
+    write_table(table_path, header, rows_by_id.values())
+
+    fmus: dict[int, FmuFile] = {}
+    if backend == "fmu" and pending:
+        paths = ensure_fmus(sorted(study.stage_counts()), os.path.join(out_dir, "fmu"), fmu_dir)
+        fmus = {n: FmuFile(_sha256(p), os.path.abspath(p)) for n, p in paths.items()}
+    metric_names = tuple(c for c in header if c not in
+                         ("point", "id", "status", "error") and c not in study.swept)
+    tasks = [PointTask(p.index, pid, dict(p.values), study.point_inputs(p.values, backend),
+                       metric_names, fmus) for p, pid in pending]
+
+    bar = Progress(len(tasks), len(kept), progress)
+    done: list[PointResult] = []
+    timing_rows: list[list[str]] = []
+
+    def handle(res: PointResult) -> None:
+        if res.status == "ok" and res.series is not None:
+            np.savez_compressed(os.path.join(series_dir, f"{res.id}.npz"), **res.series)
+        row = row_of(res, header)
+        rows_by_id[res.id] = row
+        append_row(table_path, header, row)
+        timing_rows.append([str(res.index), res.id, res.status, res.worker,
+                            f"{res.wall_time:.6f}", f"{res.cpu_time:.6f}"])
+        res.series = None          # on disk now; keep the memory small
+        done.append(res)
+        bar.update(res.status == "ok")
+
+    if tasks:
+        if executor == "loop":
+            for t in tasks:
+                handle(run_point(t))
+        else:
+            ship = (scheduler is not None and client is None) if ship_fmus is None \
+                else bool(ship_fmus)
+            results, close = _dask_results(tasks, client, scheduler, workers, ship)
+            try:
+                for res in results():
+                    handle(res)
+            finally:
+                close()
+    bar.close()
+
+    ordered = [rows_by_id[i] for i in ids if i in rows_by_id]
+    point_of = dict(zip(ids, points))
+    write_table(table_path, header, ordered)
+    write_table(os.path.join(out_dir, "timing.csv"),
+                ["point", "id", "status", "worker", "wall_time [s]", "cpu_time [s]"],
+                sorted(timing_rows, key=lambda r: int(r[0])))
+    rows = numeric_rows(dict(zip(header, r)) for r in ordered)
+    for r in rows:
+        r.update(point_of[r["id"]].values)     # swept values with their types (str, int)
+    result = SweepResult(study, out_dir, table_path, header, rows, done, len(kept),
+                         backend=backend)
+    result.trends = evaluate(study, rows)
+    if figures:
+        result.figures = draw_figures(study, result)
+    result.wall_time = time.perf_counter() - t0
+    write_report(result)
+    return result
+
+
+def draw_figures(study: Study, result: SweepResult) -> list[str]:
+    """``time.png`` (the time panels of up to :data:`MAX_TIME_RUNS` points) and ``steady.png``."""
+    from .plots import DEFAULT_PANELS, plot_steady, plot_time_panels
+
+    out = []
+    ok = [r for r in result.rows if r.get("status") == "ok"]
+    if not ok:
+        return out
+    swept = list(study.swept)
+    pick = ok if len(ok) <= MAX_TIME_RUNS else \
+        [ok[int(i)] for i in np.linspace(0, len(ok) - 1, MAX_TIME_RUNS)]
+    runs = []
+    for r in pick:
+        s = load_series(result.out_dir, r["id"])
+        if s is not None:
+            runs.append((_label({k: r[k] for k in swept}), s))
+    panels = tuple(study.plots.get("time_panels", DEFAULT_PANELS))
+    if runs:
+        path = os.path.join(result.out_dir, "time.png")
+        plot_time_panels(runs, path, panels, title=study.title)
+        out.append(path)
+    if swept:
+        x = study.plots.get("x", swept[0])
+        axis = next(ax for ax in study.axes if x in ax.names)
+        group_by = [n for ax in study.axes if ax is not axis for n in ax.names]
+        metrics = list(study.plots.get("steady", [])) or _default_steady(result.header)
+        path = os.path.join(result.out_dir, "steady.png")
+        x_values = None
+        if not all(isinstance(r.get(x), float) for r in ok):
+            x_values = list(dict.fromkeys(r.get(x) for r in result.rows))
+        plot_steady(result.rows, x, metrics, group_by, path, title=study.title,
+                    x_values=x_values)
+        out.append(path)
+    return out
+
+
+def _default_steady(header: Sequence[str]) -> list[str]:
+    want = ["efficiency@end", "stage[1].contact_force@end", "stage[2].contact_force@end",
+            "stage[2].spline_friction@end"]
+    return [m for m in want if m in header][:4]
+
+
+def _md_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    for r in rows:
+        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |")
+    return "\n".join(lines)
+
+
+def _cell(v: Any) -> str:
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else f"{v:.6g}"
+    return str(v)
+
+
+def write_report(result: SweepResult) -> str:
+    """``OUT/report.md``: the study, its claims and verdicts, the failed points, the figures."""
+    st = result.study
+    sc = ", ".join(f"{k} = {v}" for k, v in st.scenario.items() if v not in (None, (), []))
+    parts = [f"# {st.title}\n",
+             f"Study `{st.path or st.name}` (preset `{st.preset}`, backend "
+             f"`{result.backend}`); source: {st.source or '—'}.\n",
+             f"Scenario: {sc}.\n"]
+    if st.parameters:
+        parts.append("Fixed parameters: " + ", ".join(f"{k} = {v}" for k, v in
+                                                      st.parameters.items()) + ".\n")
+    if st.notes:
+        parts.append(st.notes.strip() + "\n")
+    n_ok = sum(1 for r in result.rows if r.get("status") == "ok")
+    parts.append(f"Points: {len(result.rows)} ({n_ok} ok, {len(result.failed)} failed; "
+                 f"{result.skipped} taken from an earlier run). Table: `results.csv`.\n")
+    key_cols = [c for c in ("efficiency@end", "stage[1].carrier_speed_ratio@end",
+                            "stage[2].carrier_speed_ratio@end", "stage[1].contact_force@end",
+                            "stage[2].contact_force@end", "stage[2].spline_friction@end",
+                            "friction_torque@max", "efficiency@min", "efficiency@overall")
+                if c in result.header]
+    parts.append(_md_table(list(st.swept) + ["status"] + key_cols,
+                           [[_cell(r.get(c)) for c in list(st.swept) + ["status"] + key_cols]
+                            for r in result.rows]) + "\n")
+    if result.trends:
+        parts.append("## The paper's claims, checked on the table\n")
+        parts.append(_md_table(["claim", "paper", "metric", "along", "table", "verdict"], [
+            [t.trend.statement, t.trend.paper or "—", f"`{t.trend.metric}`", t.trend.vs,
+             t.observed, t.verdict] for t in result.trends]) + "\n")
+    if result.failed:
+        parts.append("## Failed points\n")
+        parts.append(_md_table(["point", "parameters", "error"], [
+            [int(r["point"]), _label({k: r[k] for k in st.swept}), r.get("error", "")]
+            for r in result.failed]) + "\n")
+    for f in result.figures:
+        parts.append(f"![{os.path.basename(f)}]({os.path.basename(f)})\n")
+    path = os.path.join(result.out_dir, "report.md")
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write("\n".join(parts))
+    return path

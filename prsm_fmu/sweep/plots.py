@@ -1,0 +1,219 @@
+"""The figures a designer reads: the papers' panels against time, and steady values against the
+swept parameter.
+
+* :func:`plot_time_panels`: one panel per signal (default: carrier speed ratios, axial contact
+  forces per roller, efficiency, spline friction, as seed 000 Figs. 4–5), every run in its own
+  colour, stages told apart by line style.  :func:`prsm_fmu.report.plot_runs` is this function
+  with the default panels.
+* :func:`plot_steady`: one panel per metric of the table against one swept parameter, one
+  line per combination of the other swept parameters.
+
+matplotlib's Agg backend is used (no display needed).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["plot_time_panels", "plot_steady", "PANELS", "DEFAULT_PANELS", "label_of",
+           "short_label"]
+
+#: time panels: signal -> (title, y label, per stage?, first stage)
+PANELS: dict[str, tuple[str, str, bool, int]] = {
+    "carrier_speed_ratio": ("carrier speed ratios ζ_PSk (solid k = 1, dashed k = 2)",
+                            "ζ_PSk [-]", True, 1),
+    "contact_force": ("axial contact force per roller F_Srzk", "F_Srzk [N]", True, 1),
+    "efficiency": ("efficiency η", "η [-]", False, 0),
+    "spline_friction": ("spline friction f_S2 between screws 1 and 2", "f_S2 [N]", True, 2),
+    "driven_torque": ("driven torques M_Sk (solid k = 1, dashed k = 2)", "M_Sk [N·m]", True, 1),
+    "friction_torque": ("friction torque at the screw M_f = P_f / ω", "M_f [N·m]", False, 0),
+    "screw_torque": ("motor torque M_S1", "M_S1 [N·m]", False, 0),
+    "screw_speed": ("screw speed ω", "ω [rad/s]", False, 0),
+}
+
+#: seed 000 Figs. 4 and 5: (a) ζ_PSk, (b) F_Srzk, (c) η, (d) f_S2
+DEFAULT_PANELS = ("carrier_speed_ratio", "contact_force", "efficiency", "spline_friction")
+
+_LABELS = {
+    "mu_screw_roller": "µ_SR", "mu_spline": "µ_SS", "mu_nut_screw": "µ_NS",
+    "load_force": "load F [N]", "screw_speed": "screw speed [rad/s]",
+    "accel_time": "acceleration time t_a [s]", "n_stages": "stages",
+    "slip_velocity_scale": "v_ε [m/s]",
+}
+
+
+_SHORT = {
+    "mu_screw_roller": ("µ_SR", ""), "mu_spline": ("µ_SS", ""), "mu_nut_screw": ("µ_NS", ""),
+    "load_force": ("F", " N"), "screw_speed": ("ω", " rad/s"), "accel_time": ("t_a", " s"),
+    "n_stages": ("stages", ""), "slip_velocity_scale": ("v_ε", " m/s"), "preset": ("", ""),
+}
+
+
+def short_label(name: str, value: Any) -> str:
+    """A legend entry for one swept value, e.g. ``µ_SR 0.1`` or ``F 500 N``."""
+    text = f"{value:g}" if isinstance(value, float) else str(value)
+    if name in _SHORT:
+        sym, unit = _SHORT[name]
+        return f"{sym} {text}{unit}".strip()
+    if name.startswith("stage[") and name.endswith("].pitch"):
+        return f"p{name[6:name.index(']')]} {text} m"
+    return f"{name} {text}"
+
+
+def label_of(name: str) -> str:
+    """A short axis label for a parameter or metric name."""
+    if name in _LABELS:
+        return _LABELS[name]
+    if name.startswith("stage[") and name.endswith("].pitch"):
+        return f"pitch of screw {name[6:name.index(']')]} [m]"
+    return name
+
+
+def _pyplot():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str,
+                     panels: Sequence[str] = DEFAULT_PANELS, title: str = "") -> None:
+    """Save one panel per signal against time [ms] for several runs.
+
+    Parameters
+    ----------
+    runs : sequence of (label, series)
+        Series with ``time`` [s] and the signals (``stage[k].<signal>`` for per-stage ones).
+    path : str
+        Output PNG.
+    panels : sequence of str
+        Keys of :data:`PANELS`, in reading order (two per row).
+    title : str
+        Figure title.
+    """
+    plt = _pyplot()
+    unknown = [p for p in panels if p not in PANELS]
+    if unknown:
+        raise ValueError(f"unknown time panels {unknown}: must be among {', '.join(PANELS)}")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    stage_ls = ["-", "--", ":", "-."]
+    n = len(panels)
+    ncols = 1 if n == 1 else 2
+    nrows = math.ceil(n / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(10, 3.75 * nrows), sharex=True,
+                             squeeze=False)
+    ax_of = {p: axes[i // ncols, i % ncols] for i, p in enumerate(panels)}
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    stage_panels = [p for p in panels if PANELS[p][2]]
+    global_panels = [p for p in panels if not PANELS[p][2]]
+    for j, (label, res) in enumerate(runs):
+        c = colours[j % len(colours)]
+        t_ms = np.asarray(res["time"]) * 1e3
+        k = 1
+        while f"stage[{k}].carrier_speed_ratio" in res or f"stage[{k}].contact_force" in res:
+            ls = stage_ls[(k - 1) % len(stage_ls)]
+            for p in stage_panels:
+                first = PANELS[p][3]
+                name = f"stage[{k}].{p}"
+                if k >= first and name in res:
+                    ax_of[p].plot(t_ms, res[name], ls, color=c,
+                                  label=label if k == first else None)
+            k += 1
+        for p in global_panels:
+            if p in res:
+                ax_of[p].plot(t_ms, res[p], "-", color=c, label=label)
+    for i, p in enumerate(panels):
+        ax = ax_of[p]
+        ax.set_title(f"({chr(ord('a') + i)}) {PANELS[p][0]}", fontsize=10)
+        ax.set_ylabel(PANELS[p][1])
+    for ax in axes.flat[:n]:
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8, loc="best")
+    for i in range(n):
+        if i >= n - ncols:
+            axes.flat[i].set_xlabel("time [ms]")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _unit(metric: str) -> str:
+    """``[unit]`` of a metric column (settling times in s)."""
+    from ..cli import unit_of
+
+    signal, _, how = metric.rpartition("@")
+    if how == "settle":
+        return "[s]"
+    if signal == "friction_torque":
+        return "[N·m]"
+    u = unit_of(signal)
+    return "" if u == "?" else f"[{u}]"
+
+
+def plot_steady(rows: Sequence[Mapping[str, Any]], x: str, metrics: Sequence[str],
+                group_by: Sequence[str], path: str, title: str = "",
+                x_values: Sequence[Any] | None = None) -> None:
+    """Save one panel per metric against the swept parameter ``x``.
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        Rows of the table (numbers as floats); rows whose status is not ``ok`` are left out.
+    x : str
+        Column of the abscissa.
+    metrics : sequence of str
+        Metric columns, one panel each.
+    group_by : sequence of str
+        Columns whose combinations make the lines (the other swept parameters).
+    path : str
+        Output PNG.
+    title : str
+        Figure title.
+    x_values : sequence, optional
+        Tick labels for a non-numeric ``x`` (in order).
+    """
+    plt = _pyplot()
+    ok = [r for r in rows if r.get("status") == "ok"]
+    n = max(len(metrics), 1)
+    ncols = 1 if n == 1 else 2
+    nrows = math.ceil(n / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(10, 3.6 * nrows), squeeze=False)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    groups: dict[tuple, list] = {}
+    for r in ok:
+        groups.setdefault(tuple(r.get(g) for g in group_by), []).append(r)
+    numeric = all(isinstance(r.get(x), float) for r in ok)
+    order = list(x_values) if x_values is not None else \
+        sorted({r.get(x) for r in ok}, key=str)
+    for i, m in enumerate(metrics):
+        ax = axes.flat[i]
+        for key, rs in groups.items():
+            rs = sorted(rs, key=(lambda r: r[x]) if numeric else (lambda r: order.index(r[x])
+                                                                    if r[x] in order else 0))
+            xs = [r[x] if numeric else order.index(r[x]) for r in rs]
+            ys = [r.get(m, math.nan) for r in rs]
+            ys = [y if isinstance(y, float) else math.nan for y in ys]
+            lab = ", ".join(short_label(g, v) for g, v in zip(group_by, key))
+            ax.plot(xs, ys, "o-", label=lab or None)
+        if not numeric:
+            ax.set_xticks(range(len(order)))
+            ax.set_xticklabels([str(o) for o in order], fontsize=8)
+        ax.set_title(f"({chr(ord('a') + i)}) {m}", fontsize=10)
+        ax.set_xlabel(label_of(x))
+        ax.set_ylabel(_unit(m))
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8, loc="best")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
