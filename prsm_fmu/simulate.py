@@ -134,7 +134,8 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     x = model.initial_state(u, screw_speed=initial_screw_speed, carrier_ratio=initial_carrier_ratio)
     names = model.output_names
     out = np.empty((n_steps + 1, len(names)))
-    out[0] = [model.outputs(0.0, x, u)[k] for k in names]
+    y = model.outputs(0.0, x, u)
+    out[0] = [y[k] for k in names]
     rhs_calls = 0
     cpu0 = _time.process_time()
     for i in range(n_steps):
@@ -144,7 +145,8 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         rhs_calls += stats.rhs_calls
         t1 = (i + 1) * output_interval
         # outputs at the end of the interval with the inputs that were held over it
-        out[i + 1] = [model.outputs(t1, x, u)[k] for k in names]
+        y = model.outputs(t1, x, u)
+        out[i + 1] = [y[k] for k in names]
     cpu = _time.process_time() - cpu0
     res = {"time": np.arange(n_steps + 1) * output_interval}
     res.update({k: out[:, j] for j, k in enumerate(names)})
