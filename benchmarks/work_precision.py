@@ -1,0 +1,549 @@
+"""Work-precision charts: error against cost for every fidelity level × stepper × step or tolerance.
+
+For each scene (a data structure, :data:`SCENES`; the actuator-loop scenes are added there
+later, without touching the framework), every configuration of the grid is run and compared
+with the scene's reference:
+
+* **reference**: the dynamic level with ``solve_ivp(Radau)`` at rtol 1e-12 (stepper ``radau``,
+  restarted on each communication step), checked against a second reference at rtol 1e-11;
+  their difference is printed (it is the floor below which an error cannot be resolved);
+* **error** (DESIGN.md §5), per output: max over the scene's fixed grid of output times (every
+  communication step) of |y − y_ref| / max|y_ref|, over the FMU's outputs
+  (``OUTPUTS`` of benchmarks/step_cost.py); a configuration's error is the largest of them.
+  The reference is the *dynamic* level's, so a lower level's error includes its model error;
+* **cost**: CPU seconds per simulated second of the stepping (``time.process_time`` over the
+  stepper's advances, best of several repeats; outputs are evaluated outside the timing) and
+  right-hand-side calls per simulated second.
+
+Each scene writes ``docs/figures/wp_<scene>.csv`` (one row per configuration, with the error of
+every output) and ``docs/figures/wp_<scene>.png`` (log–log error against cost, Pareto front
+marked), and prints the cheapest configuration at the scene's target error and its speed-up over
+``solve_ivp(Radau)`` restarted on each communication step (the cheapest Radau tolerance that
+meets the target; Radau at rtol 1e-6 is printed too).  Errors are reproducible to round-off: the
+steppers are deterministic and nothing is random; the costs are measured in this run, on this
+machine, and vary from run to run.
+
+Run: ``python benchmarks/work_precision.py`` (about 30 s; ``--scene startup``, ``--quick``
+for a small grid, ``--out DIR``).  docs/accuracy.md explains the charts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib.util
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from prsm_fmu import presets, simulate
+from prsm_fmu.models import FIDELITIES, make_model
+from prsm_fmu.simulate import tuned_stepper_options
+from prsm_fmu.steppers import StepFailure, make_stepper
+
+ROOT = Path(__file__).resolve().parents[1]
+FIGURES = ROOT / "docs" / "figures"
+
+
+def _load_sibling(name: str):
+    """Import benchmarks/<name>.py by path (works when this file is run as a script or loaded
+    by the tests)."""
+    path = Path(__file__).with_name(f"{name}.py")
+    mod_name = f"_prsm_benchmarks_{name}"
+    if mod_name in sys.modules:
+        return sys.modules[mod_name]
+    spec = importlib.util.spec_from_file_location(mod_name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+#: the FMU's outputs (DESIGN.md §4) for two stages, as benchmarks/step_cost.py measures them
+OUTPUTS: tuple[str, ...] = tuple(_load_sibling("step_cost").OUTPUTS)
+
+#: rtol of the reference and of its check; atol = rtol · 1e-2 (per state, times state_scale)
+REFERENCE_RTOL, CHECK_RTOL = 1e-12, 1e-11
+#: errors below this are plotted at it (round-off; a log axis has no zero)
+ERROR_FLOOR = 1e-16
+
+
+# ---- configurations --------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Config:
+    """One point of the grid: a fidelity level, a stepper and its step count or tolerance.
+
+    Attributes
+    ----------
+    fidelity : str
+        ``kinematic``, ``quasi-static`` or ``dynamic``.
+    stepper : str
+        ``rk4`` (explicit fixed), ``explicit_adaptive`` (Dormand–Prince 5(4)), ``rosenbrock``
+        (implicit, ROS34PW2), ``closed_form`` (slaved levels) or ``radau`` (``solve_ivp``
+        restarted on each communication step: the baseline and the reference).
+    knob : str
+        ``substeps`` (internal steps per communication step), ``rtol`` or ``""`` (none).
+    value : float
+        The knob's value (0 when there is none).
+    """
+
+    fidelity: str
+    stepper: str
+    knob: str = ""
+    value: float = 0.0
+
+    @property
+    def rtol(self) -> float:
+        """Relative tolerance [-] (1e-8, simulate's default, for steppers without one)."""
+        return self.value if self.knob == "rtol" else 1e-8
+
+    @property
+    def atol(self) -> float:
+        """Absolute tolerance relative to state_scale: rtol·1e-3 (benchmarks/step_cost.py);
+        rtol·1e-2 for the references."""
+        return self.rtol * (1e-2 if self.rtol <= CHECK_RTOL else 1e-3)
+
+    @property
+    def stepper_options(self) -> dict:
+        """Extra options for the stepper (on top of simulate's tuned ones)."""
+        opts: dict = {"rtol": self.rtol, "atol": self.atol} if self.stepper != "rk4" else {}
+        if self.knob == "substeps":
+            opts["substeps"] = int(self.value)
+        return opts
+
+    @property
+    def label(self) -> str:
+        """Short human-readable name."""
+        if self.knob == "substeps":
+            return f"{self.fidelity} {self.stepper} ×{int(self.value)}"
+        if self.knob == "rtol":
+            return f"{self.fidelity} {self.stepper} rtol {self.value:.0e}"
+        return f"{self.fidelity} {self.stepper}"
+
+
+@dataclass
+class RunResult:
+    """What running one configuration of a scene gives.
+
+    Attributes
+    ----------
+    outputs : dict
+        Output name → array over the scene's output times (including t = 0).
+    cpu : float
+        CPU seconds spent stepping the whole run [s] (best of the repeats).
+    rhs_calls : int
+        Right-hand-side calls of the whole run.
+    """
+
+    outputs: dict
+    cpu: float
+    rhs_calls: int
+
+
+def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
+                  rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
+                  radau_rtols=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)) -> tuple[Config, ...]:
+    """fidelity × {rk4 × substeps, explicit_adaptive × rtol, rosenbrock × rtol}, closed_form
+    for the slaved levels, and the restarted-Radau baseline on the dynamic level."""
+    grid: list[Config] = []
+    for fid in fidelities:
+        grid += [Config(fid, "rk4", "substeps", n) for n in substeps]
+        grid += [Config(fid, "explicit_adaptive", "rtol", r) for r in rtols]
+        grid += [Config(fid, "rosenbrock", "rtol", r) for r in rtols]
+        if fid != "dynamic":
+            grid.append(Config(fid, "closed_form"))
+    if "dynamic" in fidelities:
+        grid += [Config("dynamic", "radau", "rtol", r) for r in radau_rtols]
+    return tuple(grid)
+
+
+# ---- scenes ----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Scene:
+    """A scene of the work-precision study (add new ones to :data:`SCENES`).
+
+    Attributes
+    ----------
+    name : str
+        Key and file stem (``wp_<name>.csv/png``).
+    title : str
+        One line for the chart and the printout.
+    t_end, comm_step : float
+        Simulated time and communication step (= output interval) [s]; the error grid is
+        every communication step.
+    run : callable
+        ``run(config, time_it=True) -> RunResult``: runs one configuration (raises
+        StepFailure, or returns non-finite outputs, when it fails); with ``time_it=False``
+        the cost need not be measured (the references).
+    grid : tuple of Config
+        The configurations to run.
+    target_error : float
+        The error at which the cheapest configuration is reported.
+    outputs : tuple of str
+        The outputs the error is taken over.
+    reference_fidelity : str
+        The level of the reference (the most detailed one).
+    speedup_to_beat : float or None
+        The number issue 5 asks for at the target (printed beside the measured one).
+    """
+
+    name: str
+    title: str
+    t_end: float
+    comm_step: float
+    run: Callable[..., RunResult]
+    grid: tuple[Config, ...]
+    target_error: float = 1e-6
+    outputs: tuple[str, ...] = OUTPUTS
+    reference_fidelity: str = "dynamic"
+    speedup_to_beat: float | None = None
+
+
+def timed(fn: Callable[[], object], min_total: float = 0.1, max_repeats: int = 15) -> float:
+    """Smallest CPU time of ``fn()`` over repeats (at least 3, until min_total s are spent) [s]."""
+    best = math.inf
+    spent = 0.0
+    n = 0
+    while n < 3 or (spent < min_total and n < max_repeats):
+        c0 = time.process_time()
+        fn()
+        dt = time.process_time() - c0
+        best = min(best, dt)
+        spent += dt
+        n += 1
+    return best
+
+
+def make_simulate_runner(params, drive: str, t_end: float, comm_step: float, inputs: dict,
+                         initial: dict) -> Callable[..., RunResult]:
+    """``run(config)`` for a scene of the mechanism alone through :func:`prsm_fmu.simulate`.
+
+    The outputs and rhs calls are simulate's; the cost is measured on a replay of the same
+    stepping (same model, same stepper options as simulate builds them) with only the
+    stepper's advances inside the timing, since simulate's own ``cpu_time`` includes the
+    output evaluation.  The replay's final outputs must equal simulate's bit for bit (checked).
+
+    Parameters
+    ----------
+    params : MechanismParams
+    drive : {"torque", "speed"}
+    t_end, comm_step : float
+        [s]
+    inputs : dict
+        Constant inputs by simulate keyword (``screw_speed``/``screw_torque``, ``load_force``).
+    initial : dict
+        simulate's initial-condition keywords.
+    """
+    n_steps = int(round(t_end / comm_step))
+    drive_key = "screw_speed" if drive == "speed" else "screw_torque"
+    u = (float(inputs[drive_key]), float(inputs["load_force"]))
+
+    def run(cfg: Config, time_it: bool = True) -> RunResult:
+        res = simulate(params, cfg.fidelity, drive, t_end=t_end, output_interval=comm_step,
+                       stepper=cfg.stepper, rtol=cfg.rtol, atol=cfg.atol,
+                       stepper_options=cfg.stepper_options, **inputs, **initial)
+        outputs = {k: v for k, v in res.items() if isinstance(v, np.ndarray)}
+        if not time_it:
+            return RunResult(outputs, math.nan, int(res["rhs_calls"]))
+        model = make_model(params, cfg.fidelity, drive)
+        opts = tuned_stepper_options(cfg.stepper, cfg.rtol, cfg.atol)
+        opts.update(cfg.stepper_options)
+        x0 = model.initial_state(u, screw_speed=initial.get("initial_screw_speed", 0.0),
+                                 carrier_ratio=initial.get("initial_carrier_ratio", 0.0))
+        last = []
+
+        def replay():
+            st = make_stepper(cfg.stepper, model, **opts)
+            x = x0
+            for i in range(n_steps):
+                x, _ = st.advance(i * comm_step, x, u, comm_step)
+            last[:] = [x]
+
+        cpu = timed(replay)
+        y_end = model.outputs(n_steps * comm_step, last[0], u)
+        for name in model.output_names:
+            a, b = y_end[name], res[name][-1]
+            if not (a == b or (math.isnan(a) and math.isnan(b))):
+                raise RuntimeError(f"{cfg.label}: the timed replay ends at {name} = {a!r}, "
+                                   f"simulate at {b!r}: the replay is not simulate's stepping")
+        return RunResult(outputs, cpu, int(res["rhs_calls"]))
+
+    return run
+
+
+SEED000 = presets.load("seed000_two_stage")
+
+#: seed 000 §3.1 start-up: screw speed stepped to 100 rad/s with the carriers at rest, F = 5 kN
+STARTUP = Scene(
+    name="startup",
+    title="seed 000 start-up: ω stepped to 100 rad/s, carriers at rest, F = 5 kN, 0–1 ms, "
+          "communication step 10 µs",
+    t_end=1e-3, comm_step=1e-5,
+    run=make_simulate_runner(SEED000, "speed", 1e-3, 1e-5,
+                             {"screw_speed": 100.0, "load_force": 5000.0},
+                             {"initial_carrier_ratio": 0.0}),
+    grid=standard_grid(),
+    target_error=1e-6,
+    speedup_to_beat=20.0,
+)
+
+#: the same start-up with the paper's 1 µs output interval as communication step: how the
+#: speed-up over restarted Radau depends on the communication step (a reduced grid)
+STARTUP_1US = Scene(
+    name="startup_1us",
+    title="seed 000 start-up as above, communication step 1 µs (sensitivity to the "
+          "communication step; reduced grid)",
+    t_end=1e-3, comm_step=1e-6,
+    run=make_simulate_runner(SEED000, "speed", 1e-3, 1e-6,
+                             {"screw_speed": 100.0, "load_force": 5000.0},
+                             {"initial_carrier_ratio": 0.0}),
+    grid=(standard_grid(("dynamic",), substeps=(1, 2), rtols=(1e-5, 1e-6, 1e-7),
+                        radau_rtols=(1e-5, 1e-6, 1e-7))
+          + (Config("quasi-static", "closed_form"),)),
+    target_error=1e-6,
+    speedup_to_beat=20.0,
+)
+
+#: every scene; the actuator-loop scenes (position step, sine tracking, reversal) go here
+SCENES: dict[str, Scene] = {s.name: s for s in (STARTUP, STARTUP_1US)}
+
+
+# ---- the framework ---------------------------------------------------------------------------
+
+def output_errors(y: dict, ref: dict, outputs) -> dict[str, float]:
+    """Per output: max_t |y − y_ref| / max_t |y_ref| (absolute where y_ref ≡ 0); nan if y is
+    not finite."""
+    errs = {}
+    for name in outputs:
+        a, b = np.asarray(y[name], float), np.asarray(ref[name], float)
+        if a.shape != b.shape or not np.all(np.isfinite(a)):
+            errs[name] = math.nan
+            continue
+        scale = float(np.max(np.abs(b)))
+        errs[name] = float(np.max(np.abs(a - b))) / (scale if scale > 0.0 else 1.0)
+    return errs
+
+
+@dataclass
+class Point:
+    """One configuration's measured error and cost."""
+
+    config: Config
+    status: str                     # "ok" or "failed: <reason>"
+    error: float = math.nan         # max over outputs
+    errors: dict = field(default_factory=dict)
+    cpu_per_s: float = math.nan     # CPU s per simulated s
+    rhs_per_s: float = math.nan     # rhs calls per simulated s
+    rhs_calls: int = 0
+    pareto: bool = False
+
+
+def reference(scene: Scene, rtol: float) -> RunResult:
+    """The scene's reference run at ``rtol`` (radau on the reference level)."""
+    return scene.run(Config(scene.reference_fidelity, "radau", "rtol", rtol), time_it=False)
+
+
+def measure(scene: Scene, cfg: Config, ref: RunResult) -> Point:
+    """Run one configuration and measure it against the reference."""
+    try:
+        r = scene.run(cfg)
+    except StepFailure as exc:
+        return Point(cfg, "failed: " + str(exc).splitlines()[0][:120])
+    errs = output_errors(r.outputs, ref.outputs, scene.outputs)
+    if any(math.isnan(e) for e in errs.values()):
+        return Point(cfg, "failed: non-finite outputs", errors=errs)
+    return Point(cfg, "ok", max(errs.values()), errs, r.cpu / scene.t_end,
+                 r.rhs_calls / scene.t_end, r.rhs_calls)
+
+
+def mark_pareto(points: list[Point]) -> None:
+    """Flag the points no other point beats in both cost (CPU) and error."""
+    ok = sorted((p for p in points if p.status == "ok"), key=lambda p: (p.cpu_per_s, p.error))
+    best = math.inf
+    for p in ok:
+        p.pareto = p.error < best
+        best = min(best, p.error)
+
+
+def cheapest(points: list[Point], target: float, stepper: str | None = None) -> Point | None:
+    """The cheapest (CPU) successful point with error ≤ target (optionally of one stepper)."""
+    cands = [p for p in points if p.status == "ok" and p.error <= target
+             and (stepper is None or p.config.stepper == stepper)]
+    return min(cands, key=lambda p: p.cpu_per_s) if cands else None
+
+
+def run_scene(scene: Scene, grid: tuple[Config, ...] | None = None, verbose: bool = True) -> dict:
+    """Reference, check and every configuration of one scene.
+
+    Returns
+    -------
+    dict
+        ``points`` (list of Point), ``reference_difference`` (error of the rtol-1e-11 check
+        against the rtol-1e-12 reference), ``reference`` (RunResult).
+    """
+    say = print if verbose else (lambda *a, **k: None)
+    grid = scene.grid if grid is None else grid
+    say(f"\n== scene {scene.name}: {scene.title}")
+    c0 = time.process_time()
+    ref = reference(scene, REFERENCE_RTOL)
+    check = reference(scene, CHECK_RTOL)
+    ref_diff = max(output_errors(check.outputs, ref.outputs, scene.outputs).values())
+    say(f"reference: {scene.reference_fidelity} radau rtol {REFERENCE_RTOL:g}; check at rtol "
+        f"{CHECK_RTOL:g} differs by {ref_diff:.2e} (error measure of DESIGN.md §5) "
+        f"[{time.process_time() - c0:.1f} s CPU]")
+    if not ref_diff <= scene.target_error / 100:
+        say(f"WARNING: the reference is not 100x more accurate than the target {scene.target_error:g}")
+    points = []
+    for i, cfg in enumerate(grid, 1):
+        p = measure(scene, cfg, ref)
+        points.append(p)
+        if p.status == "ok":
+            say(f"[{i:3d}/{len(grid)}] {cfg.label:42s} error {p.error:9.2e}  "
+                f"CPU {p.cpu_per_s:9.3e} s/s  rhs {p.rhs_calls:7d}")
+        else:
+            say(f"[{i:3d}/{len(grid)}] {cfg.label:42s} {p.status}")
+    mark_pareto(points)
+    return {"points": points, "reference_difference": ref_diff, "reference": ref}
+
+
+def summary(scene: Scene, result: dict) -> list[str]:
+    """Lines: the Pareto front, the cheapest configuration at the target and its speed-ups."""
+    pts = result["points"]
+    lines = ["Pareto front (cheapest first):"]
+    for p in sorted((p for p in pts if p.pareto), key=lambda p: p.cpu_per_s):
+        lines.append(f"  {p.config.label:42s} error {p.error:9.2e}  CPU {p.cpu_per_s:9.3e} s/s")
+    best = cheapest(pts, scene.target_error)
+    base = cheapest(pts, scene.target_error, "radau")
+    conventional = next((p for p in pts if p.config.stepper == "radau" and p.config.value == 1e-6
+                         and p.status == "ok"), None)
+    if best is None:
+        lines.append(f"no configuration reaches error ≤ {scene.target_error:g}")
+        return lines
+    lines.append(f"cheapest at error ≤ {scene.target_error:g}: {best.config.label} "
+                 f"(error {best.error:.2e}, {best.cpu_per_s:.3e} CPU s/s, "
+                 f"{best.rhs_per_s:.3g} rhs/s)")
+    if base is not None:
+        lines.append(f"  speed-up over solve_ivp(Radau) restarted each communication step at "
+                     f"the cheapest tolerance meeting the target ({base.config.label}, error "
+                     f"{base.error:.2e}): {base.cpu_per_s / best.cpu_per_s:.1f}x"
+                     + (f"  (to beat: ≥ {scene.speedup_to_beat:g}x)" if scene.speedup_to_beat else ""))
+    if conventional is not None:
+        lines.append(f"  speed-up over Radau at rtol 1e-6 (error {conventional.error:.2e}): "
+                     f"{conventional.cpu_per_s / best.cpu_per_s:.1f}x")
+    return lines
+
+
+def write_csv(scene: Scene, result: dict, path: Path) -> None:
+    """One row per configuration (errors per output included)."""
+    best = cheapest(result["points"], scene.target_error)
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["scene", "fidelity", "stepper", "knob", "value", "status", "error",
+                    "cpu_s_per_sim_s", "rhs_calls", "rhs_per_sim_s", "pareto",
+                    f"cheapest_at_{scene.target_error:g}"] + [f"err:{o}" for o in scene.outputs])
+        for p in result["points"]:
+            c = p.config
+            w.writerow([scene.name, c.fidelity, c.stepper, c.knob, f"{c.value:g}", p.status,
+                        f"{p.error:.6e}", f"{p.cpu_per_s:.4e}", p.rhs_calls,
+                        f"{p.rhs_per_s:.6g}", int(p.pareto), int(p is best)]
+                       + [f"{p.errors.get(o, math.nan):.6e}" for o in scene.outputs])
+
+
+STEPPER_STYLE = {"rk4": ("tab:blue", "explicit fixed (RK4 × substeps)"),
+                 "explicit_adaptive": ("tab:orange", "explicit adaptive (DP5(4), rtol)"),
+                 "rosenbrock": ("tab:green", "implicit (ROS34PW2, rtol)"),
+                 "closed_form": ("tab:purple", "closed form (slaved levels)"),
+                 "radau": ("tab:gray", "solve_ivp Radau restarted (baseline, rtol)")}
+FIDELITY_MARKER = {"dynamic": "o", "quasi-static": "s", "kinematic": "^"}
+
+
+def plot(scene: Scene, result: dict, path: Path) -> None:
+    """Log–log error against CPU cost and against rhs calls, Pareto front marked."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = [p for p in result["points"] if p.status == "ok"]
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), sharey=True)
+    for ax, attr, xlabel in ((axes[0], "cpu_per_s", "CPU seconds per simulated second"),
+                             (axes[1], "rhs_per_s", "rhs calls per simulated second")):
+        series: dict = {}
+        for p in pts:
+            series.setdefault((p.config.fidelity, p.config.stepper), []).append(p)
+        for (fid, st), ps in series.items():
+            ps = sorted(ps, key=lambda p: p.config.value)
+            colour = STEPPER_STYLE[st][0]
+            xs = [getattr(p, attr) for p in ps]
+            ys = [max(p.error, ERROR_FLOOR) for p in ps]
+            ax.plot(xs, ys, "-", color=colour, alpha=0.35, lw=1)
+            ax.plot(xs, ys, FIDELITY_MARKER[fid], color=colour, ms=5, mfc="none" if fid != "dynamic" else colour)
+        front = sorted((p for p in pts if p.pareto), key=lambda p: p.cpu_per_s)
+        if attr == "cpu_per_s":
+            fx = [p.cpu_per_s for p in front]
+            fy = [max(p.error, ERROR_FLOOR) for p in front]
+            ax.step(fx, fy, where="post", color="k", lw=1.3, label="Pareto front (CPU)")
+            ax.plot(fx, fy, "o", ms=10, mfc="none", mec="k")
+        else:
+            ax.plot([p.rhs_per_s for p in front], [max(p.error, ERROR_FLOOR) for p in front],
+                    "o", ms=10, mfc="none", mec="k", label="Pareto front (CPU), for reference")
+        best = cheapest(result["points"], scene.target_error)
+        if best is not None:
+            ax.plot([getattr(best, attr)], [max(best.error, ERROR_FLOOR)], "*", ms=16, color="gold",
+                    mec="k", label=f"cheapest at error ≤ {scene.target_error:g}: {best.config.label}")
+        ax.axhline(scene.target_error, ls="--", color="r", lw=0.8)
+        ax.axhspan(ERROR_FLOOR, max(result["reference_difference"], ERROR_FLOOR), color="0.85",
+                   label="reference check difference (floor)")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(xlabel)
+        ax.grid(True, which="major", alpha=0.3)
+    axes[0].set_ylabel("error: max over outputs and output times of |y − y_ref| / max|y_ref|")
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], color=c, marker="o", ls="-", label=lab) for c, lab in STEPPER_STYLE.values()]
+    handles += [Line2D([], [], color="k", marker=m, ls="", mfc="none", label=f) for f, m in FIDELITY_MARKER.items()]
+    axes[0].legend(handles=handles, fontsize=7, loc="lower left")
+    axes[1].legend(fontsize=7, loc="lower left")
+    fig.suptitle(scene.title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def quick_grid(scene: Scene) -> tuple[Config, ...]:
+    """A small slice of the scene's grid (for a fast look and the reproducibility test)."""
+    keep = {("rk4", 1), ("rk4", 4), ("explicit_adaptive", 1e-6), ("rosenbrock", 1e-6),
+            ("closed_form", 0.0), ("radau", 1e-6)}
+    return tuple(c for c in scene.grid if (c.stepper, c.value) in keep)
+
+
+def main(argv=None) -> None:
+    """Run the scenes, print the summaries, write CSV and PNG files."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", action="append", choices=sorted(SCENES),
+                    help="scene to run (repeatable; default: all)")
+    ap.add_argument("--quick", action="store_true", help="a small slice of the grid")
+    ap.add_argument("--out", type=Path, default=FIGURES, help="output directory (docs/figures)")
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    for name in args.scene or list(SCENES):
+        scene = SCENES[name]
+        grid = quick_grid(scene) if args.quick else scene.grid
+        c0 = time.time()
+        result = run_scene(scene, grid)
+        for line in summary(scene, result):
+            print(line)
+        csv_path, png_path = args.out / f"wp_{name}.csv", args.out / f"wp_{name}.png"
+        write_csv(scene, result, csv_path)
+        plot(scene, result, png_path)
+        print(f"wrote {csv_path} and {png_path} [{time.time() - c0:.0f} s]")
+
+
+if __name__ == "__main__":
+    main()
