@@ -10,7 +10,9 @@ The FMU ``PRSM<n>`` (or any name) is built from a :class:`~prsm_fmu.params.Mecha
    set and serialize its state;
 3. :func:`fmu_build.model_description.complete` adds what pythonfmu leaves out, and the zip is
    rewritten with the completed ``modelDescription.xml``;
-4. :func:`fmu_build.model_description.check` and, if fmpy is installed, ``fmpy``'s
+4. :func:`fmu_build.extra.add_baselines` packs the regression baselines into ``extra/``
+   (PRSM2);
+5. :func:`fmu_build.model_description.check` and, if fmpy is installed, ``fmpy``'s
    ``validate_fmu`` must report no problem, or the build fails.
 
 Build in a process of its own (``python -m fmu_build``): pythonfmu imports the generated
@@ -28,7 +30,7 @@ import prsm_fmu
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.slave import parameter_defaults
 
-from . import model_description
+from . import extra, model_description
 
 #: the default experiment of every FMU: start [s], stop [s], communication step [s]
 DEFAULT_EXPERIMENT = (0.0, 0.1, 1e-3)
@@ -139,6 +141,7 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
             xml = z.read("modelDescription.xml")
         tool = f"prsm-fmu fmu_build {prsm_fmu.__version__} (PythonFMU {pythonfmu_version})"
         _rewrite_model_description(built, model_description.complete(xml, tool))
+        extra.add_baselines(built, name)         # extra/baselines (issue 6), PRSM2 only
         if check:
             problems = validate(built)
             if problems:

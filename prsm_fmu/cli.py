@@ -10,13 +10,16 @@ Subcommands::
                      --no-dask] [--backend fmu|model] [--fmu-dir DIR] [--rerun-all]
     prsm-fmu check   PRESET [--load N] [--length M] [--material NAME] [--safety-factor K]
                      [--stability-factor N] [--ends ENDS] [--teeth Z_R,Z_IG] [--set NAME=VALUE]
+    prsm-fmu regress [--update] [--fmu PRSM2.fmu] [--baselines DIR|FMU] [--case NAME ...]
+                     [--set NAME=VALUE] [--out DIR]
 
 ``startup`` runs the start-up scenario of seed 000 §3.1 (the screw speed stepped at t = 0 with
 the carriers at rest, a constant load on the last nut), prints a table, the carriers' settling
 times and the run's cost and energy balance, and writes ``startup.csv`` and ``startup.png``.
 ``steady`` prints the steady state found by root finding (:func:`prsm_fmu.steady_state`).
 ``sweep`` runs a parameter study (:mod:`prsm_fmu.sweep`, docs/sweeps.md) and ``check`` the
-design checks of seed 001 (:mod:`prsm_fmu.design_checks`).
+design checks of seed 001 (:mod:`prsm_fmu.design_checks`).  ``regress`` compares the built
+FMU's outputs with the stored baselines (:mod:`prsm_fmu.regress`, docs/regression.md).
 All quantities are SI (m, N, N·m, rad/s, s, W, J).
 
 The helpers :func:`settling_time`, :func:`energy_balance_residual`, :func:`write_csv` and
@@ -695,7 +698,85 @@ def build_parser() -> argparse.ArgumentParser:
                    help="change a parameter first, e.g. stage[2].screw_radius=0.015 (SI); "
                         "repeatable")
     p.set_defaults(func=cmd_check, parser=p)
+
+    p = sub.add_parser(
+        "regress", help="compare the built FMU's outputs with the stored baselines",
+        description="Build PRSM2.fmu in a child process (or take --fmu), run every regression "
+                    "case (baselines/tolerances.toml) with fmpy and compare each output with "
+                    "its tolerance tube; write OUT/report.html with a plot of every output "
+                    "that left its tube. Exit status 1 if one did. --update rewrites the "
+                    "baselines at tight tolerance and baselines/REPORT.md (docs/regression.md).")
+    p.add_argument("--update", action="store_true",
+                   help="write new baselines and a report of what changed against the old")
+    p.add_argument("--fmu", default=None, help="use this FMU instead of building one")
+    p.add_argument("--baselines", default=None, metavar="DIR|FMU",
+                   help="baselines directory, or an FMU holding them in extra/baselines "
+                        "(default: the repository's baselines/)")
+    p.add_argument("--case", action="append", default=None, metavar="NAME",
+                   help="only this case (repeatable); default every case")
+    p.add_argument("--set", type=_regress_value, action="append", metavar="NAME=VALUE",
+                   help="set an FMU parameter in every case first, e.g. mu_screw_roller=0.101 "
+                        "(to see what a change does); repeatable")
+    p.add_argument("--out", default="out/regress", help="output directory (default %(default)s)")
+    p.set_defaults(func=cmd_regress, parser=p)
     return parser
+
+
+def _regress_value(text: str) -> tuple[str, float | str]:
+    """``NAME=VALUE`` of ``regress --set``: a float if it parses as one, else a string."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE")
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        return name.strip(), value.strip()
+
+
+def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Build the FMU (child process), run the regression cases, compare or update baselines.
+
+    Returns
+    -------
+    int
+        0 if every case passes (or the baselines were written), 1 if one fails.
+    """
+    from pathlib import Path
+
+    from . import regress
+    from .regress.report import verdict_table, write_report
+
+    out = Path(args.out)
+    if args.fmu:
+        fmu = Path(args.fmu)
+        if not fmu.is_file():
+            parser.error(f"argument --fmu: {fmu}: no such file")
+    else:
+        print(f"building PRSM2.fmu into {out / 'fmu'} (python -m fmu_build, child process) ...",
+              flush=True)
+        fmu = regress.build_fmu(out / "fmu")
+    where = Path(args.baselines) if args.baselines else regress.DEFAULT_DIR
+    if args.update:
+        if where.suffix == ".fmu" or args.set:
+            parser.error("argument --update: writes into a baselines directory, without --set")
+        print(regress.update(fmu, where, args.case))
+        print(f"wrote the baselines and {where / 'REPORT.md'}: review the report, then pack "
+              "them into the FMU by rebuilding it (python -m fmu_build)")
+        return 0
+    params = dict(args.set) if args.set else None
+    try:
+        results = regress.check(fmu, where, args.case, parameters=params)
+    except ValueError as exc:
+        parser.error(f"argument --case: {exc}")
+    print(verdict_table(results))
+    failed = [r.case.name for r in results if not r.passed]
+    if failed:
+        path = write_report(results, out, f"{fmu.name} against {where}")
+        print(f"FAIL: {len(failed)} of {len(results)} cases ({', '.join(failed)}); report: "
+              f"{path}")
+        return 1
+    print(f"PASS: {len(results)} cases, every output inside its tube")
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
