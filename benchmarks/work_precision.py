@@ -1,7 +1,8 @@
 """Work-precision charts: error against cost for every fidelity level × stepper × step or tolerance.
 
-For each scene (a data structure, :data:`SCENES`; the actuator-loop scenes are added there
-later, without touching the framework), every configuration of the grid is run and compared
+For each scene (a data structure, :data:`SCENES`: the seed 000 start-up of the mechanism alone,
+and the actuator-loop scenes of system_models/ with the PRSM as the plain Python block:
+position step, sine tracking, load step), every configuration of the grid is run and compared
 with the scene's reference:
 
 * **reference**: the dynamic level with ``solve_ivp(Radau)`` at rtol 1e-12 (stepper ``radau``,
@@ -23,8 +24,13 @@ meets the target; Radau at rtol 1e-6 is printed too).  Errors are reproducible t
 steppers are deterministic and nothing is random; the costs are measured in this run, on this
 machine, and vary from run to run.
 
-Run: ``python benchmarks/work_precision.py`` (about 30 s; ``--scene startup``, ``--quick``
-for a small grid, ``--out DIR``).  docs/accuracy.md explains the charts.
+Each scene with an ``auto`` entry also prints what ``fidelity = "auto"`` picks at the target
+(prsm_fmu.models.auto), its estimated model error per level against the measured one, and the
+speed-up of its choice over the dynamic level's implicit stepper.
+
+Run: ``python benchmarks/work_precision.py`` (about 7 min, most of it the loop scenes' Radau
+references; ``--scene startup``, ``--quick`` for a small grid, ``--out DIR``).
+docs/accuracy.md explains the charts.
 """
 
 from __future__ import annotations
@@ -43,6 +49,7 @@ import numpy as np
 
 from prsm_fmu import presets, simulate
 from prsm_fmu.models import FIDELITIES, make_model
+from prsm_fmu.models.auto import choose_for_start
 from prsm_fmu.simulate import tuned_stepper_options
 from prsm_fmu.steppers import StepFailure, make_stepper
 
@@ -192,6 +199,9 @@ class Scene:
         The level of the reference (the most detailed one).
     speedup_to_beat : float or None
         The number issue 5 asks for at the target (printed beside the measured one).
+    auto : callable or None
+        ``auto(tolerance) -> AutoChoice``: what ``fidelity = "auto"`` picks for this scene
+        (prsm_fmu.models.auto); the printout checks its estimate against the measured errors.
     """
 
     name: str
@@ -204,6 +214,7 @@ class Scene:
     outputs: tuple[str, ...] = OUTPUTS
     reference_fidelity: str = "dynamic"
     speedup_to_beat: float | None = None
+    auto: Callable[[float], object] | None = None
 
 
 def timed(fn: Callable[[], object], min_total: float = 0.1, max_repeats: int = 15) -> float:
@@ -292,6 +303,8 @@ STARTUP = Scene(
     grid=standard_grid(),
     target_error=1e-6,
     speedup_to_beat=20.0,
+    auto=lambda tol: choose_for_start(SEED000, tol, "speed", (100.0, 5000.0), carrier_ratio=0.0,
+                                      comm_step=1e-5),
 )
 
 #: the same start-up with the paper's 1 µs output interval as communication step: how the
@@ -311,8 +324,154 @@ STARTUP_1US = Scene(
     speedup_to_beat=20.0,
 )
 
-#: every scene; the actuator-loop scenes (position step, sine tracking, reversal) go here
-SCENES: dict[str, Scene] = {s.name: s for s in (STARTUP, STARTUP_1US)}
+# ---- actuator-loop scenes (system_models/, the PRSM as the plain Python block) -------------
+
+#: outputs of a loop scene's error: the scene's own list without ``prsm.efficiency`` (a ratio of
+#: powers that jumps between 0 and its value where a power changes sign, at instants that differ
+#: by a step between levels) and ``controller.reference`` (an input), plus the carrier speeds
+#: (the quantity the quasi-static level approximates)
+LOOP_EXCLUDED = ("prsm.efficiency", "controller.reference")
+
+
+def loop_outputs(scene_name: str, n_stages: int = 2) -> tuple[str, ...]:
+    """The outputs a loop scene's error is taken over (see :data:`LOOP_EXCLUDED`)."""
+    from system_models.scenes import load_scene
+
+    outs = [o for o in load_scene(scene_name).outputs if o not in LOOP_EXCLUDED]
+    return tuple(outs + [f"prsm.stage[{k}].carrier_speed" for k in range(1, n_stages + 1)])
+
+
+def load_loop_scene(scene_name: str, t_end: float | None = None):
+    """A scene of system_models/scenes, optionally cut to ``t_end`` [s]."""
+    from dataclasses import replace
+
+    from system_models.scenes import load_scene
+
+    sc = load_scene(scene_name)
+    return sc if t_end is None else replace(sc, t_end=float(t_end))
+
+
+def make_loop_runner(scene_name: str, t_end: float | None = None,
+                     outputs: tuple[str, ...] | None = None) -> Callable[..., RunResult]:
+    """``run(config)`` for an actuator-loop scene with the PRSM as the plain Python block.
+
+    The configuration sets the PRSM block's ``fidelity``, ``stepper``, ``tolerance`` and
+    ``substeps`` (the FMU's parameters); controller, motor, load and master are the scene's.
+    Outputs: the master's on the communication grid.  Cost: CPU seconds (``process_time``)
+    inside the PRSM block's ``do_step`` calls (its stepping; output evaluation and the other
+    blocks excluded), one run; rhs calls: the sum of the block's ``step_rhs_calls``.  A step
+    the block refuses (StepFailure inside, e.g. a fixed explicit step beyond its stability
+    limit) makes the run fail.
+    """
+    from dataclasses import replace
+
+    from system_models.ema import build_system
+    from system_models.master import CoSimulationError
+
+    sc = load_loop_scene(scene_name, t_end)
+    outs = outputs or loop_outputs(scene_name)
+
+    def run(cfg: Config, time_it: bool = True) -> RunResult:
+        par = dict(sc.prsm.get("parameters", {}))
+        par.update(stepper=cfg.stepper, tolerance=cfg.rtol,
+                   substeps=int(cfg.value) if cfg.knob == "substeps" else 0)
+        scene = replace(sc, prsm={**sc.prsm, "parameters": par})
+        system = build_system(scene, prsm="python", fidelity=cfg.fidelity)
+        blk = next(b for b in system.master.blocks if b.name == "prsm")
+        spent = [0.0]
+        inner = blk.do_step
+
+        def do_step(t, h, _inner=inner):
+            c0 = time.process_time()
+            try:
+                return _inner(t, h)
+            finally:
+                spent[0] += time.process_time() - c0
+
+        blk.do_step = do_step
+        try:
+            res = system.run()
+        except CoSimulationError as exc:
+            raise StepFailure(str(exc).splitlines()[0]) from None
+        outputs_ = {n: np.asarray(res[n], float) for n in outs}
+        rhs = int(np.sum(res["prsm.step_rhs_calls"]))
+        return RunResult(outputs_, spent[0] if time_it else math.nan, rhs)
+
+    return run
+
+
+def loop_grid(rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
+              radau_rtols=(1e-4, 1e-6, 1e-8, 1e-10)) -> tuple[Config, ...]:
+    """The loop scenes' grid: closed form and RK4 ×1 for the slaved levels (exact for their own
+    model: the points show the level's model error), ROS34PW2 × rtol for every level, the
+    restarted-Radau baseline.  No explicit stepper on the dynamic level: at the loop's 0.1 ms
+    step the carriers' time constant falls to 10 ns near standstill (h/τ ~ 10⁴), where RK4
+    needs ~4 000 substeps per step and DP5(4) as many (docs/accuracy.md §2)."""
+    grid: list[Config] = []
+    for fid in ("kinematic", "quasi-static"):
+        grid += [Config(fid, "closed_form"), Config(fid, "rk4", "substeps", 1)]
+        grid += [Config(fid, "rosenbrock", "rtol", r) for r in (1e-4, 1e-8)]
+    grid += [Config("dynamic", "rosenbrock", "rtol", r) for r in rtols]
+    grid += [Config("dynamic", "radau", "rtol", r) for r in radau_rtols]
+    return tuple(grid)
+
+
+def loop_trajectory(scene_name: str, t_end: float | None = None):
+    """Screw speed, acceleration and load force along a quasi-static run of a loop scene (the
+    cheapest level that has the carriers' equilibrium), and the lumped mechanism: what
+    ``auto`` evaluates its lag estimate on (docs/accuracy.md §4)."""
+    from system_models.run import run_scene as run_loop
+
+    r = run_loop(load_loop_scene(scene_name, t_end), prsm="python", fidelity="quasi-static")
+    res = r.result
+    return (np.asarray(res["prsm.screw_speed"]), np.asarray(res["prsm.screw_acceleration"]),
+            np.asarray(res["load.force"]), r.system.prsm.params())
+
+
+def loop_auto_choice(scene_name: str, tolerance: float, t_end: float | None = None):
+    """``auto``'s level for a loop scene at ``tolerance``: the estimate along a quasi-static run
+    (:func:`prsm_fmu.models.auto.estimate_along`; the carriers start at equilibrium)."""
+    from prsm_fmu.models.auto import estimate_along
+
+    w, a, f, params = loop_trajectory(scene_name, t_end)
+    sc = load_loop_scene(scene_name, t_end)
+    return estimate_along(params, tolerance, w, a, f, comm_step=sc.step)
+
+
+def _loop_scene(name: str, title: str, target: float, t_end: float | None = None,
+                speedup: float | None = None) -> Scene:
+    sc = load_loop_scene(name, t_end)
+    return Scene(name=name, title=title, t_end=sc.t_end, comm_step=sc.step,
+                 run=make_loop_runner(name, t_end), grid=loop_grid(), target_error=target,
+                 outputs=loop_outputs(name), speedup_to_beat=speedup,
+                 auto=lambda tol: loop_auto_choice(name, tol, t_end))
+
+
+#: the actuator's position step (system_models/scenes/position_step.toml), PRSM in Python
+POSITION_STEP = _loop_scene(
+    "position_step", "actuator loop: rod position step 0 → 10 mm against the surface load, "
+    "0–0.25 s, communication step 0.1 ms, Gauss–Seidel, PRSM as Python block", 1e-4)
+
+#: sine tracking (system_models/scenes/sine_tracking.toml) cut to its first 0.5 s: the ramp-in
+#: and one full period, four speed reversals
+SINE_TRACKING = _loop_scene(
+    "sine_tracking", "actuator loop: ±5 mm, 2 Hz sine with velocity feed-forward, 0–0.5 s "
+    "(ramp-in and one period, four reversals), communication step 0.1 ms, PRSM as Python block",
+    1e-4, t_end=0.5)
+
+#: load step (system_models/scenes/load_step.toml): the servo holds 5 mm against a 3 kN gust;
+#: the target is looser (5e-3): a scene where ``auto`` picks the quasi-static level
+LOAD_STEP = _loop_scene(
+    "load_step", "actuator loop: hold 5 mm, 3 kN gust load step at 20 ms, 0–0.2 s, "
+    "communication step 0.1 ms, PRSM as Python block", 5e-3)
+
+#: every scene
+SCENES: dict[str, Scene] = {s.name: s for s in (STARTUP, STARTUP_1US, POSITION_STEP,
+                                                 SINE_TRACKING, LOAD_STEP)}
+
+#: scenes whose printout compares ``auto``'s choice with the dynamic level's implicit stepper
+#: (issue 5: ≥ 50× at error ≤ 1e-4 on the position step)
+AUTO_SPEEDUP_TO_BEAT = {"position_step": 50.0}
 
 
 # ---- the framework ---------------------------------------------------------------------------
@@ -437,6 +596,53 @@ def summary(scene: Scene, result: dict) -> list[str]:
     if conventional is not None:
         lines.append(f"  speed-up over Radau at rtol 1e-6 (error {conventional.error:.2e}): "
                      f"{conventional.cpu_per_s / best.cpu_per_s:.1f}x")
+    lines += auto_summary(scene, result)
+    return lines
+
+
+def level_floor(points: list[Point], fidelity: str) -> Point | None:
+    """A level's most accurate successful point: its model error (for the slaved levels the
+    closed form, exact for their own model)."""
+    cands = [p for p in points if p.status == "ok" and p.config.fidelity == fidelity]
+    return min(cands, key=lambda p: p.error) if cands else None
+
+
+def auto_summary(scene: Scene, result: dict) -> list[str]:
+    """``auto``'s estimate against the measured model errors, its choice at the target and its
+    cost against the dynamic level's implicit stepper (docs/accuracy.md §4)."""
+    if scene.auto is None:
+        return []
+    pts = result["points"]
+    choice = scene.auto(scene.target_error)
+    lines = ["auto: estimated model error against measured (the level's most accurate point):"]
+    for fid in FIDELITIES:
+        floor = level_floor(pts, fid)
+        meas = f"{floor.error:.2e} ({floor.config.label})" if floor else "not run"
+        lines.append(f"  {fid:13s} estimated {choice.errors[fid]:9.2e}  measured {meas}")
+    lines.append(f"auto at tolerance {scene.target_error:g} picks {choice.describe()}")
+    mine = cheapest([p for p in pts if p.config.fidelity == choice.fidelity], scene.target_error)
+    implicit = cheapest([p for p in pts if p.config.fidelity == "dynamic"], scene.target_error,
+                        "rosenbrock")
+    if mine is None:
+        lines.append(f"  no {choice.fidelity} configuration meets {scene.target_error:g}: the "
+                     "choice FAILS the tolerance")
+        return lines
+    lines.append(f"  cheapest {choice.fidelity} configuration meeting it: {mine.config.label} "
+                 f"(error {mine.error:.2e}, {mine.cpu_per_s:.3e} CPU s/s)")
+    if implicit is not None:
+        to_beat = AUTO_SPEEDUP_TO_BEAT.get(scene.name)
+        lines.append(f"  speed-up of auto's choice over the dynamic level with the implicit "
+                     f"stepper ({implicit.config.label}, error {implicit.error:.2e}, "
+                     f"{implicit.cpu_per_s:.3e} CPU s/s): "
+                     f"{implicit.cpu_per_s / mine.cpu_per_s:.1f}x"
+                     + (f"  (to beat: ≥ {to_beat:g}x)" if to_beat else ""))
+    cheaper = FIDELITIES[:FIDELITIES.index(choice.fidelity)]
+    if cheaper:
+        nxt = level_floor(pts, cheaper[-1])
+        if nxt is not None:
+            lines.append(f"  the next cheaper level, {cheaper[-1]}, "
+                         + ("does not meet" if nxt.error > scene.target_error else "MEETS")
+                         + f" it (model error {nxt.error:.2e})")
     return lines
 
 

@@ -69,8 +69,12 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     ----------
     params : MechanismParams
         The mechanism (e.g. ``presets.load("seed000_two_stage")``).
-    fidelity : {"kinematic", "quasi-static", "dynamic"}
-        Model level.
+    fidelity : {"kinematic", "quasi-static", "dynamic", "auto"}
+        Model level.  ``auto`` chooses once per run, at its start, the cheapest level whose
+        estimated model error is ≤ ``rtol`` (operating point: the inputs at t = 0, the initial
+        screw speed and carrier ratio; the communication step is ``output_interval``;
+        :func:`prsm_fmu.models.auto.choose_for_start`, docs/accuracy.md §4).  The result's
+        ``fidelity`` says which; the default stepper is that level's.
     drive : {"torque", "speed"}
         ``torque``: ``screw_torque`` [N·m] drives screw 1 and the screw speed is a state;
         ``speed``: ``screw_speed`` [rad/s] is prescribed (a step at t = 0 when constant).
@@ -99,7 +103,8 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     -------
     dict
         ``time`` [s] and every output of DESIGN.md §4 as arrays, plus ``rhs_calls`` (total
-        right-hand-side evaluations) and ``cpu_time`` [s] of the run.
+        right-hand-side evaluations) and ``cpu_time`` [s] of the run; with ``auto`` also
+        ``fidelity`` (the level run) and ``auto_choice`` (:class:`~prsm_fmu.models.AutoChoice`).
 
     Raises
     ------
@@ -115,10 +120,16 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     if n_steps < 1 or abs(n_steps * output_interval - t_end) > 1e-9 * t_end:
         raise ValueError(f"t_end = {t_end!r} must be a whole multiple of output_interval = "
                          f"{output_interval!r}")
-    model = make_model(params, fidelity, drive, **(model_options or {}))
     drive_signal = _signal(screw_torque if drive == "torque" else screw_speed,
                            "screw_torque" if drive == "torque" else "screw_speed")
     load_signal = _signal(load_force, "load_force")
+    mopts = dict(model_options or {})
+    if fidelity == "auto":
+        mopts.update(tolerance=rtol, inputs=(drive_signal(0.0), load_signal(0.0)),
+                     comm_step=output_interval, screw_speed=initial_screw_speed,
+                     carrier_ratio=initial_carrier_ratio)
+    model = make_model(params, fidelity, drive, **mopts)
+    fidelity = model.fidelity
     name = stepper or DEFAULT_STEPPER[fidelity]
     opts = tuned_stepper_options(name, rtol, atol)
     opts.update(stepper_options or {})
@@ -152,6 +163,9 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     res.update({k: out[:, j] for j, k in enumerate(names)})
     res["rhs_calls"] = rhs_calls
     res["cpu_time"] = cpu
+    if hasattr(model, "auto_choice"):
+        res["fidelity"] = fidelity
+        res["auto_choice"] = model.auto_choice
     return res
 
 

@@ -48,15 +48,19 @@ from pythonfmu.enums import Fmi2Status
 
 from . import __version__
 from .models import FIDELITIES, make_model
+from .models.auto import choose_for_start
 from .params import MechanismParams, StageParams, stage_field_names
 from .simulate import DEFAULT_STEPPER, tuned_stepper_options
 from .steppers import STEPPER_NAMES, StepFailure, make_stepper
 
-#: the FMU's fidelity choices; ``auto`` currently means ``AUTO_FIDELITY`` (see below)
+#: the FMU's fidelity choices; ``auto``: :func:`prsm_fmu.models.auto.choose_for_start`
 FMU_FIDELITIES = FIDELITIES + ("auto",)
 
-#: what ``fidelity = auto`` selects until the automatic choice (an error estimate against the
-#: tolerance per communication step) exists: the quasi-static level
+#: what ``fidelity = auto`` selects at the FMU's default start (screw at rest, no inputs):
+#: the quasi-static level.  The choice itself is made at initialization by
+#: :func:`prsm_fmu.models.auto.choose_for_start` from the tolerance and the start's operating
+#: point (the communication step is not known then: input jumps are not credited with damping);
+#: see docs/accuracy.md §4
 AUTO_FIDELITY = "quasi-static"
 
 #: the FMU's stepper choices: ``default`` is ``closed_form`` for the levels with slaved
@@ -150,8 +154,8 @@ MECHANISM_FIELDS: dict[str, tuple] = {
 
 #: the FMU's own parameters: name -> (type, unit, description, min, max, default)
 SOLVER_FIELDS: dict[str, tuple] = {
-    "fidelity": ("String", None, "model level: kinematic, quasi-static, dynamic or auto (auto = "
-                 "quasi-static until the automatic choice exists)", None, None, "quasi-static"),
+    "fidelity": ("String", None, "model level: kinematic, quasi-static, dynamic or auto (auto: the "
+                 "cheapest level whose estimated model error at the start is within tolerance)", None, None, "quasi-static"),
     "tolerance": ("Real", "1", "relative local error tolerance of the adaptive steppers "
                   "(absolute tolerance: 0.01 * tolerance in rad, rad/s and J)", 0.0, 1.0, 1e-6),
     "stepper": ("String", None, "time stepper inside a communication step: default (closed_form "
@@ -535,10 +539,17 @@ class PRSMSlave(Fmi2Slave):
         if fidelity not in FMU_FIDELITIES:
             raise ValueError(f"fidelity = {fidelity!r} is not allowed: must be one of "
                              f"{', '.join(FMU_FIDELITIES)}")
-        level = AUTO_FIDELITY if fidelity == "auto" else fidelity
         tol = par["tolerance"]
         if not (math.isfinite(tol) and 0.0 < tol < 1.0):
             raise ValueError(f"tolerance = {tol!r} is out of range: must be in (0, 1)")
+        choice = None
+        if fidelity == "auto":
+            eff0 = par["kinematic_efficiency"]
+            choice = choose_for_start(
+                params, tol, "torque", tuple(self._u), screw_speed=par["initial_screw_speed"],
+                carrier_ratio=None if par["initial_carrier_equilibrium"] else 0.0,
+                kinematic_efficiency=eff0 if math.isfinite(eff0) and 0.0 < eff0 <= 1.0 else 1.0)
+        level = choice.fidelity if choice is not None else fidelity
         substeps = par["substeps"]
         if substeps < 0:
             raise ValueError(f"substeps = {substeps!r} is out of range: must be an integer >= 0 "
@@ -579,6 +590,8 @@ class PRSMSlave(Fmi2Slave):
                 opts["fixed_substeps"] = substeps
         model_opts = {"efficiency": eff} if level == "kinematic" else {}
         model = make_model(params, level, "torque", **model_opts)
+        if choice is not None:
+            model.auto_choice = choice
         stepper = make_stepper(name, model, **opts)
         x0 = model.initial_state(tuple(self._u), screw_speed=par["initial_screw_speed"],
                                  screw_angle=par["initial_screw_angle"],
@@ -625,8 +638,7 @@ class PRSMSlave(Fmi2Slave):
             what = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
             self._fail_visibly(f"initialization failed: {what}")
         if self._par["fidelity"] == "auto":
-            self.log(f"fidelity = 'auto' selects {level!r} (the automatic choice is not "
-                     "implemented yet)", Fmi2Status.ok)
+            self.log(f"fidelity = 'auto' selects {model.auto_choice.describe()}", Fmi2Status.ok)
         self._model, self._stepper, self._x = model, stepper, x0
         self._u_held = (self._u[0], self._u[1])
         self._config = self._config_key()

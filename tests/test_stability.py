@@ -134,3 +134,18 @@ def test_work_precision_errors_are_reproducible_to_1e_12():
     errs = {p.config: p.error for p in first["points"]}
     assert errs[grid[1]] <= 1e-5
     assert errs[grid[3]] > 0.5 and errs[grid[4]] > 0.5
+
+
+def test_loop_scene_errors_are_reproducible_to_1e_12():
+    """A slice of the position-step loop scene (cut to 15 ms: the step and the acceleration),
+    run twice against the same reference run: the same errors to 1e-12, the same rhs counts."""
+    run = wp.make_loop_runner("position_step", 0.015)
+    outs = wp.loop_outputs("position_step")
+    ref = run(wp.Config("dynamic", "rosenbrock", "rtol", 1e-9), time_it=False)
+    for cfg in (wp.Config("dynamic", "rosenbrock", "rtol", 1e-5),
+                wp.Config("quasi-static", "closed_form")):
+        a, b = run(cfg, time_it=False), run(cfg, time_it=False)
+        ea, eb = (wp.output_errors(r.outputs, ref.outputs, outs) for r in (a, b))
+        assert a.rhs_calls == b.rhs_calls
+        for name in outs:
+            assert abs(ea[name] - eb[name]) <= 1e-12, (cfg.label, name)
