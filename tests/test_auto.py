@@ -8,10 +8,7 @@ level must not (DESIGN.md §5 error measure, benchmarks/work_precision.py).
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,17 +19,9 @@ from prsm_fmu.models import FIDELITIES, make_model
 from prsm_fmu.models.auto import (MARGIN, carrier_time_constant, carrier_time_constants,
                                   choose_fidelity, choose_for_start, effective_load)
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+from benchmark_modules import load_benchmark as _load  # noqa: E402
 
 
-def _load(name: str):
-    mod_name = f"_prsm_benchmarks_{name}"
-    if mod_name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(mod_name, BENCHMARKS / f"{name}.py")
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[mod_name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[mod_name]
 
 
 wp = _load("work_precision")

@@ -10,25 +10,14 @@ may).  The benchmarks are loaded from benchmarks/ by path; their maps and charts
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+from benchmark_modules import load_benchmark as _load  # noqa: E402
 
 
-def _load(name: str):
-    mod_name = f"_prsm_benchmarks_{name}"
-    if mod_name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(mod_name, BENCHMARKS / f"{name}.py")
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[mod_name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[mod_name]
 
 
 maps = _load("stability_maps")
