@@ -47,30 +47,15 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Intege
 from pythonfmu.enums import Fmi2Status
 
 from . import __version__
-from .models import FIDELITIES, make_model
-from .models.auto import choose_for_start
+from .configure import ATOL_FACTOR, AUTO_FIDELITY, FIDELITY_CHOICES, STEPPER_CHOICES, configure
 from .params import MechanismParams, StageParams, stage_field_names
-from .simulate import DEFAULT_STEPPER, tuned_stepper_options
-from .steppers import STEPPER_NAMES, StepFailure, make_stepper
+from .simulate import DEFAULT_STEPPER
+from .steppers import StepFailure
 
-#: the FMU's fidelity choices; ``auto``: :func:`prsm_fmu.models.auto.choose_for_start`
-FMU_FIDELITIES = FIDELITIES + ("auto",)
-
-#: what ``fidelity = auto`` selects at the FMU's default start (screw at rest, no inputs):
-#: the quasi-static level.  The choice itself is made at initialization by
-#: :func:`prsm_fmu.models.auto.choose_for_start` from the tolerance and the start's operating
-#: point (the communication step is not known then: input jumps are not credited with damping);
-#: see docs/accuracy.md §4
-AUTO_FIDELITY = "quasi-static"
-
-#: the FMU's stepper choices: ``default`` is ``closed_form`` for the levels with slaved
-#: carriers (quasi-static, kinematic) and ``rosenbrock`` for the dynamic level
-FMU_STEPPERS = ("default",) + STEPPER_NAMES
-
-
-#: absolute tolerance of the adaptive steppers relative to ``tolerance`` (states are in rad,
-#: rad/s and J, each with scale 1): atol = ATOL_FACTOR * tolerance
-ATOL_FACTOR = 1e-2
+#: the FMU's fidelity and stepper choices, what ``auto`` picks at the default start and the
+#: absolute-tolerance factor: one definition for the FMU and the loop (prsm_fmu/configure.py)
+FMU_FIDELITIES = FIDELITY_CHOICES
+FMU_STEPPERS = STEPPER_CHOICES
 
 _INF = math.inf
 
@@ -535,68 +520,7 @@ class PRSMSlave(Fmi2Slave):
                        for k in range(1, self.n_stages + 1))
         params = MechanismParams(stages=stages, name=f"{type(self).__name__} ({self.preset})",
                                  **{f: par[f] for f in MECHANISM_FIELDS}).validate()
-        fidelity = par["fidelity"]
-        if fidelity not in FMU_FIDELITIES:
-            raise ValueError(f"fidelity = {fidelity!r} is not allowed: must be one of "
-                             f"{', '.join(FMU_FIDELITIES)}")
-        tol = par["tolerance"]
-        if not (math.isfinite(tol) and 0.0 < tol < 1.0):
-            raise ValueError(f"tolerance = {tol!r} is out of range: must be in (0, 1)")
-        choice = None
-        if fidelity == "auto":
-            eff0 = par["kinematic_efficiency"]
-            choice = choose_for_start(
-                params, tol, "torque", tuple(self._u), screw_speed=par["initial_screw_speed"],
-                carrier_ratio=None if par["initial_carrier_equilibrium"] else 0.0,
-                kinematic_efficiency=eff0 if math.isfinite(eff0) and 0.0 < eff0 <= 1.0 else 1.0)
-        level = choice.fidelity if choice is not None else fidelity
-        substeps = par["substeps"]
-        if substeps < 0:
-            raise ValueError(f"substeps = {substeps!r} is out of range: must be an integer >= 0 "
-                             "(0: adaptive)")
-        max_substeps = par["max_substeps"]
-        if max_substeps < 1:
-            raise ValueError(f"max_substeps = {max_substeps!r} is out of range: must be an "
-                             "integer >= 1")
-        eff = par["kinematic_efficiency"]
-        if not (math.isfinite(eff) and 0.0 < eff <= 1.0):
-            raise ValueError(f"kinematic_efficiency = {eff!r} is out of range: must be in (0, 1]")
-        for name in ("initial_screw_speed", "initial_screw_angle"):
-            if not math.isfinite(par[name]):
-                raise ValueError(f"{name} = {par[name]!r} is out of range: must be finite")
-        name = par["stepper"]
-        if name not in FMU_STEPPERS:
-            raise ValueError(f"stepper = {name!r} is not allowed: must be one of "
-                             f"{', '.join(FMU_STEPPERS)}")
-        name = DEFAULT_STEPPER[level] if name == "default" else name
-        if name == "closed_form" and level == "dynamic":
-            raise ValueError("stepper = 'closed_form' is not allowed with fidelity = 'dynamic': "
-                             "the closed form exists only for kinematic and quasi-static")
-        opts: dict[str, Any] = {}
-        if name == "rk4":
-            if substeps < 1:
-                raise ValueError("substeps = 0 is out of range for stepper = 'rk4': must be an "
-                                 "integer >= 1 (rk4 has no error control)")
-            opts["substeps"] = substeps
-        else:
-            opts.update(tuned_stepper_options(name, tol, ATOL_FACTOR * tol) if not substeps
-                        else {"rtol": tol, "atol": ATOL_FACTOR * tol})
-            if name != "radau":
-                opts["max_substeps"] = max_substeps
-            if substeps:
-                if name == "radau":
-                    raise ValueError(f"substeps = {substeps!r} is out of range for stepper = "
-                                     "'radau': must be 0 (radau has no fixed-step mode)")
-                opts["fixed_substeps"] = substeps
-        model_opts = {"efficiency": eff} if level == "kinematic" else {}
-        model = make_model(params, level, "torque", **model_opts)
-        if choice is not None:
-            model.auto_choice = choice
-        stepper = make_stepper(name, model, **opts)
-        x0 = model.initial_state(tuple(self._u), screw_speed=par["initial_screw_speed"],
-                                 screw_angle=par["initial_screw_angle"],
-                                 carrier_ratio=None if par["initial_carrier_equilibrium"] else 0.0)
-        return model, stepper, x0, level, name
+        return configure(params, par, tuple(self._u))
 
     def _config_key(self) -> tuple:
         return tuple(self._par[n] for n in self._par_names)

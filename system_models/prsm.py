@@ -6,9 +6,9 @@ Both take the FMU's vocabulary (docs/fmu.md): inputs ``screw_torque`` [N.m] and 
 (``stage[1].screw_inertia``, ``fidelity``, ``tolerance``, ``initial_screw_speed``, …).
 
 :class:`PythonPRSM` does what the FMU's slave (``prsm_fmu/slave.py``) does with the same
-parameters: the model of :func:`prsm_fmu.models.make_model`, the stepper the FMU documents as
-its default, the same tolerances, the outputs computed from the state at the communication
-point and the inputs held over the last step.  So a scene run with either gives the same
+parameters: model, stepper, tolerances and ``auto`` choice come from the same function
+(:func:`prsm_fmu.configure.configure`), the outputs are computed from the state at the
+communication point and the inputs held over the last step.  So a scene run with either gives the same
 numbers (tests/test_system_cosim.py checks 1e-10; in practice they agree bit for bit).
 """
 
@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from prsm_fmu import presets
-from prsm_fmu.models import make_model
+from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, configure
 from prsm_fmu.params import MechanismParams, stage_field_names
-from prsm_fmu.simulate import DEFAULT_STEPPER, tuned_stepper_options
-from prsm_fmu.steppers import StepFailure, make_stepper
+from prsm_fmu.simulate import DEFAULT_STEPPER
+from prsm_fmu.steppers import StepFailure
 
 from .blocks import Port, PythonBlock, StepRefused
 
@@ -33,11 +33,6 @@ __all__ = ["PRSMConfig", "PythonPRSM", "make_prsm_block", "prsm_output_names", "
 MECHANISMS = {"PRSM1": "seed003_single_stage", "PRSM2": "seed000_two_stage",
               "PRSM3": "seed000_three_stage"}
 
-# The FMU's choices (prsm_fmu/slave.py: AUTO_FIDELITY, ATOL_FACTOR); repeated here so that the
-# Python block needs no pythonfmu, and checked equal by the tests.  The default steppers and their
-# options come from the one source the slave uses too (prsm_fmu.simulate).
-AUTO_FIDELITY = "quasi-static"
-ATOL_FACTOR = 1e-2
 
 _HEAD = {"screw_speed": "rad/s", "screw_angle": "rad", "screw_acceleration": "rad/s2",
          "rod_position": "m", "rod_velocity": "m/s"}
@@ -144,28 +139,10 @@ class PythonPRSM(PythonBlock):
         self.outputs = tuple(Port(o, _unit(o)) for o in self._names) + tuple(
             Port(c, "1", discrete=True) for c in COUNTERS)
         super().__init__(name)
-        fidelity = s["fidelity"]
-        level = AUTO_FIDELITY if fidelity == "auto" else fidelity
-        stepper = DEFAULT_STEPPER[level] if s["stepper"] == "default" else s["stepper"]
-        tol = s["tolerance"]
-        opts: dict[str, Any] = {}
-        if stepper == "rk4":
-            opts["substeps"] = s["substeps"]
-        else:        # as prsm_fmu.slave.PRSMSlave._build
-            opts.update(tuned_stepper_options(stepper, tol, ATOL_FACTOR * tol) if not s["substeps"]
-                        else {"rtol": tol, "atol": ATOL_FACTOR * tol})
-            if stepper != "radau":
-                opts["max_substeps"] = s["max_substeps"]
-            if s["substeps"]:
-                opts["fixed_substeps"] = s["substeps"]
-        model_opts = {"efficiency": s["kinematic_efficiency"]} if level == "kinematic" else {}
-        self.model = make_model(p, level, "torque", **model_opts)
-        self.stepper = make_stepper(stepper, self.model, **opts)
         self.u = [float(v) for v in config.initial_inputs]
         self.u_held = tuple(self.u)
-        self.x = self.model.initial_state(
-            self.u_held, screw_speed=s["initial_screw_speed"], screw_angle=s["initial_screw_angle"],
-            carrier_ratio=None if s["initial_carrier_equilibrium"] else 0.0)
+        # the FMU's own configuration (validation, auto choice, stepper and options)
+        self.model, self.stepper, self.x, _level, _name = configure(p, s, self.u_held)
         self.t = float(start_time)
         self.stats = (0, 0)
         self.memory = self.stepper.get_memory()
