@@ -39,6 +39,7 @@ from .simulate import DEFAULT_STEPPER, simulate
 from .steady_state import steady_state
 from .sweep.metrics import settle, value_at
 from .sweep.plots import DEFAULT_PANELS, plot_time_panels
+from .sweep.table import markdown_table
 
 __all__ = ["main", "generate", "COMMAND"]
 
@@ -89,14 +90,6 @@ def _always_greater(res: Mapping[str, np.ndarray], a: str, b: str) -> tuple[bool
     """(a > b at every sample, smallest a − b)."""
     d = np.asarray(res[a]) - np.asarray(res[b])
     return bool(np.all(d > 0.0)), float(np.min(d))
-
-
-def _table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
-    """A Markdown table."""
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    for r in rows:
-        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |")
-    return "\n".join(lines)
 
 
 def _ms(t: float) -> str:
@@ -166,7 +159,7 @@ def _section_startup(p0: MechanismParams, runs: dict[float, dict], fig_dir: str,
          f"{a['energy']:.1e}", f"{b['energy']:.1e}"],
         ["right-hand-side calls", "—", f"{a['rhs']}", f"{b['rhs']}"],
     ]
-    table = _table(["quantity", "seed 000 §3.1", "model, µ_SR = 0.1 (preset)",
+    table = markdown_table(["quantity", "seed 000 §3.1", "model, µ_SR = 0.1 (preset)",
                     "model, µ_SR = 0.05 (seed 002's)"], rows)
 
     # invariance of settling time × µ_SR
@@ -180,7 +173,7 @@ def _section_startup(p0: MechanismParams, runs: dict[float, dict], fig_dir: str,
         inv_rows.append([f"{mu:g}", _ms(ts[0]), _ms(ts[1]), f"{mu * ts[0] * 1e6:.2f}",
                          f"{mu * ts[1] * 1e6:.2f}", f"{r['efficiency'][0]:.3f}",
                          f"{r['efficiency'][-1]:.3f}"])
-    inv_table = _table(["µ_SR", "t_s1 [ms]", "t_s2 [ms]", "µ_SR·t_s1 [µs]", "µ_SR·t_s2 [µs]",
+    inv_table = markdown_table(["µ_SR", "t_s1 [ms]", "t_s2 [ms]", "µ_SR·t_s1 [µs]", "µ_SR·t_s2 [µs]",
                         "η(0)", "η(1 ms)"], inv_rows)
     spread = {k: (max(v) - min(v)) / np.mean(v) for k, v in prods.items()}
     faster1 = PAPER_SETTLE[0] / a["ts1"]
@@ -250,7 +243,7 @@ def _section_grid(p0: MechanismParams, runs: dict[tuple[float, float], dict], fi
                      f"{_at(r, 'stage[2].contact_force', 0.0):.1f} → "
                      f"{_at(r, 'stage[2].contact_force', T_CONTACT):.1f}",
                      _ms(_settle(r, 1)), _ms(_settle(r, 2))])
-    table = _table(["µ_SR", "µ_SS", "ζ_PS1", "ζ_PS2", "F_Srz1 [N]", "F_Srz2 [N]", "η",
+    table = markdown_table(["µ_SR", "µ_SS", "ζ_PS1", "ζ_PS2", "F_Srz1 [N]", "F_Srz2 [N]", "η",
                     "f_S2 [N]", "F_Srz1: t = 0 → 0.75 ms [N]", "F_Srz2: t = 0 → 0.75 ms [N]",
                     "t_s1 [ms]", "t_s2 [ms]"], rows)
     plot_runs([(f"µ_SR {k[0]:g}, µ_SS {k[1]:g}", runs[k]) for k in sorted(runs)],
@@ -288,7 +281,7 @@ def _section_grid(p0: MechanismParams, runs: dict[tuple[float, float], dict], fi
             > ss[(s, mus_ss[0])]["stage[2].spline_friction"] for s in mus_sr)
     settle_faster = all(_settle(runs[(mus_sr[1], m)], j) < _settle(runs[(mus_sr[0], m)], j)
                         for m in mus_ss for j in (1, 2))
-    trends = _table(["seed 000 §3.2 statement", "model", "verdict"], [
+    trends = markdown_table(["seed 000 §3.2 statement", "model", "verdict"], [
         ["efficiency decreases as µ_SR increases",
          f"η falls by ≥ {d_eta_sr:.3f} from µ_SR 0.1 to 0.2", _agree(eta_falls)],
         ["µ_SS has a slight effect on the efficiency",
@@ -347,11 +340,11 @@ def _section_pitch(p0: MechanismParams, fig_dir: str, fig_rel: str,
                      _ms(t1), _ms(t2)])
     plot_runs(runs, os.path.join(fig_dir, "seed000_pitches.png"),
               title="seed 000 §3.3 pitches (p1 + p2 = 4 mm): 100 rad/s step, 5000 N")
-    table = _table(["pitch 1 [mm]", "pitch 2 [mm]", "L_S1 [mm]", "L_S2 [mm]", "ζ_PS1", "ζ_PS2",
+    table = markdown_table(["pitch 1 [mm]", "pitch 2 [mm]", "L_S1 [mm]", "L_S2 [mm]", "ζ_PS1", "ζ_PS2",
                     "F_Srz1 [N]", "F_Srz2 [N]", "η", "f_S2 [N]", "t_s1 [ms]", "t_s2 [ms]"], rows)
     col = {k: [v[k] for v in vals] for k in vals[0]}
     eta_range = max(col["eta"]) - min(col["eta"])
-    trends = _table(["seed 000 §3.3 statement", "model", "verdict"], [
+    trends = markdown_table(["seed 000 §3.3 statement", "model", "verdict"], [
         ["F_Srz1 decreases as pitch 1 increases",
          f"F_Srz1 {col['f1'][0]:.1f} → {col['f1'][-1]:.1f} N", _agree(_monotone(col["f1"], False))],
         ["pitches have little influence on the efficiency (sum constant)",
@@ -407,10 +400,10 @@ def _section_002(fig_rel: str, zetas_seen: list[float]) -> str:
         settle_002[sc] = (_settle(r, 1), _settle(r, 2))
         trans.append([SCENARIO_LABEL[sc], f"{r['efficiency'][0]:.3f}", _ms(settle_002[sc][0]),
                       _ms(settle_002[sc][1]), f"{r['efficiency'][-1]:.3f}"])
-    table = _table(["scenario", "µ_SS", "µ_NS", "η paper", "η model", "ζ_PS1 paper",
+    table = markdown_table(["scenario", "µ_SS", "µ_NS", "η paper", "η model", "ζ_PS1 paper",
                     "ζ_PS1 model", "ζ_PS2 paper", "ζ_PS2 model", "F_RG1 / F_RG2 paper [N]",
                     "F_RG model"], rows)
-    ttable = _table(["scenario", "η(0) model (paper ≈ 0.60)",
+    ttable = markdown_table(["scenario", "η(0) model (paper ≈ 0.60)",
                      "t_s1 model [ms] (paper ≈ 50 ms)", "t_s2 model [ms] (paper ≈ 150 ms)",
                      "η(1 ms) model"], trans)
     base = presets.load("seed002_two_stage")

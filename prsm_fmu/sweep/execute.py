@@ -50,7 +50,8 @@ import numpy as np
 from .metrics import standard_metrics
 from .points import FmuFile, PointResult, PointTask, run_point
 from .study import Study
-from .table import append_row, columns, numeric_rows, read_table, row_of, write_table
+from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
+                    write_table)
 from .trends import TrendResult, evaluate
 
 __all__ = ["run_study", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
@@ -429,13 +430,6 @@ def _default_steady(header: Sequence[str]) -> list[str]:
     return [m for m in want if m in header][:4]
 
 
-def _md_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    for r in rows:
-        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |")
-    return "\n".join(lines)
-
-
 def _cell(v: Any) -> str:
     if isinstance(v, float):
         return "nan" if math.isnan(v) else f"{v:.6g}"
@@ -463,17 +457,17 @@ def write_report(result: SweepResult) -> str:
                             "stage[2].contact_force@end", "stage[2].spline_friction@end",
                             "friction_torque@max", "efficiency@min", "efficiency@overall")
                 if c in result.header]
-    parts.append(_md_table(list(st.swept) + ["status"] + key_cols,
+    parts.append(markdown_table(list(st.swept) + ["status"] + key_cols,
                            [[_cell(r.get(c)) for c in list(st.swept) + ["status"] + key_cols]
                             for r in result.rows]) + "\n")
     if result.trends:
         parts.append("## The paper's claims, checked on the table\n")
-        parts.append(_md_table(["claim", "paper", "metric", "along", "table", "verdict"], [
+        parts.append(markdown_table(["claim", "paper", "metric", "along", "table", "verdict"], [
             [t.trend.statement, t.trend.paper or "—", f"`{t.trend.metric}`", t.trend.vs,
              t.observed, t.verdict] for t in result.trends]) + "\n")
     if result.failed:
         parts.append("## Failed points\n")
-        parts.append(_md_table(["point", "parameters", "error"], [
+        parts.append(markdown_table(["point", "parameters", "error"], [
             [int(r["point"]), _label({k: r[k] for k in st.swept}), r.get("error", "")]
             for r in result.failed]) + "\n")
     for f in result.figures:

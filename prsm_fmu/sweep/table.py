@@ -20,7 +20,8 @@ import math
 import os
 from typing import Any, Iterable, Mapping, Sequence
 
-__all__ = ["columns", "format_value", "write_table", "append_row", "read_table", "row_of"]
+__all__ = ["columns", "format_value", "write_table", "append_row", "read_table", "row_of",
+           "markdown_table"]
 
 FIXED_HEAD = ("point", "id")
 FIXED_MID = ("status", "error")
@@ -120,3 +121,11 @@ def numeric_rows(rows: Iterable[Mapping[str, str]]) -> list[dict[str, Any]]:
                 d[k] = v
         out.append(d)
     return out
+
+
+def markdown_table(headers: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    """A Markdown table of ``rows`` under ``headers`` (cells as ``str``, ``|`` escaped)."""
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    for r in rows:
+        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |")
+    return "\n".join(lines)
