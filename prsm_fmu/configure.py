@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-from .models import FIDELITIES, make_model
+from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
 from .params import MechanismParams
 from .simulate import DEFAULT_STEPPER, tuned_stepper_options
@@ -19,15 +19,17 @@ from .steppers import STEPPER_NAMES, make_stepper
 #: fidelity choices; ``auto``: :func:`prsm_fmu.models.auto.choose_for_start`
 FIDELITY_CHOICES = FIDELITIES + ("auto",)
 
-#: what ``fidelity = auto`` selects at the FMU's default start (screw at rest, no inputs):
-#: the quasi-static level.  The choice itself is made when the model is built, by
+#: the level ``fidelity = auto`` starts with at the FMU's default start (screw at rest, no
+#: inputs): the quasi-static level.  The start is chosen when the model is built, by
 #: :func:`prsm_fmu.models.auto.choose_for_start` from the tolerance and the start's operating
 #: point (the communication step is not known then: input jumps are not credited with damping);
-#: see docs/accuracy.md §4
+#: from then on the level of each step follows the carriers' lag
+#: (:mod:`prsm_fmu.models.adaptive`); see docs/accuracy.md §4
 AUTO_FIDELITY = "quasi-static"
 
 #: stepper choices: ``default`` is ``closed_form`` for the levels with slaved carriers
-#: (quasi-static, kinematic) and ``rosenbrock`` for the dynamic level
+#: (quasi-static, kinematic) and ``rosenbrock`` for the dynamic level and for the dynamic steps
+#: of ``auto``
 STEPPER_CHOICES = ("default",) + STEPPER_NAMES
 
 #: absolute tolerance of the adaptive steppers relative to ``tolerance`` (states are in rad,
@@ -73,7 +75,9 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
             params, tol, "torque", tuple(inputs), screw_speed=solver["initial_screw_speed"],
             carrier_ratio=None if solver["initial_carrier_equilibrium"] else 0.0,
             kinematic_efficiency=eff0 if math.isfinite(eff0) and 0.0 < eff0 <= 1.0 else 1.0)
-    level = choice.fidelity if choice is not None else fidelity
+    # auto: the kinematic level, or the model that switches between dynamic and quasi-static
+    level = fidelity if choice is None else ("kinematic" if choice.fidelity == "kinematic"
+                                             else "auto")
     substeps = solver["substeps"]
     if substeps < 0:
         raise ValueError(f"substeps = {substeps!r} is out of range: must be an integer >= 0 "
@@ -113,9 +117,8 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
                                  "'radau': must be 0 (radau has no fixed-step mode)")
             opts["fixed_substeps"] = substeps
     model_opts = {"efficiency": eff} if level == "kinematic" else {}
-    model = make_model(params, level, "torque", **model_opts)
-    if choice is not None:
-        model.auto_choice = choice
+    model = (make_model(params, level, "torque", **model_opts) if choice is None
+             else auto_model(params, "torque", choice, **model_opts))
     stepper = make_stepper(name, model, **opts)
     x0 = model.initial_state(tuple(inputs), screw_speed=solver["initial_screw_speed"],
                              screw_angle=solver["initial_screw_angle"],

@@ -20,7 +20,7 @@ Signal = Union[float, Callable[[float], float]]
 
 #: default stepper per fidelity level (used by simulate and the FMU)
 DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
-                   "kinematic": "closed_form"}
+                   "kinematic": "closed_form", "auto": "rosenbrock"}
 
 #: options that make an adaptive stepper cheapest at equal accuracy on this model
 #: (benchmarks/step_cost.py: Jacobian reuse within a step while h·‖J‖·|Δx|/|x| ≤ 0.1, and a first

@@ -562,7 +562,10 @@ class PRSMSlave(Fmi2Slave):
             what = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
             self._fail_visibly(f"initialization failed: {what}")
         if self._par["fidelity"] == "auto":
-            self.log(f"fidelity = 'auto' selects {model.auto_choice.describe()}", Fmi2Status.ok)
+            along = ("; it switches between the dynamic and the quasi-static level along the run"
+                     if model.fidelity == "auto" else "")
+            self.log(f"fidelity = 'auto' starts with {model.auto_choice.describe()}{along}",
+                     Fmi2Status.ok)
         self._model, self._stepper, self._x = model, stepper, x0
         self._u_held = (self._u[0], self._u[1])
         self._config = self._config_key()

@@ -1669,7 +1669,9 @@ def make_stepper(name: str, model: Any, **options: Any) -> Stepper:
     name : {"rk4", "explicit_adaptive", "rosenbrock", "radau", "closed_form"}
         Stepper kind.
     model : OdeModel
-        Model to integrate.
+        Model to integrate.  A model with a ``stepper_factory(name, **options)`` (the
+        ``auto`` fidelity, which switches levels along a run) builds its own stepper, taking
+        ``name`` for its dynamic steps.
     **options
         Keyword arguments of the stepper's constructor (e.g. ``rtol``, ``substeps``).
 
@@ -1687,4 +1689,7 @@ def make_stepper(name: str, model: Any, **options: Any) -> Stepper:
         cls = _STEPPERS[name]
     except (KeyError, TypeError):
         raise ValueError(f"unknown stepper {name!r}: allowed are {', '.join(STEPPER_NAMES)}") from None
+    factory = getattr(model, "stepper_factory", None)
+    if factory is not None:      # a model that switches levels steps itself (models/adaptive.py)
+        return factory(name, **options)
     return cls(model, **options)

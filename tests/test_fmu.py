@@ -54,6 +54,7 @@ H = 1e-3                      # communication step [s]
 OK, DISCARD = 0, 2
 
 #: the steppers the FMU documents as its defaults (docs/fmu.md), and its tolerance mapping
+from prsm_fmu.configure import AUTO_FIDELITY  # noqa: E402
 from prsm_fmu.simulate import DEFAULT_STEPPER, tuned_stepper_options  # noqa: E402 - as the FMU
 TOLERANCE = 1e-6              # the FMU's default ``tolerance``: rtol = tol, atol = 0.01 tol
 
@@ -189,7 +190,8 @@ def run_fmu(host: Host, n: int, names, k0: int = 0, loop: tuple = (0.0, None)) -
 def run_python(params, fidelity: str, n: int, names, stepper: str | None = None,
                **stepper_opts) -> list[list]:
     """The same loop on the Python model with the stepper the FMU documents."""
-    model = make_model(params, fidelity, "torque")
+    auto = dict(tolerance=TOLERANCE, carrier_ratio=0.0) if fidelity == "auto" else {}
+    model = make_model(params, fidelity, "torque", **auto)
     name = stepper or DEFAULT_STEPPER[fidelity]
     opts = stepper_opts or tuned_stepper_options(name, TOLERANCE, 0.01 * TOLERANCE)
     st = make_stepper(name, model, **opts)
@@ -625,11 +627,13 @@ def test_out_of_range_parameters_fail_initialization_with_the_message_logged():
 
 
 def test_auto_fidelity_runs_the_documented_level():
+    """At the default start auto starts with the documented level and then switches along the
+    run exactly as the Python model does (prsm_fmu/models/adaptive.py)."""
     host = Host("PRSM2", start={"fidelity": "auto"})
     try:
-        got = run_fmu(host, 50, ["screw_speed"])
-        assert any("selects 'quasi-static'" in m for _, m in host.messages)
+        got = run_fmu(host, 50, ["screw_speed", "stage[1].contact_force"])
+        assert any(f"starts with '{AUTO_FIDELITY}'" in m for _, m in host.messages)
     finally:
         host.free()
-    assert got == run_python(presets.load("seed000_two_stage"), "quasi-static", 50,
-                             ["screw_speed"])
+    assert got == run_python(presets.load("seed000_two_stage"), "auto", 50,
+                             ["screw_speed", "stage[1].contact_force"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..params import MechanismParams
+from .adaptive import AdaptiveModel
 from .auto import AutoChoice, choose_fidelity, choose_for_start, estimate_errors
 from .base import Model
 from .dynamic import DynamicModel
@@ -22,9 +23,11 @@ def make_model(params: MechanismParams, fidelity: str = "dynamic", drive: str = 
     params : MechanismParams
         The mechanism.
     fidelity : {"kinematic", "quasi-static", "dynamic", "auto"}
-        Level of detail.  ``auto``: the cheapest level whose estimated model error at the start
-        of the run is within ``tolerance`` (:func:`prsm_fmu.models.auto.choose_for_start`;
-        docs/accuracy.md §4); the returned model's ``auto_choice`` says what and why.
+        Level of detail.  ``auto``: the cheapest level whose estimated model error is within
+        ``tolerance``, chosen at the start (:func:`prsm_fmu.models.auto.choose_for_start`) and
+        along the run between the dynamic and the quasi-static level (:func:`auto_model`,
+        prsm_fmu/models/adaptive.py; docs/accuracy.md §4); the returned model's
+        ``auto_choice`` says what was chosen at the start and why.
     drive : {"torque", "speed"}
         Drive mode.
     **options
@@ -45,15 +48,36 @@ def make_model(params: MechanismParams, fidelity: str = "dynamic", drive: str = 
         inputs = kw.pop("inputs", (0.0, 0.0))
         choice = choose_for_start(params, tol, drive, inputs,
                                   kinematic_efficiency=options.get("efficiency", 1.0), **kw)
-        if choice.fidelity != "kinematic":
-            options.pop("efficiency", None)
-        model = _CLASSES[choice.fidelity](params, drive, **options)
-        model.auto_choice = choice
-        return model
+        return auto_model(params, drive, choice, **options)
     if fidelity not in _CLASSES:
         raise ValueError(f"fidelity = {fidelity!r} is not allowed: must be one of {FIDELITIES}")
     return _CLASSES[fidelity](params, drive, **options)
 
 
-__all__ = ["Model", "DynamicModel", "QuasiStaticModel", "KinematicModel", "make_model", "FIDELITIES",
-           "AutoChoice", "choose_fidelity", "choose_for_start", "estimate_errors"]
+def auto_model(params: MechanismParams, drive: str, choice: AutoChoice, **options) -> Model:
+    """The model ``fidelity = "auto"`` runs, given the choice at the start of the run.
+
+    The kinematic level when it was chosen (its error, the friction loss, does not change along
+    a run); otherwise an :class:`~prsm_fmu.models.adaptive.AdaptiveModel` that starts at the
+    chosen level and switches between the dynamic and the quasi-static level along the run.
+
+    Parameters
+    ----------
+    params : MechanismParams
+    drive : {"torque", "speed"}
+    choice : AutoChoice
+        From :func:`choose_for_start`, with its tolerance.
+    **options
+        ``efficiency`` for the kinematic level.
+    """
+    if choice.fidelity == "kinematic":
+        model = KinematicModel(params, drive, **options)
+    else:
+        model = AdaptiveModel(params, drive, tolerance=choice.tolerance, start=choice.fidelity,
+                              choice=choice)
+    model.auto_choice = choice
+    return model
+
+
+__all__ = ["Model", "AdaptiveModel", "auto_model", "DynamicModel", "QuasiStaticModel",
+           "KinematicModel", "make_model", "FIDELITIES", "AutoChoice", "choose_fidelity", "choose_for_start", "estimate_errors"]

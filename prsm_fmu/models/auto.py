@@ -27,8 +27,10 @@ of it.  docs/accuracy.md §4 derives it and checks it against the work-precision
 * **kinematic**: E_qs plus what the kinematic level leaves out on top: the friction loss
   |η/η₀ − 1| (η the quasi-static level's steady forward efficiency, independent of speed and load
   outside the friction band; η₀ the kinematic level's constant efficiency, 1 by default: then
-  it is 1 − η ≈ 0.2 for seed 000) and the pure-rolling carrier ratio's offset from ζ*,
-  max_k |ζ_ideal,k/ζ*_k − 1|.
+  it is 1 − η ≈ 0.2 for seed 000), the pure-rolling carrier ratio's offset from ζ*,
+  max_k |ζ_ideal,k/ζ*_k − 1|, and its friction outputs (:func:`friction_output_gap`: no spline
+  friction at all, so 1 for a mechanism with spline friction such as seed 000's two stages —
+  over the FMU's outputs the kinematic level is then never within a tolerance below 1).
 
 The communication step h enters only through the damping of input jumps; when it is not known
 (the FMU chooses at initialization, before the first step) it is taken as 0 (no damping: the
@@ -68,7 +70,7 @@ class AutoChoice:
         Estimated model error per level (DESIGN.md §5 measure).
     terms : dict
         The estimate's terms: ``start_deviation``, ``speed_jump``, ``lag``, ``friction_loss``,
-        ``carrier_ratio``.
+        ``carrier_ratio``, ``friction_outputs``.
     tau : float
         Slowest carrier time constant at the (start) operating point [s] (inf if undriven).
     efficiency : float
@@ -196,20 +198,40 @@ def estimate_along(params: MechanismParams, tolerance: float, screw_speed, accel
                             kinematic_efficiency=kinematic_efficiency)
     terms = dict(start.terms, lag=lag)
     e_qs = max(terms["start_deviation"], terms["speed_jump"], lag)
-    errors = {"kinematic": max(e_qs, terms["friction_loss"], terms["carrier_ratio"]),
+    errors = {"kinematic": max(e_qs, terms["friction_loss"], terms["carrier_ratio"],
+                               terms["friction_outputs"]),
               "quasi-static": e_qs, "dynamic": 0.0}
     level = _pick(errors, tolerance)
     return AutoChoice(level, errors, terms, start.tau, start.efficiency, float(tolerance),
                       comm_step)
 
 
-def steady_efficiency(params: MechanismParams) -> float:
-    """Forward efficiency of the quasi-static level in steady motion, outside the friction band."""
+def _steady_outputs(params: MechanismParams) -> dict:
+    """The quasi-static level's outputs in steady forward motion, outside the friction band."""
     from .quasi_static import QuasiStaticModel
 
     model = QuasiStaticModel(params, "speed")
     u = _EFFICIENCY_POINT
-    return model.outputs(0.0, model.initial_state(u), u)["efficiency"]
+    return model.outputs(0.0, model.initial_state(u), u)
+
+
+def steady_efficiency(params: MechanismParams) -> float:
+    """Forward efficiency of the quasi-static level in steady motion, outside the friction band."""
+    return _steady_outputs(params)["efficiency"]
+
+
+def friction_output_gap(params: MechanismParams, kinematic_efficiency: float = 1.0) -> float:
+    """Relative error of the kinematic level's friction outputs [-].
+
+    The kinematic level has no friction forces: its spline friction is 0 (error 1 wherever the
+    mechanism has spline friction), and its friction power is (1 − η₀)·P_in against the
+    quasi-static level's (1 − η)·P_in, a relative error |η − η₀| / (1 − η).
+    """
+    y = _steady_outputs(params)
+    eta = y["efficiency"]
+    spline = any(y[f"stage[{k}].spline_friction"] != 0.0 for k in range(1, params.n_stages + 1))
+    power = abs(eta - float(kinematic_efficiency)) / (1.0 - eta) if eta < 1.0 else 0.0
+    return max(1.0 if spline else 0.0, power)
 
 
 def estimate_errors(params: MechanismParams, *, screw_speed: float, load_force: float,
@@ -256,9 +278,10 @@ def estimate_errors(params: MechanismParams, *, screw_speed: float, load_force: 
     loss = abs(eta / float(kinematic_efficiency) - 1.0)
     mech = Mechanism(params, "dynamic")
     ratio = max(abs(s.zeta_ideal / s.zeta_geometric - 1.0) for s in mech.stages)
-    errors = {"kinematic": max(e_qs, loss, ratio), "quasi-static": e_qs, "dynamic": 0.0}
+    gap = friction_output_gap(params, kinematic_efficiency)
+    errors = {"kinematic": max(e_qs, loss, ratio, gap), "quasi-static": e_qs, "dynamic": 0.0}
     terms = {"start_deviation": float(start_deviation), "speed_jump": jump, "lag": lag,
-             "friction_loss": loss, "carrier_ratio": ratio}
+             "friction_loss": loss, "carrier_ratio": ratio, "friction_outputs": gap}
     return AutoChoice("", errors, terms, tau, eta, math.nan, comm_step)
 
 
@@ -341,6 +364,6 @@ def choose_for_start(params: MechanismParams, tolerance: float, drive: str, inpu
 
 
 __all__ = ["AutoChoice", "COST_ORDER", "MARGIN", "carrier_time_constant", "carrier_time_constants",
-           "steady_efficiency",
+           "steady_efficiency", "friction_output_gap",
            "effective_load", "estimate_along",
            "estimate_errors", "choose_fidelity", "choose_for_start"]
