@@ -89,7 +89,9 @@ class Config:
     Attributes
     ----------
     fidelity : str
-        ``kinematic``, ``quasi-static`` or ``dynamic``.
+        ``kinematic``, ``quasi-static``, ``dynamic`` or ``auto`` (prsm_fmu/models/adaptive.py:
+        the level of each step chosen along the run; its ``rtol`` is both the model tolerance
+        and the dynamic steps' rtol, as the FMU's ``tolerance``).
     stepper : str
         ``rk4`` (explicit fixed), ``explicit_adaptive`` (Dormand–Prince 5(4)), ``rosenbrock``
         (implicit, ROS34PW2), ``closed_form`` (slaved levels) or ``radau`` (``solve_ivp``
@@ -155,9 +157,11 @@ class RunResult:
 
 def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
                   rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
-                  radau_rtols=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)) -> tuple[Config, ...]:
+                  radau_rtols=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
+                  auto_rtols=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8)) -> tuple[Config, ...]:
     """fidelity × {rk4 × substeps, explicit_adaptive × rtol, rosenbrock × rtol}, closed_form
-    for the slaved levels, and the restarted-Radau baseline on the dynamic level."""
+    for the slaved levels, ``auto`` (switching along the run) with the adaptive steppers for
+    its dynamic steps, and the restarted-Radau baseline on the dynamic level."""
     grid: list[Config] = []
     for fid in fidelities:
         grid += [Config(fid, "rk4", "substeps", n) for n in substeps]
@@ -165,6 +169,8 @@ def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
         grid += [Config(fid, "rosenbrock", "rtol", r) for r in rtols]
         if fid != "dynamic":
             grid.append(Config(fid, "closed_form"))
+    for st in ("explicit_adaptive", "rosenbrock"):
+        grid += [Config("auto", st, "rtol", r) for r in auto_rtols]
     if "dynamic" in fidelities:
         grid += [Config("dynamic", "radau", "rtol", r) for r in radau_rtols]
     return tuple(grid)
@@ -322,7 +328,7 @@ STARTUP_1US = Scene(
                              {"screw_speed": 100.0, "load_force": 5000.0},
                              {"initial_carrier_ratio": 0.0}),
     grid=(standard_grid(("dynamic",), substeps=(1, 2), rtols=(1e-5, 1e-6, 1e-7),
-                        radau_rtols=(1e-5, 1e-6, 1e-7))
+                        radau_rtols=(1e-5, 1e-6, 1e-7), auto_rtols=(1e-6, 1e-7))
           + (Config("quasi-static", "closed_form"),)),
     target_error=1e-6,
     speedup_to_beat=20.0,
@@ -405,10 +411,11 @@ def make_loop_runner(scene_name: str, t_end: float | None = None,
 
 
 def loop_grid(rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
-              radau_rtols=(1e-4, 1e-6, 1e-8, 1e-10)) -> tuple[Config, ...]:
+              radau_rtols=(1e-4, 1e-6, 1e-8, 1e-10),
+              auto_rtols=(1e-3, 1e-4, 1e-5, 1e-6)) -> tuple[Config, ...]:
     """The loop scenes' grid: closed form and RK4 ×1 for the slaved levels (exact for their own
-    model: the points show the level's model error), ROS34PW2 × rtol for every level, the
-    restarted-Radau baseline.  No explicit stepper on the dynamic level: at the loop's 0.1 ms
+    model: the points show the level's model error), ROS34PW2 × rtol for every level and for
+    ``auto``'s dynamic steps, the restarted-Radau baseline.  No explicit stepper on the dynamic level: at the loop's 0.1 ms
     step the carriers' time constant falls to 10 ns near standstill (h/τ ~ 10⁴), where RK4
     needs ~4 000 substeps per step and DP5(4) as many (docs/accuracy.md §2)."""
     grid: list[Config] = []
@@ -416,6 +423,7 @@ def loop_grid(rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
         grid += [Config(fid, "closed_form"), Config(fid, "rk4", "substeps", 1)]
         grid += [Config(fid, "rosenbrock", "rtol", r) for r in (1e-4, 1e-8)]
     grid += [Config("dynamic", "rosenbrock", "rtol", r) for r in rtols]
+    grid += [Config("auto", "rosenbrock", "rtol", r) for r in auto_rtols]
     grid += [Config("dynamic", "radau", "rtol", r) for r in radau_rtols]
     return tuple(grid)
 
@@ -639,23 +647,31 @@ def auto_summary(scene: Scene, result: dict) -> list[str]:
         floor = level_floor(pts, fid)
         meas = f"{floor.error:.2e} ({floor.config.label})" if floor else "not run"
         lines.append(f"  {fid:13s} estimated {choice.errors[fid]:9.2e}  measured {meas}")
-    lines.append(f"auto at tolerance {scene.target_error:g} picks {choice.describe()}")
-    mine = cheapest([p for p in pts if p.config.fidelity == choice.fidelity], scene.target_error)
+    lines.append(f"auto's estimate at tolerance {scene.target_error:g} asks for the "
+                 f"{choice.fidelity} level somewhere in the run ({choice.describe()})")
+    mine = cheapest([p for p in pts if p.config.fidelity == "auto"], scene.target_error)
     implicit = cheapest([p for p in pts if p.config.fidelity == "dynamic"], scene.target_error,
                         "rosenbrock")
     if mine is None:
-        lines.append(f"  no {choice.fidelity} configuration meets {scene.target_error:g}: the "
-                     "choice FAILS the tolerance")
-        return lines
-    lines.append(f"  cheapest {choice.fidelity} configuration meeting it: {mine.config.label} "
-                 f"(error {mine.error:.2e}, {mine.cpu_per_s:.3e} CPU s/s)")
-    if implicit is not None:
+        lines.append(f"  no auto configuration (switching along the run) meets "
+                     f"{scene.target_error:g}" + ("" if any(p.config.fidelity == "auto"
+                                                          for p in pts) else " (none run)"))
+    else:
+        lines.append(f"  cheapest auto configuration meeting it: {mine.config.label} "
+                     f"(error {mine.error:.2e}, {mine.cpu_per_s:.3e} CPU s/s)")
+    if implicit is not None and mine is not None:
         to_beat = AUTO_SPEEDUP_TO_BEAT.get(scene.name)
-        lines.append(f"  speed-up of auto's choice over the dynamic level with the implicit "
+        lines.append(f"  speed-up of auto over the dynamic level with the implicit "
                      f"stepper ({implicit.config.label}, error {implicit.error:.2e}, "
                      f"{implicit.cpu_per_s:.3e} CPU s/s): "
                      f"{implicit.cpu_per_s / mine.cpu_per_s:.1f}x"
                      + (f"  (to beat: ≥ {to_beat:g}x)" if to_beat else ""))
+    if implicit is not None:
+        floor = min((p for p in pts if p.status == "ok"), key=lambda p: p.cpu_per_s)
+        lines.append(f"  bound: the cheapest configuration of the grid at any error "
+                     f"({floor.config.label}, error {floor.error:.2e}) is "
+                     f"{implicit.cpu_per_s / floor.cpu_per_s:.1f}x cheaper than that implicit "
+                     "stepper: no choice of level can be faster than this")
     cheaper = FIDELITIES[:FIDELITIES.index(choice.fidelity)]
     if cheaper:
         nxt = level_floor(pts, cheaper[-1])
@@ -687,7 +703,7 @@ STEPPER_STYLE = {"rk4": ("tab:blue", "explicit fixed (RK4 × substeps)"),
                  "rosenbrock": ("tab:green", "implicit (ROS34PW2, rtol)"),
                  "closed_form": ("tab:purple", "closed form (slaved levels)"),
                  "radau": ("tab:gray", "solve_ivp Radau restarted (baseline, rtol)")}
-FIDELITY_MARKER = {"dynamic": "o", "quasi-static": "s", "kinematic": "^"}
+FIDELITY_MARKER = {"dynamic": "o", "quasi-static": "s", "kinematic": "^", "auto": "D"}
 
 
 def plot(scene: Scene, result: dict, path: Path) -> None:

@@ -219,6 +219,10 @@ def _check_tracking(res, c, ctx):
     ref = ctx["reference"]
     t = res.time
     sel = t >= float(c.get("after", 0.0))
+    if not np.any(sel):          # a run cut before the window (e.g. a shortened scene)
+        return CheckResult("tracking", sig, False, {}, {},
+                           f"not evaluated: the run ends at t = {t[-1]:g} s, before the "
+                           f"window after t = {c.get('after', 0.0)} s")
     e = _series(res, sig)[sel] - np.array([ref(x) for x in t[sel]])
     m = {"max_error": float(np.max(np.abs(e))), "rms_error": float(np.sqrt(np.mean(e * e)))}
     lim = {k: float(c[k]) for k in ("max_error", "rms_error_max") if k in c}

@@ -151,6 +151,11 @@ LOOP_CASES = [
     # scene, cut to [s], tolerance, the level auto must pick
     ("position_step", 0.06, 1e-4, "dynamic"),
     ("load_step", 0.04, 5e-3, "quasi-static"),
+    ("sine_tracking", 0.15, 1e-4, "dynamic"),
+    # through zero speed and to the end of the ramp (the carriers' largest lag, at 50 ms); at
+    # 1e-4 the dynamic level's own ROS34PW2 at rtol 1e-4 misses by 4.8e-4 at the last step
+    # before zero speed (docs/accuracy.md §2), which is the stepper's error, not the level's
+    ("speed_reversal", 0.06, 1e-3, "dynamic"),
 ]
 
 
