@@ -76,6 +76,9 @@ OUTPUTS: tuple[str, ...] = tuple(_load_sibling("step_cost").OUTPUTS)
 
 #: rtol of the reference and of its check; atol = rtol · 1e-2 (per state, times state_scale)
 REFERENCE_RTOL, CHECK_RTOL = 1e-12, 1e-11
+#: ``auto``'s tolerance (the model error it accepts) when its dynamic steps are RK4's, which
+#: have none: the start-up's target
+AUTO_FIXED_STEP_TOLERANCE = 1e-6
 #: errors below this are plotted at it (round-off; a log axis has no zero)
 ERROR_FLOOR = 1e-16
 
@@ -109,8 +112,11 @@ class Config:
 
     @property
     def rtol(self) -> float:
-        """Relative tolerance [-] (1e-8, simulate's default, for steppers without one)."""
-        return self.value if self.knob == "rtol" else 1e-8
+        """Relative tolerance [-] (1e-8, simulate's default, for steppers without one; for
+        ``auto`` with RK4, :data:`AUTO_FIXED_STEP_TOLERANCE`, its model tolerance)."""
+        if self.knob == "rtol":
+            return self.value
+        return AUTO_FIXED_STEP_TOLERANCE if self.fidelity == "auto" else 1e-8
 
     @property
     def atol(self) -> float:
@@ -160,8 +166,9 @@ def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
                   radau_rtols=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
                   auto_rtols=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8)) -> tuple[Config, ...]:
     """fidelity × {rk4 × substeps, explicit_adaptive × rtol, rosenbrock × rtol}, closed_form
-    for the slaved levels, ``auto`` (switching along the run) with the adaptive steppers for
-    its dynamic steps, and the restarted-Radau baseline on the dynamic level."""
+    for the slaved levels, ``auto`` (switching along the run) with RK4 × up to 4 substeps or
+    the adaptive steppers for its dynamic steps (AUTO_FIXED_STEP_TOLERANCE with RK4), and the
+    restarted-Radau baseline on the dynamic level."""
     grid: list[Config] = []
     for fid in fidelities:
         grid += [Config(fid, "rk4", "substeps", n) for n in substeps]
@@ -169,6 +176,7 @@ def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
         grid += [Config(fid, "rosenbrock", "rtol", r) for r in rtols]
         if fid != "dynamic":
             grid.append(Config(fid, "closed_form"))
+    grid += [Config("auto", "rk4", "substeps", n) for n in substeps if n <= 4]
     for st in ("explicit_adaptive", "rosenbrock"):
         grid += [Config("auto", st, "rtol", r) for r in auto_rtols]
     if "dynamic" in fidelities:
