@@ -672,8 +672,14 @@ class ExplicitAdaptive(_AdaptiveBase):
     with ``q`` the embedded order; no growth right after a rejection.  Each advance
     lands exactly on ``t + h`` (the last internal step is shortened, or stretched by at
     most 5 % to avoid a tiny remainder).  The step-size proposal is carried between
-    advance calls (memory).  The FSAL stage is *not* carried between advances, since
-    the inputs or the state may be changed by the master in between.
+    advance calls (memory), and so is the FSAL stage: it is reused only when the next
+    advance starts where this one ended with the same state and inputs (the master may
+    change either in between; then the first stage is evaluated afresh).  Reused or
+    evaluated, it is the same number, so results do not depend on it; the rhs count does.
+    Without a proposal (the first advance, after :meth:`reset`) the first internal step
+    is chosen as in Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.4 (with one extra
+    rhs call): from the norms of the state, its derivative and an estimate of the second
+    derivative.
 
     Non-finite values in a trial step (other than at its start point) reject the
     step and shrink it by ``fac_min``; a non-finite rhs at an accepted point, or a step
@@ -733,6 +739,72 @@ class ExplicitAdaptive(_AdaptiveBase):
                 f"order = {order!r} is out of range: allowed are 5 (Dormand-Prince) and 3 (Bogacki-Shampine)"
             )
         self.order = order
+        self._fsal: tuple | None = None
+        self._k_end: list[float] = []
+
+    # --- memory: the step-size proposal and the FSAL stage ------------------------------
+
+    def get_memory(self) -> tuple:
+        """Return ``(h_proposal, fsal)``: the proposed next internal step [s] (None before
+        the first adaptive advance) and ``(t_end, x_end, u, f(t_end, x_end))`` of the last
+        advance (None if there is none to reuse)."""
+        return (self._h_prop, self._fsal)
+
+    def set_memory(self, m: tuple) -> None:
+        """Restore ``(h_proposal, fsal)`` from :meth:`get_memory` (``(h_proposal,)`` alone is
+        accepted: no FSAL stage to reuse)."""
+        m = tuple(m)
+        if len(m) not in (1, 2):
+            raise ValueError(f"{self.name}: memory must be (h_proposal, fsal), got {m!r}")
+        fsal = m[1] if len(m) == 2 else None
+        if fsal is not None and not (isinstance(fsal, tuple) and len(fsal) == 4
+                                     and len(fsal[1]) == self.n_states == len(fsal[3])):
+            raise ValueError(f"{self.name}: memory's FSAL stage must be None or "
+                             f"(t, x, u, f) with {self.n_states} states, got {fsal!r}")
+        super().set_memory(m[:1])
+        self._fsal = fsal
+
+    def reset(self) -> None:
+        """Forget the step-size proposal and the FSAL stage."""
+        super().reset()
+        self._fsal = None
+
+    def _first_stage(self, f: Callable, t: float, x: list[float], u: tuple, h: float,
+                     stats: StepStats) -> list[float]:
+        """f(t, x, u): the last advance's FSAL stage when this one starts where it ended."""
+        c = self._fsal
+        if c is not None and c[2] == u and abs(t - c[0]) <= 4e-16 * max(abs(t), h) \
+                and c[1] == tuple(x):
+            return list(c[3])
+        try:
+            k1 = f(t, x, u)
+        except (ArithmeticError, ValueError) as exc:
+            raise self._fail(f"rhs raised {exc!r} in stage 1", t, self._h_prop or h, t, h) from exc
+        stats.rhs_calls += 1
+        return k1
+
+    def _starting_step(self, f: Callable, t: float, x: list[float], k1: list[float], u: tuple,
+                       h: float, stats: StepStats) -> float:
+        """First internal step [s] without a proposal (Hairer, Norsett & Wanner, II.4)."""
+        rtol = self.rtol
+        w = [at + rtol * abs(a) for a, at in zip(x, self._atol_w)]
+        n = self._n_err
+        d0 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(x, w)]) / n)
+        d1 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(k1, w)]) / n)
+        if not d1 > 1e-5:          # practically at rest (or nan, handled by the step itself)
+            return h
+        h0 = min(h, 0.01 * d0 / d1 if d0 >= 1e-5 else 1e-6)
+        try:
+            f1 = f(t + h0, [a + h0 * b for a, b in zip(x, k1)], u)
+        except (ArithmeticError, ValueError):
+            return min(h, h0)
+        stats.rhs_calls += 1
+        d2 = math.sqrt(sum([((b - a) / wi) ** 2 for a, b, wi in zip(k1, f1, w)]) / n) / h0
+        dm = max(d1, d2)
+        if not math.isfinite(dm):
+            return min(h, h0)
+        h1 = (0.01 / dm) ** (1.0 / (self.order + 1)) if dm > 1e-15 else max(1e-6, 1e-3 * h0)
+        return min(h, 100.0 * h0, h1)
 
     # --- trial steps: return (x_new, f(t+hs, x_new), err, bad_stage) ---------------------
     # bad_stage: 0 if all finite, i >= 2 the first stage (1-based; the last stage is the
@@ -829,11 +901,7 @@ class ExplicitAdaptive(_AdaptiveBase):
         n_st = self._rhs_per_trial
         trial = self._trial
         stats = StepStats()
-        try:
-            k1 = f(t, x, u)
-        except (ArithmeticError, ValueError) as exc:
-            raise self._fail(f"rhs raised {exc!r} in stage 1", t, self._h_prop or h, t, h) from exc
-        stats.rhs_calls = 1
+        k1 = self._first_stage(f, t, x, u, h, stats)
         if len(k1) != len(x) or not _is_finite_sum(k1):
             raise self._fail(
                 "non-finite value (or wrong length) in stage 1 (rhs at the start point)",
@@ -857,12 +925,15 @@ class ExplicitAdaptive(_AdaptiveBase):
                 y = y_new
             stats.substeps = n_sub
             stats.error_estimate = err
+            self._fsal = (t + h, tuple(y), u, tuple(k1))
             return y, stats
 
         hs = self._h_prop
         if hs is None:
-            hs = self._initial_step(x, k1, h)
-        return self._adaptive_loop(trial, f, t, x, k1, u, h, hs, n_st, stats)
+            hs = self._starting_step(f, t, x, k1, u, h, stats)
+        y, stats = self._adaptive_loop(trial, f, t, x, k1, u, h, hs, n_st, stats)
+        self._fsal = (t + h, tuple(y), u, tuple(self._k_end))
+        return y, stats
 
     def _adaptive_loop(
         self, trial: Callable, f: Callable, t: float, x: list[float], k1: list[float],
@@ -915,6 +986,7 @@ class ExplicitAdaptive(_AdaptiveBase):
                     if h_new >= h_step:
                         h_new = max(h_new, hs)
                     self._h_prop = h_new
+                    self._k_end = k1
                     return y, stats
                 tau += h_step
                 hs = h_new

@@ -168,4 +168,4 @@ def test_a_memory_of_another_stepper_is_refused_with_a_clear_error():
     with pytest.raises(ValueError, match="not a memory"):
         st.set_memory((None,))
     with pytest.raises(ValueError, match="not a memory"):
-        st.set_memory(("static", (0.0, 0.0), 0.0, 0, 1, 0, (None,), (None,)))
+        st.set_memory(("static", (0.0, 0.0), 0.0, 0, 1, 1.0, 0, (None,), (None,)))

@@ -534,11 +534,12 @@ def test_fd_jacobian_matches_analytic():
 
 def test_adaptive_counts_are_consistent():
     m = CountingCycle()
+    # the first advance: stage 1, one call for the starting step's estimate, then the trials
     x, st = ExplicitAdaptive(m, rtol=1e-8).advance(0.0, [0.3, 0.1], (), 1.0)
-    assert st.rhs_calls == 1 + 6 * (st.substeps + st.rejected) == m.rhs_calls
+    assert st.rhs_calls == 2 + 6 * (st.substeps + st.rejected) == m.rhs_calls
     m = CountingCycle()
     x, st = ExplicitAdaptive(m, rtol=1e-6, order=3).advance(0.0, [0.3, 0.1], (), 1.0)
-    assert st.rhs_calls == 1 + 3 * (st.substeps + st.rejected) == m.rhs_calls
+    assert st.rhs_calls == 2 + 3 * (st.substeps + st.rejected) == m.rhs_calls
     m = CountingCycle()
     x, st = Rosenbrock(m, rtol=1e-6).advance(0.0, [0.3, 0.1], (), 1.0)
     assert st.lu_decompositions == st.substeps + st.rejected
@@ -994,19 +995,40 @@ def test_memory_round_trip_is_bit_exact(stepper):
 
 def test_adaptive_memory_carries_step_proposal():
     s = ExplicitAdaptive(LimitCycle(), rtol=1e-8)
-    assert s.get_memory() == (None,)
+    assert s.get_memory() == (None, None)
     s.advance(0.0, [0.3, 0.1], (), 0.3)
     mem = s.get_memory()
     assert mem[0] is not None and mem[0] > 0.0
     _, st_warm = s.advance(0.3, [0.3, 0.1], (), 0.3)
     s.reset()
-    assert s.get_memory() == (None,)
+    assert s.get_memory() == (None, None)
     with pytest.raises(ValueError):
         s.set_memory((1.0, 2.0))
     with pytest.raises(ValueError):
         s.set_memory((-1.0,))
     with pytest.raises(ValueError):
         RK4(LimitCycle()).set_memory((1.0,))
+
+
+def test_adaptive_reuses_its_last_stage_only_where_the_next_advance_starts():
+    """FSAL across advances: from the state it returned, with the same inputs, the next
+    advance saves stage 1 and gives the same numbers as a stepper that evaluates it; from
+    another state or with other inputs it evaluates it."""
+    m = CountingCycle()
+    s = ExplicitAdaptive(m, rtol=1e-8)
+    x1, _ = s.advance(0.0, [0.3, 0.1], (), 0.3)
+    mem = s.get_memory()
+    fresh = ExplicitAdaptive(CountingCycle(), rtol=1e-8)
+    fresh.set_memory(mem[:1])                       # the proposal, no stage to reuse
+    x2, st = s.advance(0.3, x1, (), 0.3)
+    x2f, stf = fresh.advance(0.3, x1, (), 0.3)
+    assert x2 == x2f and st.substeps == stf.substeps
+    assert st.rhs_calls == stf.rhs_calls - 1 == 6 * (st.substeps + st.rejected)
+    s.set_memory(mem)
+    _, st = s.advance(0.3, [x1[0] + 1e-9, x1[1]], (), 0.3)      # another state
+    assert st.rhs_calls == 1 + 6 * (st.substeps + st.rejected)
+    with pytest.raises(ValueError, match="FSAL"):
+        s.set_memory((0.1, (0.3, (1.0,), (), (1.0,))))
 
 
 # ----------------------------------------------------------------------------------

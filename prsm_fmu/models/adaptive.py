@@ -17,8 +17,11 @@ A run's operating point moves, so the choice is made again at every communicatio
   the largest of input, output and friction power; carrier speeds: ζ* times the largest screw
   speed so far; screw acceleration: the largest torque over the inertia on the screw; ratios: 1).
   The scales are magnitudes at the current point, so the check is conservative against the
-  error measure of DESIGN.md §5 (relative to the run's maxima).  A failed confirmation waits
-  1, 2, 4 … (at most 64) steps before the next one.
+  error measure of DESIGN.md §5 (relative to the run's maxima).  A failed confirmation
+  records how much more the outputs moved than the carriers (the gain err/deviation; near the
+  equilibrium it is a constant of the linearised outputs) and the next confirmation waits
+  until the deviation times that gain is within the limit; where that does not predict it
+  (no deviation, or no larger gain), it waits 1, 2, 4 … (at most 64) steps.
 * **quasi-static → dynamic** when the carriers' estimated lag exceeds ``tolerance / MARGIN``.
   The lag d_k = ω_Pk/ζ*_k − ω of each carrier is integrated along the quasi-static run with the
   linearised carrier equation d' = −α − d/τ_k (exact over a step with α and τ held; d ← d − αh
@@ -96,6 +99,8 @@ class AdaptiveModel(DynamicModel):
         self.dynamic = DynamicModel(params, drive)
         self.zeta = tuple(self.quasi_static.mechanism.zeta)
         self._coef: dict = {}
+        #: m·c_out of the last nut [kg·m/rad]: F_eff = F + m·c_out·α (auto.effective_load)
+        self._nut_term = effective_load(params, 0.0, 1.0)
         stages = self.mechanism.stages
         # inertia on the screw axis with the carriers slaved (scale of the acceleration check)
         self.slaved_inertia = 2.0 * self.quasi_static.kinetic_energy(
@@ -146,7 +151,9 @@ class AdaptiveModel(DynamicModel):
                     h: float) -> list[float]:
         """Each carrier's lag d_k [rad/s] after a step h [s] at screw acceleration α [rad/s²],
         mean screw speed ω [rad/s] and load force F [N] (module docstring)."""
-        f_eff = effective_load(self.params, load, alpha)
+        if alpha == 0.0 and not any(d):
+            return list(d)                        # nothing to lag behind: stays 0
+        f_eff = load + self._nut_term * alpha      # effective_load, inlined (hot path)
         out = []
         if omega == 0.0:
             return [0.0] * self._n
@@ -260,21 +267,22 @@ class SwitchingStepper(Stepper):
         self.omega_scale = 0.0
         self.wait = 0
         self.backoff = 1
+        self.gain = 1.0
         self.switches = 0
         self.dynamic_stepper.reset()
         self.quasi_static_stepper.reset()
 
     def get_memory(self) -> tuple:
-        """``(mode, lags, largest screw speed, wait, backoff, switches, dynamic stepper's
-        memory, quasi-static stepper's memory)``."""
+        """``(mode, lags, largest screw speed, wait, backoff, gain, switches, dynamic
+        stepper's memory, quasi-static stepper's memory)``."""
         return (self.mode, tuple(self.lag), self.omega_scale, self.wait, self.backoff,
-                self.switches, self.dynamic_stepper.get_memory(),
+                self.gain, self.switches, self.dynamic_stepper.get_memory(),
                 self.quasi_static_stepper.get_memory())
 
     def set_memory(self, m: tuple) -> None:
         """Restore a snapshot of :meth:`get_memory`."""
         try:
-            mode, lag, scale, wait, backoff, switches, dmem, qmem = m
+            mode, lag, scale, wait, backoff, gain, switches, dmem, qmem = m
         except (TypeError, ValueError):
             raise ValueError(f"{self.name}: not a memory of this stepper: {m!r}") from None
         if mode not in MODES or len(lag) != self.model._n:
@@ -285,6 +293,7 @@ class SwitchingStepper(Stepper):
         self.lag = [float(v) for v in lag]
         self.omega_scale = float(scale)
         self.wait, self.backoff, self.switches = int(wait), int(backoff), int(switches)
+        self.gain = float(gain)
 
     # ---- stepping -----------------------------------------------------------------------------
     def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
@@ -296,14 +305,19 @@ class SwitchingStepper(Stepper):
             i = m._i_carrier
             # the lag at the step's start: the carried estimate plus the stored carriers' offset
             # from the equilibrium of this step's speed (a prescribed speed that jumped)
-            d0 = [dk + (x[i + k] / z - w0 if z != 0.0 else 0.0)
-                  for k, (dk, z) in enumerate(zip(self.lag, m.zeta))]
+            d0 = list(self.lag)
+            for k, z in enumerate(m.zeta):
+                if z != 0.0:
+                    d0[k] += x[i + k] / z - w0
             yr, stats = self.quasi_static_stepper.advance(t, m.reduced(x), u, h)
-            w1 = m.screw_speed(yr, u)
-            alpha = (w1 - w0) / h if m._torque_drive else 0.0
-            d1 = m.advance_lag(d0, alpha, 0.5 * (w0 + w1), u[1], h)
-            scale = max(scale, abs(w1))
-            worst = max((abs(v) for v in d1), default=0.0)
+            w1 = yr[1] if m._torque_drive else w0
+            d1 = m.advance_lag(d0, (w1 - w0) / h, 0.5 * (w0 + w1), u[1], h)
+            if abs(w1) > scale:
+                scale = abs(w1)
+            worst = 0.0
+            for v in d1:
+                if abs(v) > worst:
+                    worst = abs(v)
             if MARGIN * worst <= self.tolerance * scale:
                 self.lag, self.omega_scale = d1, scale
                 return m.expanded(yr, w1), stats
@@ -324,12 +338,20 @@ class SwitchingStepper(Stepper):
         self.omega_scale = scale
         if self.wait > 0:
             self.wait -= 1
-        elif 2.0 * MARGIN * m.deviation(x1, u, scale) <= self.tolerance:
-            if 2.0 * MARGIN * m.switch_error(t + h, x1, u, scale) <= self.tolerance:
+            return x1, stats
+        dev = m.deviation(x1, u, scale)
+        if 2.0 * MARGIN * dev * self.gain <= self.tolerance:
+            err = m.switch_error(t + h, x1, u, scale)
+            if 2.0 * MARGIN * err <= self.tolerance:
                 self.mode = m.mode = "quasi-static"
                 self.lag = [0.0] * m._n
                 self.switches += 1
+                self.gain = 1.0
                 self.quasi_static_stepper.reset()
+            elif dev > 0.0 and err / dev > self.gain:
+                # the outputs move more than the carriers: wait until the deviation times
+                # this gain is within the limit (it decays exponentially near equilibrium)
+                self.gain = err / dev
             else:
                 self.wait = self.backoff
                 self.backoff = min(2 * self.backoff, MAX_WAIT)
