@@ -32,6 +32,16 @@ AUTO_FIDELITY = "quasi-static"
 #: of ``auto``
 STEPPER_CHOICES = ("default",) + STEPPER_NAMES
 
+#: the FMU's ``step_fidelity`` output: the level the outputs at a communication point come from
+LEVEL_CODES = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
+
+
+def active_level(model) -> int:
+    """:data:`LEVEL_CODES` of the level a model's outputs come from now (for ``auto``, the
+    level of its last step, prsm_fmu/models/adaptive.py)."""
+    return LEVEL_CODES[getattr(model, "mode", model.fidelity)]
+
+
 #: absolute tolerance of the adaptive steppers relative to ``tolerance`` (states are in rad,
 #: rad/s and J, each with scale 1): atol = ATOL_FACTOR * tolerance
 ATOL_FACTOR = 1e-2

@@ -47,7 +47,8 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Intege
 from pythonfmu.enums import Fmi2Status
 
 from . import __version__
-from .configure import ATOL_FACTOR, AUTO_FIDELITY, FIDELITY_CHOICES, STEPPER_CHOICES, configure
+from .configure import (ATOL_FACTOR, AUTO_FIDELITY, FIDELITY_CHOICES, STEPPER_CHOICES,
+                        LEVEL_CODES, active_level, configure)
 from .params import MechanismParams, StageParams, stage_field_names
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
@@ -206,6 +207,8 @@ OUTPUTS_TAIL: dict[str, tuple] = {
 STEP_COUNTERS: dict[str, str] = {
     "step_rhs_calls": "right-hand-side evaluations of the last communication step",
     "step_substeps": "accepted internal steps of the last communication step",
+    "step_fidelity": "level the outputs come from: 0 kinematic, 1 quasi-static, 2 dynamic "
+                     "(with fidelity = auto, the level of the last communication step)",
 }
 
 
@@ -367,7 +370,7 @@ class PRSMSlave(Fmi2Slave):
         self._t = 0.0
         self._x: list[float] | None = None
         self._u_held = (0.0, 0.0)
-        self._stats = (0, 0)
+        self._stats = (0, 0, 0)
         self._model = None
         self._stepper = None
         self._config: tuple = ()
@@ -439,6 +442,9 @@ class PRSMSlave(Fmi2Slave):
         return getter
 
     def _counter_access(self, i: int):
+        if i == 2:          # step_fidelity: before initialization, the level asked for
+            return lambda: (self._stats[2] if self._model is not None else LEVEL_CODES.get(
+                AUTO_FIDELITY if self._par["fidelity"] == "auto" else self._par["fidelity"], 0))
         return lambda: self._stats[i]
 
     # Value access by reference.  The base class raises on a wrong type or a variable without
@@ -569,7 +575,7 @@ class PRSMSlave(Fmi2Slave):
         self._model, self._stepper, self._x = model, stepper, x0
         self._u_held = (self._u[0], self._u[1])
         self._config = self._config_key()
-        self._stats = (0, 0)
+        self._stats = (0, 0, active_level(model))
         self._y = None
         self._phase = "stepping"
 
@@ -597,7 +603,7 @@ class PRSMSlave(Fmi2Slave):
         self._x = x
         self._t = current_time + h
         self._u_held = u
-        self._stats = (stats.rhs_calls, stats.substeps)
+        self._stats = (stats.rhs_calls, stats.substeps, active_level(self._model))
         self._y = None
         return True
 

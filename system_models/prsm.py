@@ -2,7 +2,7 @@
 
 Both take the FMU's vocabulary (docs/fmu.md): inputs ``screw_torque`` [N.m] and ``load_force``
 [N], held over each step; outputs ``screw_speed``, ``rod_position``, ``stage[k].contact_force``,
-… and the step counters ``step_rhs_calls``, ``step_substeps``; parameters by the FMU's names
+… and the step counters ``step_rhs_calls``, ``step_substeps``, ``step_fidelity``; parameters by the FMU's names
 (``stage[1].screw_inertia``, ``fidelity``, ``tolerance``, ``initial_screw_speed``, …).
 
 :class:`PythonPRSM` does what the FMU's slave (``prsm_fmu/slave.py``) does with the same
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from prsm_fmu import presets
-from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, configure
+from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, active_level, configure
 from prsm_fmu.params import MechanismParams, stage_field_names
 from prsm_fmu.simulate import DEFAULT_STEPPER
 from prsm_fmu.steppers import StepFailure
@@ -40,7 +40,7 @@ _STAGE = {"contact_force": "N", "normal_force": "N", "driven_torque": "N.m",
           "spline_friction": "N", "carrier_speed": "rad/s", "carrier_speed_ratio": "1"}
 _TAIL = {"efficiency": "1", "friction_power": "W", "input_power": "W", "output_power": "W",
          "input_work": "J", "output_work": "J", "friction_work": "J", "kinetic_energy": "J"}
-COUNTERS = ("step_rhs_calls", "step_substeps")
+COUNTERS = ("step_rhs_calls", "step_substeps", "step_fidelity")
 
 
 def prsm_output_names(n_stages: int) -> list[str]:
@@ -144,7 +144,7 @@ class PythonPRSM(PythonBlock):
         # the FMU's own configuration (validation, auto choice, stepper and options)
         self.model, self.stepper, self.x, _level, _name = configure(p, s, self.u_held)
         self.t = float(start_time)
-        self.stats = (0, 0)
+        self.stats = (0, 0, active_level(self.model))
         self.memory = self.stepper.get_memory()
 
     def do_step(self, t: float, h: float) -> None:
@@ -162,12 +162,16 @@ class PythonPRSM(PythonBlock):
             self.stepper.set_memory(self.memory)
             raise StepRefused(self.name, t, h, f"integration failed: {exc}") from None
         self.x, self.t, self.u_held = x, t + h, u
-        self.stats = (st.rhs_calls, st.substeps)
+        self.stats = (st.rhs_calls, st.substeps, active_level(self.model))
         self.memory = self.stepper.get_memory()
+
+    def set_state(self, state) -> None:
+        super().set_state(state)
+        self.stepper.set_memory(self.memory)     # e.g. the level ``auto`` is at, for the outputs
 
     def get_outputs(self) -> list[float]:
         y = self.model.outputs(self.t, self.x, self.u_held)
-        return [float(y[n]) for n in self._names] + [float(self.stats[0]), float(self.stats[1])]
+        return [float(y[n]) for n in self._names] + [float(c) for c in self.stats]
 
 
 def make_prsm_block(config: PRSMConfig, kind: str = "fmu", fmu_path=None, name: str = "prsm",

@@ -203,6 +203,7 @@ def run_python(params, fidelity: str, n: int, names, stepper: str | None = None,
         u = (torque, load)
         x, _ = st.advance(k * H, x, u, H)
         y = model.outputs((k + 1) * H, x, u)
+        y["mode"] = getattr(model, "mode", model.fidelity)
         rows.append([y[name] for name in names])
         speed = y["screw_speed"]
     return rows
@@ -423,10 +424,11 @@ def test_1e5_steps_leave_memory_flat():
 # ---- FMU state --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("fidelity", ["quasi-static", "dynamic"])
+@pytest.mark.parametrize("fidelity", ["quasi-static", "dynamic", "auto"])
 def test_state_round_trip_repeats_the_steps_bit_for_bit(fidelity):
     names = ["screw_speed", "screw_angle", "rod_position", "stage[1].contact_force",
-             "stage[2].carrier_speed", "efficiency", "friction_work", "step_rhs_calls"]
+             "stage[2].carrier_speed", "efficiency", "friction_work", "step_fidelity",
+             "step_rhs_calls"]
     a = Host("PRSM2", "a", start={"fidelity": fidelity})
     b = Host("PRSM2", "b")          # default parameters: the state brings its own
     try:
@@ -631,9 +633,14 @@ def test_auto_fidelity_runs_the_documented_level():
     run exactly as the Python model does (prsm_fmu/models/adaptive.py)."""
     host = Host("PRSM2", start={"fidelity": "auto"})
     try:
-        got = run_fmu(host, 50, ["screw_speed", "stage[1].contact_force"])
+        got = run_fmu(host, 50, ["screw_speed", "stage[1].contact_force", "step_fidelity"])
         assert any(f"starts with '{AUTO_FIDELITY}'" in m for _, m in host.messages)
     finally:
         host.free()
-    assert got == run_python(presets.load("seed000_two_stage"), "auto", 50,
-                             ["screw_speed", "stage[1].contact_force"])
+    want = run_python(presets.load("seed000_two_stage"), "auto", 50,
+                      ["screw_speed", "stage[1].contact_force", "mode"])
+    codes = {"quasi-static": 1, "dynamic": 2}
+    assert [r[:2] for r in got] == [r[:2] for r in want]
+    # the level reported after each step is the Python model's, and this run switches
+    assert [r[2] for r in got] == [codes[r[2]] for r in want]
+    assert {r[2] for r in got} == {1, 2}
