@@ -28,8 +28,8 @@ FIDELITY_CHOICES = FIDELITIES + ("auto",)
 AUTO_FIDELITY = "quasi-static"
 
 #: stepper choices: ``default`` is ``closed_form`` for the levels with slaved carriers
-#: (quasi-static, kinematic) and ``rosenbrock`` for the dynamic level and for the dynamic steps
-#: of ``auto``
+#: (quasi-static, kinematic), ``rosenbrock`` for the dynamic level, and for the dynamic steps of
+#: ``auto`` explicit or linearly implicit per step (prsm_fmu/models/adaptive.py)
 STEPPER_CHOICES = ("default",) + STEPPER_NAMES
 
 #: the FMU's ``step_fidelity`` output: the level the outputs at a communication point come from

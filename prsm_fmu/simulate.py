@@ -18,9 +18,11 @@ from .steppers import StepStats, make_stepper
 
 Signal = Union[float, Callable[[float], float]]
 
-#: default stepper per fidelity level (used by simulate and the FMU)
+#: default stepper per fidelity level (used by simulate and the FMU); ``auto``'s ``default``
+#: chooses explicit or linearly implicit dynamic steps from the communication step and the
+#: carriers' time constant (prsm_fmu/models/adaptive.py)
 DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
-                   "kinematic": "closed_form", "auto": "rosenbrock"}
+                   "kinematic": "closed_form", "auto": "default"}
 
 #: options that make an adaptive stepper cheapest at equal accuracy on this model
 #: (benchmarks/step_cost.py: Jacobian reuse within a step while h·‖J‖·|Δx|/|x| ≤ 0.1, and a first

@@ -1743,7 +1743,7 @@ def make_stepper(name: str, model: Any, **options: Any) -> Stepper:
     model : OdeModel
         Model to integrate.  A model with a ``stepper_factory(name, **options)`` (the
         ``auto`` fidelity, which switches levels along a run) builds its own stepper, taking
-        ``name`` for its dynamic steps.
+        ``name`` (or ``"default"``: its own choice per step) for its dynamic steps.
     **options
         Keyword arguments of the stepper's constructor (e.g. ``rtol``, ``substeps``).
 
@@ -1757,11 +1757,12 @@ def make_stepper(name: str, model: Any, **options: Any) -> Stepper:
     ValueError
         For an unknown name (the message lists the allowed names).
     """
+    factory = getattr(model, "stepper_factory", None)
+    if factory is not None and (name == "default" or name in _STEPPERS):
+        # a model that switches levels steps itself (models/adaptive.py)
+        return factory(name, **options)
     try:
         cls = _STEPPERS[name]
     except (KeyError, TypeError):
         raise ValueError(f"unknown stepper {name!r}: allowed are {', '.join(STEPPER_NAMES)}") from None
-    factory = getattr(model, "stepper_factory", None)
-    if factory is not None:      # a model that switches levels steps itself (models/adaptive.py)
-        return factory(name, **options)
     return cls(model, **options)

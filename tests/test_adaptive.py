@@ -14,7 +14,7 @@ import pytest
 
 from prsm_fmu import presets, simulate
 from prsm_fmu.models import AdaptiveModel, make_model
-from prsm_fmu.models.auto import MARGIN
+from prsm_fmu.models.auto import MARGIN, carrier_time_constants
 from prsm_fmu.steppers import make_stepper
 
 SEED000 = presets.load("seed000_two_stage")
@@ -168,4 +168,27 @@ def test_a_memory_of_another_stepper_is_refused_with_a_clear_error():
     with pytest.raises(ValueError, match="not a memory"):
         st.set_memory((None,))
     with pytest.raises(ValueError, match="not a memory"):
-        st.set_memory(("static", (0.0, 0.0), 0.0, 0, 1, 1.0, 0, (None,), (None,)))
+        st.set_memory(("static", (0.0, 0.0), 0.0, 0, 1, 1.0, 0, 0.0, ((None,),), (None,)))
+
+
+@pytest.mark.parametrize("h, omega, load, expected", [
+    (1e-5, 100.0, 5000.0, "explicit_adaptive"),     # h = 1.2 τ_fast (8.2 µs): DP5(4) is stable
+    (1e-4, 100.0, 5000.0, "rosenbrock"),            # h = 12 τ_fast: stiff for any explicit step
+    (1e-5, 0.0, 5000.0, "rosenbrock"),              # standstill: τ → 0
+    (1e-3, 100.0, 0.0, "explicit_adaptive"),        # no axial force: the carriers are not driven
+])
+def test_default_dynamic_steps_are_explicit_only_within_the_carriers_time_constant(h, omega, load,
+                                                                                  expected):
+    """The default stepper of auto's dynamic steps: explicit where the communication step is
+    at most EXPLICIT_STEP_PER_TAU of the fastest carrier time constant (checked here against the
+    linearised τ from carrier_time_constants), linearly implicit elsewhere."""
+    from prsm_fmu.models.adaptive import EXPLICIT_STEP_PER_TAU
+
+    m = make_model(SEED000, "auto", "speed", tolerance=1e-6, inputs=(omega, load),
+                   carrier_ratio=0.0)
+    st = make_stepper("default", m, rtol=1e-6, atol=1e-8)
+    x = m.initial_state((omega, load), carrier_ratio=None)
+    assert st.dynamic_for(x, (omega, load), h).name == expected
+    if omega and load:
+        tau = min(carrier_time_constants(SEED000, omega, load))
+        assert (h <= EXPLICIT_STEP_PER_TAU * tau) == (expected == "explicit_adaptive")

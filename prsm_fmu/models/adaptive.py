@@ -49,13 +49,19 @@ from .auto import MARGIN, carrier_time_constants, effective_load
 from .dynamic import DynamicModel
 from .quasi_static import QuasiStaticModel
 
-__all__ = ["AdaptiveModel", "SwitchingStepper", "MODES", "MAX_WAIT"]
+__all__ = ["AdaptiveModel", "SwitchingStepper", "MODES", "MAX_WAIT", "EXPLICIT_STEP_PER_TAU"]
 
 #: the two levels a run switches between
 MODES = ("dynamic", "quasi-static")
 
 #: longest wait between two confirmations of a dynamic → quasi-static switch [steps]
 MAX_WAIT = 64
+
+#: with the ``default`` stepper, a dynamic step is explicit (Dormand–Prince 5(4)) where the
+#: communication step is at most this many fastest carrier time constants, linearly implicit
+#: (ROS34PW2) elsewhere: DP5(4) is stable to 3.3 τ on the real axis; the margin covers the
+#: screw–carrier coupling and a speed that falls within the step (τ ∝ ω)
+EXPLICIT_STEP_PER_TAU = 1.5
 
 #: outputs compared before a switch, by the kind of scale they are measured against
 _KINDS = {"contact_force": "force", "normal_force": "force", "spline_friction": "force",
@@ -236,10 +242,15 @@ class SwitchingStepper(Stepper):
     ----------
     model : AdaptiveModel
     name : str
-        Stepper of the dynamic level (``closed_form`` and ``default`` mean ``rosenbrock``).
+        Stepper of the dynamic level; ``default``: each dynamic step explicit (DP5(4)) where
+        the communication step is at most :data:`EXPLICIT_STEP_PER_TAU` times the fastest
+        carrier time constant at the step's start (τ_k = c_k |ω|/|F|), ROS34PW2 with the tuned
+        options of :data:`prsm_fmu.simulate.TUNED_OPTIONS` elsewhere; ``closed_form`` means
+        ``rosenbrock``.
     **options
         That stepper's options; ``rtol``, ``atol`` and ``max_substeps`` also set the
-        quasi-static closed form's fallback integrator.
+        quasi-static closed form's fallback integrator (and, with ``default``, both
+        dynamic steppers).
     """
 
     name = "auto"
@@ -248,12 +259,19 @@ class SwitchingStepper(Stepper):
         super().__init__(model)
         if not isinstance(model, AdaptiveModel):
             raise ValueError("SwitchingStepper needs an AdaptiveModel (fidelity = 'auto')")
-        if name in ("closed_form", "default"):
-            name = "rosenbrock"
-        self.dynamic_stepper = make_stepper(name, model.dynamic, **options)
         fallback = {k: options[k] for k in ("rtol", "atol", "max_substeps") if k in options}
+        if name == "default":
+            from ..simulate import TUNED_OPTIONS
+
+            self.dynamic_steppers = {
+                "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic, **fallback),
+                "rosenbrock": make_stepper("rosenbrock", model.dynamic,
+                                           **{**TUNED_OPTIONS["rosenbrock"], **fallback})}
+        else:
+            name = "rosenbrock" if name == "closed_form" else name
+            self.dynamic_steppers = {name: make_stepper(name, model.dynamic, **options)}
         self.quasi_static_stepper = ClosedForm(model.quasi_static, **fallback)
-        self.name = f"auto({self.dynamic_stepper.name})"
+        self.name = f"auto({name})"
         self.tolerance = model.tolerance
         self.reset()
 
@@ -269,35 +287,62 @@ class SwitchingStepper(Stepper):
         self.backoff = 1
         self.gain = 1.0
         self.switches = 0
-        self.dynamic_stepper.reset()
+        self.alpha = 0.0
+        for st in self.dynamic_steppers.values():
+            st.reset()
         self.quasi_static_stepper.reset()
 
     def get_memory(self) -> tuple:
-        """``(mode, lags, largest screw speed, wait, backoff, gain, switches, dynamic
-        stepper's memory, quasi-static stepper's memory)``."""
+        """``(mode, lags, largest screw speed, wait, backoff, gain, switches, last screw
+        acceleration, the dynamic steppers' memories, quasi-static stepper's memory)``."""
         return (self.mode, tuple(self.lag), self.omega_scale, self.wait, self.backoff,
-                self.gain, self.switches, self.dynamic_stepper.get_memory(),
+                self.gain, self.switches, self.alpha,
+                tuple(st.get_memory() for st in self.dynamic_steppers.values()),
                 self.quasi_static_stepper.get_memory())
 
     def set_memory(self, m: tuple) -> None:
         """Restore a snapshot of :meth:`get_memory`."""
         try:
-            mode, lag, scale, wait, backoff, gain, switches, dmem, qmem = m
+            mode, lag, scale, wait, backoff, gain, switches, alpha, dmem, qmem = m
         except (TypeError, ValueError):
             raise ValueError(f"{self.name}: not a memory of this stepper: {m!r}") from None
-        if mode not in MODES or len(lag) != self.model._n:
+        if mode not in MODES or len(lag) != self.model._n \
+                or len(dmem) != len(self.dynamic_steppers):
             raise ValueError(f"{self.name}: not a memory of this stepper: {m!r}")
-        self.dynamic_stepper.set_memory(dmem)
+        for st, mem in zip(self.dynamic_steppers.values(), dmem):
+            st.set_memory(mem)
         self.quasi_static_stepper.set_memory(qmem)
         self.mode = self.model.mode = mode
         self.lag = [float(v) for v in lag]
         self.omega_scale = float(scale)
         self.wait, self.backoff, self.switches = int(wait), int(backoff), int(switches)
-        self.gain = float(gain)
+        self.gain, self.alpha = float(gain), float(alpha)
 
     # ---- stepping -----------------------------------------------------------------------------
+    def dynamic_for(self, x: list[float], u: tuple, h: float) -> Stepper:
+        """The stepper of a dynamic step of h [s] from state x with inputs u (see ``name``)."""
+        steppers = self.dynamic_steppers
+        if len(steppers) == 1:
+            return next(iter(steppers.values()))
+        m = self.model
+        # the axial force that drives the carriers, with the last step's acceleration
+        omega, load = m.screw_speed(x, u), u[1] + m._nut_term * self.alpha
+        if omega == 0.0:
+            return steppers["rosenbrock"]
+        if load == 0.0:
+            return steppers["explicit_adaptive"]       # the carriers are not driven
+        tau = min(m.lag_coefficients(omega * load > 0.0)) * abs(omega) / abs(load)
+        return steppers["explicit_adaptive" if h <= EXPLICIT_STEP_PER_TAU * tau else "rosenbrock"]
+
     def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
         h = self._check_args(t, x, h)
+        x1, stats = self._advance(t, x, u, h)
+        m = self.model
+        if m._torque_drive:
+            self.alpha = (x1[1] - x[1]) / h
+        return x1, stats
+
+    def _advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
         m = self.model
         w0 = m.screw_speed(x, u)
         scale = max(self.omega_scale, abs(w0))
@@ -326,14 +371,15 @@ class SwitchingStepper(Stepper):
             xd = list(x)
             for k, z in enumerate(m.zeta):
                 xd[i + k] = z * (w0 + d0[k])
-            self.dynamic_stepper.reset()
-            x1, st2 = self.dynamic_stepper.advance(t, xd, u, h)
+            dyn = self.dynamic_for(xd, u, h)
+            dyn.reset()
+            x1, st2 = dyn.advance(t, xd, u, h)
             self.mode = m.mode = "dynamic"
             self.switches += 1
             self.wait, self.backoff = 0, 1
             self.omega_scale = max(scale, abs(m.screw_speed(x1, u)))
             return x1, _sum(stats, st2)
-        x1, stats = self.dynamic_stepper.advance(t, x, u, h)
+        x1, stats = self.dynamic_for(x, u, h).advance(t, x, u, h)
         scale = max(scale, abs(m.screw_speed(x1, u)))
         self.omega_scale = scale
         if self.wait > 0:
