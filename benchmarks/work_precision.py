@@ -97,8 +97,9 @@ class Config:
         and the dynamic steps' rtol, as the FMU's ``tolerance``).
     stepper : str
         ``rk4`` (explicit fixed), ``explicit_adaptive`` (Dormand–Prince 5(4)), ``rosenbrock``
-        (implicit, ROS34PW2), ``closed_form`` (slaved levels) or ``radau`` (``solve_ivp``
-        restarted on each communication step: the baseline and the reference).
+        (implicit, ROS34PW2), ``closed_form`` (slaved levels), ``default`` (``auto`` only: its
+        own choice of DP5(4) or ROS34PW2 per step, the FMU's default) or ``radau``
+        (``solve_ivp`` restarted on each communication step: the baseline and the reference).
     knob : str
         ``substeps`` (internal steps per communication step), ``rtol`` or ``""`` (none).
     value : float
@@ -177,7 +178,7 @@ def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
         if fid != "dynamic":
             grid.append(Config(fid, "closed_form"))
     grid += [Config("auto", "rk4", "substeps", n) for n in substeps if n <= 4]
-    for st in ("explicit_adaptive", "rosenbrock"):
+    for st in ("explicit_adaptive", "rosenbrock", "default"):
         grid += [Config("auto", st, "rtol", r) for r in auto_rtols]
     if "dynamic" in fidelities:
         grid += [Config("dynamic", "radau", "rtol", r) for r in radau_rtols]
@@ -431,7 +432,7 @@ def loop_grid(rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
         grid += [Config(fid, "closed_form"), Config(fid, "rk4", "substeps", 1)]
         grid += [Config(fid, "rosenbrock", "rtol", r) for r in (1e-4, 1e-8)]
     grid += [Config("dynamic", "rosenbrock", "rtol", r) for r in rtols]
-    grid += [Config("auto", "rosenbrock", "rtol", r) for r in auto_rtols]
+    grid += [Config("auto", st, "rtol", r) for st in ("rosenbrock", "default") for r in auto_rtols]
     grid += [Config("dynamic", "radau", "rtol", r) for r in radau_rtols]
     return tuple(grid)
 
@@ -710,6 +711,7 @@ STEPPER_STYLE = {"rk4": ("tab:blue", "explicit fixed (RK4 × substeps)"),
                  "explicit_adaptive": ("tab:orange", "explicit adaptive (DP5(4), rtol)"),
                  "rosenbrock": ("tab:green", "implicit (ROS34PW2, rtol)"),
                  "closed_form": ("tab:purple", "closed form (slaved levels)"),
+                 "default": ("tab:brown", "auto's own choice per step (DP5(4) or ROS34PW2)"),
                  "radau": ("tab:gray", "solve_ivp Radau restarted (baseline, rtol)")}
 FIDELITY_MARKER = {"dynamic": "o", "quasi-static": "s", "kinematic": "^", "auto": "D"}
 
