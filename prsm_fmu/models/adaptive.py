@@ -249,8 +249,8 @@ class SwitchingStepper(Stepper):
         ``rosenbrock``.
     **options
         That stepper's options; ``rtol``, ``atol`` and ``max_substeps`` also set the
-        quasi-static closed form's fallback integrator (and, with ``default``, both
-        dynamic steppers).
+        quasi-static closed form's fallback integrator (with ``default``, they and
+        ``fixed_substeps`` set both dynamic steppers).
     """
 
     name = "auto"
@@ -263,10 +263,14 @@ class SwitchingStepper(Stepper):
         if name == "default":
             from ..simulate import TUNED_OPTIONS
 
+            common = dict(fallback)
+            tuned = dict(TUNED_OPTIONS["rosenbrock"])
+            if "fixed_substeps" in options:          # fixed steps: no step-size tuning
+                common["fixed_substeps"] = options["fixed_substeps"]
+                tuned = {}
             self.dynamic_steppers = {
-                "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic, **fallback),
-                "rosenbrock": make_stepper("rosenbrock", model.dynamic,
-                                           **{**TUNED_OPTIONS["rosenbrock"], **fallback})}
+                "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic, **common),
+                "rosenbrock": make_stepper("rosenbrock", model.dynamic, **tuned, **common)}
         else:
             name = "rosenbrock" if name == "closed_form" else name
             self.dynamic_steppers = {name: make_stepper(name, model.dynamic, **options)}
