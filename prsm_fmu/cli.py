@@ -2,8 +2,9 @@
 
 Subcommands::
 
-    prsm-fmu startup [--preset seed000_two_stage] [--fidelity dynamic] [--speed 100]
-                     [--load 5000] [--t-end 1e-3] [--interval 1e-6] [--out out]
+    prsm-fmu startup [--preset seed000_two_stage] [--fidelity dynamic|auto|...]
+                     [--tolerance 1e-8] [--speed 100] [--load 5000] [--t-end 1e-3]
+                     [--interval 1e-6] [--out out]
     prsm-fmu steady  [--preset seed000_two_stage] [--speed 100] [--load 5000]
     prsm-fmu presets
     prsm-fmu sweep   STUDY.toml [--out DIR] [--workers N | --scheduler tcp://host:port |
@@ -388,8 +389,11 @@ def cmd_startup(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     params: MechanismParams = args.preset
     res = simulate(params, fidelity=args.fidelity, drive="speed", screw_speed=args.speed,
                    load_force=args.load, t_end=args.t_end, output_interval=args.interval,
-                   stepper=args.stepper)
+                   stepper=args.stepper, rtol=args.tolerance, atol=1e-2 * args.tolerance)
     n = params.n_stages
+    if args.fidelity == "auto":
+        print(f"fidelity auto at tolerance {args.tolerance:g}: starts with "
+              f"{res['auto_choice'].describe()}; switches along the run (step_fidelity)")
     print(f"start-up: preset {params.name}, fidelity {args.fidelity}, screw speed step to "
           f"{args.speed:g} rad/s at t = 0 (carriers at rest), load {args.load:g} N, "
           f"t_end {args.t_end:g} s, output interval {args.interval:g} s")
@@ -609,8 +613,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "write OUT/startup.csv and OUT/startup.png.")
     p.add_argument("--preset", type=_preset, default="seed000_two_stage",
                    help="preset name (see 'prsm-fmu presets'); default %(default)s")
-    p.add_argument("--fidelity", choices=FIDELITIES, default="dynamic",
-                   help="model level; default %(default)s")
+    p.add_argument("--fidelity", choices=FIDELITIES + ("auto",), default="dynamic",
+                   help="model level (auto: dynamic while the carriers lag, quasi-static once "
+                        "they follow, docs/accuracy.md §4); default %(default)s")
+    p.add_argument("--tolerance", type=_positive_float, default=1e-8,
+                   help="rtol of the adaptive steppers (atol = 0.01 tolerance) and, with auto, "
+                        "the accepted model error [-]; default %(default)g")
     p.add_argument("--speed", type=_nonzero_float, default=100.0,
                    help="screw speed after the step [rad/s], non-zero; default %(default)g")
     p.add_argument("--load", type=_finite_float, default=5000.0,

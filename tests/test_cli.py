@@ -96,3 +96,24 @@ def test_energy_balance_residual_and_units():
     assert energy_balance_residual(res) == pytest.approx(0.05)
     assert unit_of("stage[2].driven_torque") == "N·m"
     assert unit_of("time") == "s"
+
+
+def test_startup_auto_matches_the_dynamic_level_within_its_tolerance(tmp_path, capsys):
+    """--fidelity auto (dynamic while the carriers spin up, quasi-static after): with the same
+    stepper for the dynamic steps, the written carrier ratios, efficiency and spline friction
+    agree with the dynamic level's run to the tolerance (they differ only after the switch)."""
+    runs = {}
+    for fid in ("dynamic", "auto"):
+        out = tmp_path / fid
+        assert main(["startup", "--fidelity", fid, "--tolerance", "1e-6", "--interval", "1e-5",
+                     "--stepper", "explicit_adaptive", "--out", str(out)]) == 0
+        with open(out / "startup.csv") as fh:
+            header = fh.readline().strip().split(",")
+        runs[fid] = (header, np.loadtxt(out / "startup.csv", delimiter=",", skiprows=1))
+    assert "fidelity auto at tolerance 1e-06: starts with 'dynamic'" in capsys.readouterr().out
+    header, dyn = runs["dynamic"]
+    _, auto = runs["auto"]
+    for name in ("stage[1].carrier_speed_ratio [-]", "stage[2].carrier_speed_ratio [-]",
+                 "efficiency [-]", "stage[2].spline_friction [N]"):
+        j = header.index(name)
+        assert np.max(np.abs(auto[:, j] - dyn[:, j])) <= 1e-6 * np.max(np.abs(dyn[:, j])), name
