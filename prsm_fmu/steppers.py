@@ -604,13 +604,19 @@ class _AdaptiveBase(Stepper):
         """Cheap first-step guess [s] without extra rhs calls, after Hairer, Norsett &
         Wanner, Solving ODEs I, Sec. II.4 (first part only): ``0.01 * max(d0, 1) / d1``
         with ``d0``, ``d1`` the weighted RMS norms of ``x`` and ``f(t, x)``, at most ``h``."""
+        _, d0, d1 = self._start_norms(x, f0)
+        if not d1 > 1e-5:  # practically at rest (or nan, handled by the step itself)
+            return h
+        return min(h, 0.01 * max(d0, 1.0) / d1)
+
+    def _start_norms(self, x: Sequence[float], f0: Sequence[float]) -> tuple:
+        """Error weights at ``x`` and the weighted RMS norms of ``x`` and ``f0`` (Hairer,
+        Norsett & Wanner's d0, d1)."""
         rtol = self.rtol
         w = [at + rtol * abs(a) for a, at in zip(x, self._atol_w)]
         d0 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(x, w)]) / self._n_err)
         d1 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(f0, w)]) / self._n_err)
-        if not d1 > 1e-5:  # practically at rest (or nan, handled by the step itself)
-            return h
-        return min(h, 0.01 * max(d0, 1.0) / d1)
+        return w, d0, d1
 
     def _factor(self, err: float) -> float:
         """Step-size ratio proposed by the elementary controller for error norm ``err``."""
@@ -786,11 +792,8 @@ class ExplicitAdaptive(_AdaptiveBase):
     def _starting_step(self, f: Callable, t: float, x: list[float], k1: list[float], u: tuple,
                        h: float, stats: StepStats) -> float:
         """First internal step [s] without a proposal (Hairer, Norsett & Wanner, II.4)."""
-        rtol = self.rtol
-        w = [at + rtol * abs(a) for a, at in zip(x, self._atol_w)]
+        w, d0, d1 = self._start_norms(x, k1)
         n = self._n_err
-        d0 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(x, w)]) / n)
-        d1 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(k1, w)]) / n)
         if not d1 > 1e-5:          # practically at rest (or nan, handled by the step itself)
             return h
         h0 = min(h, 0.01 * d0 / d1 if d0 >= 1e-5 else 1e-6)
