@@ -746,7 +746,6 @@ class ExplicitAdaptive(_AdaptiveBase):
             )
         self.order = order
         self._fsal: tuple | None = None
-        self._k_end: list[float] = []
 
     # --- memory: the step-size proposal and the FSAL stage ------------------------------
 
@@ -934,15 +933,16 @@ class ExplicitAdaptive(_AdaptiveBase):
         hs = self._h_prop
         if hs is None:
             hs = self._starting_step(f, t, x, k1, u, h, stats)
-        y, stats = self._adaptive_loop(trial, f, t, x, k1, u, h, hs, n_st, stats)
-        self._fsal = (t + h, tuple(y), u, tuple(self._k_end))
+        y, k_end, stats = self._adaptive_loop(trial, f, t, x, k1, u, h, hs, n_st, stats)
+        self._fsal = (t + h, tuple(y), u, tuple(k_end))
         return y, stats
 
     def _adaptive_loop(
         self, trial: Callable, f: Callable, t: float, x: list[float], k1: list[float],
         u: tuple, h: float, hs: float, n_st: int, stats: StepStats,
-    ) -> tuple[list[float], StepStats]:
-        """Error-controlled internal steps from ``t`` to ``t + h`` starting with ``hs``."""
+    ) -> tuple[list[float], list[float], StepStats]:
+        """Error-controlled internal steps from ``t`` to ``t + h`` starting with ``hs``;
+        returns the state at ``t + h``, the rhs there (the FSAL stage) and the counters."""
         tau = 0.0  # elapsed time within this advance [s]
         y = x
         attempts = 0
@@ -989,8 +989,7 @@ class ExplicitAdaptive(_AdaptiveBase):
                     if h_new >= h_step:
                         h_new = max(h_new, hs)
                     self._h_prop = h_new
-                    self._k_end = k1
-                    return y, stats
+                    return y, k1, stats
                 tau += h_step
                 hs = h_new
             else:
