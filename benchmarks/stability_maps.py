@@ -175,14 +175,14 @@ class OperatingPoint:
 
 
 def speed_indices(model) -> list[int]:
-    """Indices of the speed states (screw speed in the torque drive, carrier speeds)."""
+    """Indices of the speed states (screw speed, carrier speeds)."""
     i0 = model.state_names.index("carrier_1_speed")
-    return ([1] if model.drive == "torque" else []) + list(range(i0, i0 + model.n_carrier_states))
+    return [1] + list(range(i0, i0 + model.n_carrier_states))
 
 
 def carrier_ratios(model, x, u) -> tuple:
     """ω_Pk / ω of every carrier [-]."""
-    omega = x[1] if model.drive == "torque" else u[0]
+    omega = x[1]
     i0 = model.state_names.index("carrier_1_speed")
     return tuple(x[i0 + k] / omega for k in range(model.n_carrier_states))
 
@@ -210,7 +210,7 @@ def operating_point(drive: str, omega: float, load: float, params=SEED000,
     shortest and longest run lengths [s]; default from FACTORS and the RK4 limit)."""
     model = make_model(params, "dynamic", drive)
     if drive == "speed":
-        u = (omega, load)
+        u = (0.0, load)          # constant prescribed speed
     else:
         u = (steady_state(params, omega, load)["screw_torque"], load)
     x_eq = model.initial_state(u, screw_speed=omega, carrier_ratio=None)

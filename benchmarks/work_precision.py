@@ -268,8 +268,14 @@ def make_simulate_runner(params, drive: str, t_end: float, comm_step: float, inp
         simulate's initial-condition keywords.
     """
     n_steps = int(round(t_end / comm_step))
-    drive_key = "screw_speed" if drive == "speed" else "screw_torque"
-    u = (float(inputs[drive_key]), float(inputs["load_force"]))
+    # the model's inputs: the constant motor torque, or (speed drive) the constant speed's zero
+    # acceleration; the speed drive starts at the prescribed speed
+    if drive == "speed":
+        u = (0.0, float(inputs["load_force"]))
+        speed0 = float(inputs["screw_speed"])
+    else:
+        u = (float(inputs["screw_torque"]), float(inputs["load_force"]))
+        speed0 = float(initial.get("initial_screw_speed", 0.0))
 
     def run(cfg: Config, time_it: bool = True) -> RunResult:
         res = simulate(params, cfg.fidelity, drive, t_end=t_end, output_interval=comm_step,
@@ -279,13 +285,12 @@ def make_simulate_runner(params, drive: str, t_end: float, comm_step: float, inp
         if not time_it:
             return RunResult(outputs, math.nan, int(res["rhs_calls"]))
         auto = {} if cfg.fidelity != "auto" else dict(
-            tolerance=cfg.rtol, inputs=u, comm_step=comm_step,
-            screw_speed=initial.get("initial_screw_speed", 0.0),
+            tolerance=cfg.rtol, inputs=u, comm_step=comm_step, screw_speed=speed0,
             carrier_ratio=initial.get("initial_carrier_ratio", 0.0))
         model = make_model(params, cfg.fidelity, drive, **auto)
         opts = tuned_stepper_options(cfg.stepper, cfg.rtol, cfg.atol)
         opts.update(cfg.stepper_options)
-        x0 = model.initial_state(u, screw_speed=initial.get("initial_screw_speed", 0.0),
+        x0 = model.initial_state(u, screw_speed=speed0,
                                  carrier_ratio=initial.get("initial_carrier_ratio", 0.0))
         last = []
 
@@ -322,8 +327,8 @@ STARTUP = Scene(
     grid=standard_grid(),
     target_error=1e-6,
     speedup_to_beat=20.0,
-    auto=lambda tol: choose_for_start(SEED000, tol, "speed", (100.0, 5000.0), carrier_ratio=0.0,
-                                      comm_step=1e-5),
+    auto=lambda tol: choose_for_start(SEED000, tol, "speed", (0.0, 5000.0), screw_speed=100.0,
+                                      carrier_ratio=0.0, comm_step=1e-5),
 )
 
 #: the same start-up with the paper's 1 µs output interval as communication step: how the

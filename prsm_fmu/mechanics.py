@@ -284,12 +284,50 @@ class Mechanism:
         -------
         tuple
             (α [rad/s²], motor torque M_S1 [N·m], carrier accelerations [rad/s²] (list),
-            friction power [W]).
+            friction power [W]).  All NaN where the rigid contact has no solution
+            (:attr:`Solution.consistent` False): no stepper can integrate through such a
+            state, and :meth:`diagnose` says why.
         """
         wps = carrier_state if self.zeta is None else self.carrier_speeds(omega, carrier_state)
-        alpha, ((m0, m1), per_stage), _ = self._balance(omega, wps, load, torque, acceleration)
+        alpha, ((m0, m1), per_stage), consistent = self._balance(omega, wps, load, torque,
+                                                                 acceleration)
+        if not consistent:
+            nan = math.nan
+            return nan, nan, [nan] * len(per_stage), nan
         acc, p_fric = self._rates(omega, alpha, per_stage)
         return alpha, m0 + m1 * alpha, acc, p_fric
+
+    def diagnose(self, omega: float, carrier_state, load: float, torque: float) -> str | None:
+        """Why the rigid contact has no solution at this torque-driven state, or None if it has.
+
+        Parameters are those of :meth:`solve` (torque drive).
+
+        Returns
+        -------
+        str or None
+            A one-line reason naming the quantity: the screw's effective inertia
+            dM_S1/dα [kg·m²], which is ≤ 0 for large accelerations of one sign when a
+            carrier's slip direction makes its thread self-locking, and the carriers' speed
+            ratios against their equilibrium ratios.
+        """
+        wps = carrier_state if self.zeta is None else self.carrier_speeds(omega, carrier_state)
+        sol = self.solve(omega, wps, load, torque=torque)
+        if sol.consistent:
+            return None
+        cache = [None] * self._n_cache
+        slopes = []
+        for a in (-1e9, -1e6, 1e6, 1e9):
+            rec = self._sweep(omega, wps, load, a, cache)
+            slopes.append((rec[0][1], a, rec[0][0] + rec[0][1] * a))
+        j_eff, a_at, _ = min(slopes)
+        ratios = ", ".join(
+            f"carrier {k + 1} at {w / omega if omega else 0.0:.4g} x screw speed "
+            f"(equilibrium {s.zeta_geometric:.4g})" for k, (s, w) in enumerate(zip(self.stages, wps)))
+        return (f"rigid contact with Coulomb friction has no solution (Painlevé): the screw's "
+                f"effective inertia dM_S1/dα = {j_eff:.3g} kg·m² is <= 0 for large "
+                f"{'positive' if a_at > 0 else 'negative'} accelerations, so no acceleration balances "
+                f"screw_torque = {torque:.6g} N·m at screw speed {omega:.6g} rad/s, load "
+                f"{load:.6g} N; {ratios}")
 
     def _balance(self, omega, wps, load, torque, acceleration):
         """α, the sweep record whose signs hold at α, and the consistency flag: the sign

@@ -13,8 +13,10 @@ from typing import Callable, Union
 import numpy as np
 
 from .models import make_model
+from .models.base import is_finite_state
 from .params import MechanismParams
-from .steppers import StepStats, make_stepper
+from .profiles import SpeedLike, as_speed_profile
+from .steppers import StepFailure, StepStats, make_stepper
 
 Signal = Union[float, Callable[[float], float]]
 
@@ -60,7 +62,7 @@ def _signal(value: Signal, name: str) -> Callable[[float], float]:
 
 
 def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "torque", *,
-             screw_torque: Signal = 0.0, screw_speed: Signal = 0.0, load_force: Signal = 0.0,
+             screw_torque: Signal = 0.0, screw_speed: SpeedLike = 0.0, load_force: Signal = 0.0,
              t_end: float, output_interval: float, stepper: str | None = None,
              rtol: float = 1e-8, atol: float = 1e-10, initial_screw_speed: float = 0.0,
              initial_carrier_ratio: float | None = 0.0, model_options: dict | None = None,
@@ -79,11 +81,18 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         ``fidelity`` says which; the default stepper is that level's.
     drive : {"torque", "speed"}
         ``torque``: ``screw_torque`` [N·m] drives screw 1 and the screw speed is a state;
-        ``speed``: ``screw_speed`` [rad/s] is prescribed (a step at t = 0 when constant).
-    screw_torque, screw_speed, load_force : float or callable
+        ``speed``: ``screw_speed`` [rad/s] is prescribed with its acceleration, so the driven
+        torques carry every inertia term (a constant is a step at t = 0 from the initial
+        state; :mod:`prsm_fmu.profiles` for ramps, tables and functions).
+    screw_torque, load_force : float or callable
         Inputs, constants or functions of time [s]; sampled at the start of each output
         interval and held over it.  ``load_force`` [N] acts on the last nut, positive
         resisting extension.
+    screw_speed : float, callable or SpeedProfile
+        Speed drive: the prescribed screw speed [rad/s]: a constant, a
+        :class:`~prsm_fmu.profiles.SpeedProfile` (followed exactly where piecewise linear), or
+        a function of time (followed as its piecewise-linear interpolant between output
+        times).
     t_end : float
         End time [s], > 0.
     output_interval : float
@@ -94,7 +103,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     rtol, atol : float
         Tolerances of adaptive steppers [-], [state units].
     initial_screw_speed : float
-        Torque drive: screw speed at t = 0 [rad/s].
+        Torque drive: screw speed at t = 0 [rad/s] (the speed drive starts at the profile's).
     initial_carrier_ratio : float or None
         Dynamic level: carrier speeds at t = 0 as a fraction of the screw speed; ``None`` puts
         them at equilibrium.  Default 0 (carriers at rest, seed 000's start).
@@ -122,13 +131,19 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     if n_steps < 1 or abs(n_steps * output_interval - t_end) > 1e-9 * t_end:
         raise ValueError(f"t_end = {t_end!r} must be a whole multiple of output_interval = "
                          f"{output_interval!r}")
-    drive_signal = _signal(screw_torque if drive == "torque" else screw_speed,
-                           "screw_torque" if drive == "torque" else "screw_speed")
     load_signal = _signal(load_force, "load_force")
+    if drive == "speed":
+        profile = as_speed_profile(screw_speed)
+        speed0 = profile.speed(0.0)
+        first = profile.pieces(0.0, output_interval)[0]
+        u0 = (first[2], load_signal(0.0))
+    else:
+        torque_signal = _signal(screw_torque, "screw_torque")
+        speed0 = float(initial_screw_speed)
+        u0 = (torque_signal(0.0), load_signal(0.0))
     mopts = dict(model_options or {})
     if fidelity == "auto":
-        mopts.update(tolerance=rtol, inputs=(drive_signal(0.0), load_signal(0.0)),
-                     comm_step=output_interval, screw_speed=initial_screw_speed,
+        mopts.update(tolerance=rtol, inputs=u0, comm_step=output_interval, screw_speed=speed0,
                      carrier_ratio=initial_carrier_ratio)
     model = make_model(params, fidelity, drive, **mopts)
     fidelity = model.fidelity
@@ -140,23 +155,30 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
             opts.pop(key, None)
     st = make_stepper(name, model, **opts)
 
-    def inputs(t: float) -> tuple:
-        return (drive_signal(t), load_signal(t))
-
-    u = inputs(0.0)
-    x = model.initial_state(u, screw_speed=initial_screw_speed, carrier_ratio=initial_carrier_ratio)
+    x = model.initial_state(u0, screw_speed=speed0, carrier_ratio=initial_carrier_ratio)
     names = model.output_names
     out = np.empty((n_steps + 1, len(names)))
-    y = model.outputs(0.0, x, u)
+    y = model.outputs(0.0, x, u0)
     out[0] = [y[k] for k in names]
     rhs_calls = 0
     cpu0 = _time.process_time()
     for i in range(n_steps):
         t = i * output_interval
-        u = inputs(t)
-        x, stats = st.advance(t, x, u, output_interval)
-        rhs_calls += stats.rhs_calls
         t1 = (i + 1) * output_interval
+        if drive == "speed":
+            # the interval split where the prescribed acceleration jumps (profiles.py)
+            load = load_signal(t)
+            pieces = profile.pieces(t, t1)
+            if len(pieces) == 1:      # the whole interval: step exactly h, as the torque drive
+                pieces = [(t, output_interval, pieces[0][2])]
+            for start, length, alpha in pieces:
+                u = (alpha, load)
+                x, stats = _advance(st, model, start, x, u, length)
+                rhs_calls += stats.rhs_calls
+        else:
+            u = (torque_signal(t), load_signal(t))
+            x, stats = _advance(st, model, t, x, u, output_interval)
+            rhs_calls += stats.rhs_calls
         # outputs at the end of the interval with the inputs that were held over it
         y = model.outputs(t1, x, u)
         out[i + 1] = [y[k] for k in names]
@@ -169,6 +191,23 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         res["fidelity"] = fidelity
         res["auto_choice"] = model.auto_choice
     return res
+
+
+def _advance(st, model, t: float, x: list[float], u: tuple, h: float) -> tuple:
+    """One advance that never fails silently: a failure or a non-finite state raises
+    :class:`~prsm_fmu.steppers.StepFailure` with the time and, where the rigid contact has no
+    solution, the named cause (:meth:`prsm_fmu.models.base.Model.contact_diagnosis`)."""
+    try:
+        x1, stats = st.advance(t, x, u, h)
+    except StepFailure as exc:
+        cause = model.contact_diagnosis(x, u)
+        if cause is None:
+            raise
+        raise StepFailure(f"step from t = {t!r} s over {h!r} s refused: {cause}") from exc
+    if not is_finite_state(x1):
+        cause = model.contact_diagnosis(x, u) or "the stepper returned a non-finite state"
+        raise StepFailure(f"step from t = {t!r} s over {h!r} s refused: {cause}")
+    return x1, stats
 
 
 __all__ = ["simulate", "StepStats"]

@@ -76,11 +76,12 @@ def test_startup_switches_once_to_quasi_static_after_the_carriers_settle_and_cos
     auto = simulate(SEED000, "auto", "speed", **kw)
     dyn = simulate(SEED000, "dynamic", "speed", **kw)
     assert _error(auto, dyn) <= tol / MARGIN
-    u = (100.0, 5000.0)
+    u = (0.0, 5000.0)          # speed drive: constant prescribed speed, 5 kN
     m = make_model(SEED000, "auto", "speed", tolerance=tol, inputs=u, comm_step=h,
-                   carrier_ratio=0.0)
+                   screw_speed=100.0, carrier_ratio=0.0)
     st, xs, modes, rhs = _run(m, "explicit_adaptive", lambda t: u,
-                              m.initial_state(u, carrier_ratio=0.0), h, n, rtol=tol,
+                              m.initial_state(u, screw_speed=100.0, carrier_ratio=0.0), h, n,
+                              rtol=tol,
                               atol=tol * 1e-3)
     first = modes.index("quasi-static")
     assert st.switches == 1 and set(modes[first:]) == {"quasi-static"}
@@ -137,11 +138,11 @@ def test_energy_balance_closes_across_the_switches():
 
 
 def _memory_round_trip(stepper_name: str, k: int) -> None:
-    u = (100.0, 5000.0)
+    u = (0.0, 5000.0)          # speed drive: constant prescribed speed, 5 kN
     m = make_model(SEED000, "auto", "speed", tolerance=1e-6, inputs=u, comm_step=1e-5,
-                   carrier_ratio=0.0)
+                   screw_speed=100.0, carrier_ratio=0.0)
     st = make_stepper(stepper_name, m, rtol=1e-6, atol=1e-9)
-    x = m.initial_state(u, carrier_ratio=0.0)
+    x = m.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
     saved = None
     first = []
     for i in range(80):
@@ -184,11 +185,12 @@ def test_default_dynamic_steps_are_explicit_only_within_the_carriers_time_consta
     linearised τ from carrier_time_constants), linearly implicit elsewhere."""
     from prsm_fmu.models.adaptive import EXPLICIT_STEP_PER_TAU
 
-    m = make_model(SEED000, "auto", "speed", tolerance=1e-6, inputs=(omega, load),
+    u = (0.0, load)            # speed drive: constant prescribed speed
+    m = make_model(SEED000, "auto", "speed", tolerance=1e-6, inputs=u, screw_speed=omega,
                    carrier_ratio=0.0)
     st = make_stepper("default", m, rtol=1e-6, atol=1e-8)
-    x = m.initial_state((omega, load), carrier_ratio=None)
-    assert st.dynamic_for(x, (omega, load), h).name == expected
+    x = m.initial_state(u, screw_speed=omega, carrier_ratio=None)
+    assert st.dynamic_for(x, u, h).name == expected
     if omega and load:
         tau = min(carrier_time_constants(SEED000, omega, load))
         assert (h <= EXPLICIT_STEP_PER_TAU * tau) == (expected == "explicit_adaptive")

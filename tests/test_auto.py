@@ -75,8 +75,8 @@ def test_choice_is_the_cheapest_level_within_tolerance():
 
 def test_kinematic_estimate_is_the_friction_loss():
     qs = make_model(SEED000, "quasi-static", "speed")
-    u = (100.0, 1000.0)
-    eta = qs.outputs(0.0, qs.initial_state(u), u)["efficiency"]
+    u = (0.0, 1000.0)          # speed drive: 100 rad/s held, 1 kN
+    eta = qs.outputs(0.0, qs.initial_state(u, screw_speed=100.0), u)["efficiency"]
     c = choose_fidelity(SEED000, 1e-3, screw_speed=0.0, load_force=0.0)
     assert c.terms["friction_loss"] == pytest.approx(1.0 - eta, rel=1e-12)
     assert 0.1 < c.terms["friction_loss"] < 0.3
@@ -85,8 +85,8 @@ def test_kinematic_estimate_is_the_friction_loss():
 def test_make_model_auto_needs_a_tolerance_and_reports_its_choice():
     with pytest.raises(ValueError, match="tolerance"):
         make_model(SEED000, "auto", "torque")
-    m = make_model(SEED000, "auto", "speed", tolerance=1e-3, inputs=(100.0, 5000.0),
-                   carrier_ratio=0.0, comm_step=1e-5)
+    m = make_model(SEED000, "auto", "speed", tolerance=1e-3, inputs=(0.0, 5000.0),
+                   screw_speed=100.0, carrier_ratio=0.0, comm_step=1e-5)
     assert m.fidelity == "auto" and m.start == "dynamic" == m.auto_choice.fidelity
     m = make_model(SEED000, "auto", "torque", tolerance=1e-6)      # at rest, no load
     assert m.start == "quasi-static" == m.auto_choice.fidelity
@@ -102,11 +102,11 @@ def test_kinematic_estimate_covers_its_missing_friction_outputs():
     """The kinematic level has no spline friction: over the FMU's outputs its error is 1 on
     seed 000 (measured on a steady run against the quasi-static level), and so is its estimate,
     whatever its constant efficiency."""
-    u = (100.0, 5000.0)
+    u = (0.0, 5000.0)          # speed drive: 100 rad/s held, 5 kN
     y = {}
     for fid, opts in (("kinematic", {"efficiency": 0.8}), ("quasi-static", {})):
         m = make_model(SEED000, fid, "speed", **opts)
-        y[fid] = m.outputs(0.0, m.initial_state(u), u)
+        y[fid] = m.outputs(0.0, m.initial_state(u, screw_speed=100.0), u)
     measured = abs(y["kinematic"]["stage[2].spline_friction"]
                    - y["quasi-static"]["stage[2].spline_friction"]) \
         / abs(y["quasi-static"]["stage[2].spline_friction"])

@@ -35,10 +35,7 @@ MECHANISMS = {"seed000": two_stage, "three_stage": three_stage}
 def dT_dt(model, x, dx, u) -> float:
     """Rate of kinetic energy from state and derivative [W] (Eq. 11 differentiated)."""
     mech = model.mechanism
-    if model.drive == "torque":
-        omega, domega = x[1], dx[1]
-    else:
-        omega, domega = u[0], 0.0
+    omega, domega = x[1], dx[1]
     rate = mech.equivalent_inertia() * omega * domega
     if model.n_carrier_states:
         i = model._i_carrier
@@ -60,12 +57,11 @@ def test_power_identity_closes_to_round_off_at_random_states(mech, fidelity, dri
         omega = rng.choice([1.0, -1.0]) * 10 ** rng.uniform(-4, 2.5)
         load = rng.uniform(-8000.0, 8000.0)
         wp = [omega * rng.uniform(-0.5, 1.0) for _ in range(model.n_carrier_states)]
+        x = [0.0, omega] + wp + [0.0, 0.0, 0.0]
         if drive == "torque":
-            x = [0.0, omega] + wp + [0.0, 0.0, 0.0]
             u = (rng.uniform(-40.0, 40.0), load)
-        else:
-            x = [0.0] + wp + [0.0, 0.0, 0.0]
-            u = (omega, load)
+        else:   # a prescribed acceleration: the driven torque carries J·α
+            u = (rng.uniform(-2e4, 2e4), load)
         dx = model.rhs(0.0, x, u)
         sol = model.mechanism.solve(omega, wp, load, torque=u[0], detail=True) if drive == "torque" else None
         if sol is not None and not sol.consistent:
@@ -99,6 +95,10 @@ def test_hot_path_rates_equal_the_detailed_solution(mech, fidelity):
             alpha, motor, acc, p_fric = mech_.rates(omega, wp, load, **drive)
             for detail in (False, True):
                 sol = mech_.solve(omega, wp, load, detail=detail, **drive)
+                if not sol.consistent:
+                    # no rigid solution: the hot path gives NaN so no stepper integrates on
+                    assert all(math.isnan(v) for v in (alpha, motor, p_fric, *acc))
+                    continue
                 assert (alpha, motor) == (sol.screw_acceleration, sol.motor_torque)
                 assert acc == pytest.approx(sol.carrier_accelerations, rel=1e-14, abs=0.0)
                 assert p_fric == pytest.approx(sol.friction_power, rel=1e-12, abs=1e-12 * abs(motor * omega))
@@ -110,11 +110,11 @@ def test_carrier_accelerations_vanish_at_the_equilibrium_ratio(mech):
     dyn = make_model(params, "dynamic", "speed")
     zeta = [s.zeta_geometric for s in dyn.mechanism.stages]
     for omega, load in [(100.0, 5000.0), (-30.0, 2000.0), (5.0, -3000.0)]:
-        x = [0.0] + [z * omega for z in zeta] + [0.0] * 3
-        dx = dyn.rhs(0.0, x, (omega, load))
+        x = [0.0, omega] + [z * omega for z in zeta] + [0.0] * 3
+        dx = dyn.rhs(0.0, x, (0.0, load))
         for k, z in enumerate(zeta):
             # carrier acceleration relative to what ω·ζ would change in 1 µs
-            assert abs(dx[1 + k]) * 1e-6 <= 1e-12 * abs(omega)
+            assert abs(dx[2 + k]) * 1e-6 <= 1e-12 * abs(omega)
 
 
 def test_equilibrium_ratio_is_independent_of_friction_and_load():
@@ -136,8 +136,8 @@ def test_quasi_static_equals_dynamic_at_the_carrier_equilibrium(mech):
     dyn = make_model(params, "dynamic", "speed")
     zeta = [s.zeta_geometric for s in dyn.mechanism.stages]
     for omega, load in [(100.0, 5000.0), (-40.0, 7000.0), (60.0, -4000.0)]:
-        yq = qs.outputs(0.0, [0.0, 0.0, 0.0, 0.0], (omega, load))
-        yd = dyn.outputs(0.0, [0.0] + [z * omega for z in zeta] + [0.0] * 3, (omega, load))
+        yq = qs.outputs(0.0, [0.0, omega, 0.0, 0.0, 0.0], (0.0, load))
+        yd = dyn.outputs(0.0, [0.0, omega] + [z * omega for z in zeta] + [0.0] * 3, (0.0, load))
         for name in yq:
             if name == "kinetic_energy":
                 continue  # carriers' energy is counted the same way; checked below
@@ -156,7 +156,7 @@ def test_kinematic_level_is_an_ideal_screw_with_inertia():
         # virtual work: J α = M − F·ΣL/2π
         assert dx[1] == pytest.approx((torque - load * lead_per_rad) / j_all, rel=1e-12)
     lossy = make_model(params, "kinematic", "speed", efficiency=0.8)
-    y = lossy.outputs(0.0, [0.0, 0.0, 0.0, 0.0], (100.0, 5000.0))
+    y = lossy.outputs(0.0, [0.0, 100.0, 0.0, 0.0, 0.0], (0.0, 5000.0))
     assert y["efficiency"] == pytest.approx(0.8, rel=1e-6)
     ratio = [s.zeta_ideal for s in lossy.mechanism.stages]
     st = params.stages
@@ -166,15 +166,15 @@ def test_kinematic_level_is_an_ideal_screw_with_inertia():
 def test_frictionless_dynamic_torque_equals_virtual_work_for_any_contact_geometry():
     params = two_stage().with_changes(mu_screw_roller=0.0, mu_spline=0.0)
     model = make_model(params, "dynamic", "speed")
-    y = model.outputs(0.0, [0.0, 11.0, -7.0, 0.0, 0.0, 0.0], (100.0, 5000.0))
+    y = model.outputs(0.0, [0.0, 100.0, 11.0, -7.0, 0.0, 0.0, 0.0], (0.0, 5000.0))
     assert y["screw_torque"] == pytest.approx(5000.0 * params.total_lead / (2 * math.pi), rel=1e-12)
     assert y["efficiency"] == pytest.approx(1.0, rel=1e-12)
 
 
 def test_negative_load_moves_the_contact_to_the_other_flank():
     model = make_model(two_stage(), "quasi-static", "speed")
-    pos = model.outputs(0.0, [0.0] * 4, (100.0, 5000.0))
-    neg = model.outputs(0.0, [0.0] * 4, (100.0, -5000.0))
+    pos = model.outputs(0.0, [0.0, 100.0, 0.0, 0.0, 0.0], (0.0, 5000.0))
+    neg = model.outputs(0.0, [0.0, 100.0, 0.0, 0.0, 0.0], (0.0, -5000.0))
     for k in (1, 2):
         assert pos[f"stage[{k}].contact_force"] > 0 > neg[f"stage[{k}].contact_force"]
         assert pos[f"stage[{k}].normal_force"] > 0 and neg[f"stage[{k}].normal_force"] > 0
@@ -187,8 +187,8 @@ def test_forces_are_continuous_through_zero_load_and_zero_speed():
     names = ["screw_torque", "stage[1].contact_force", "stage[2].contact_force",
              "stage[2].spline_friction", "friction_power"]
     for eps in (1e-6, 1e-9):
-        a = model.outputs(0.0, [0.0, 30.0, 30.0, 0, 0, 0], (80.0, eps))
-        b = model.outputs(0.0, [0.0, 30.0, 30.0, 0, 0, 0], (80.0, -eps))
+        a = model.outputs(0.0, [0.0, 80.0, 30.0, 30.0, 0, 0, 0], (0.0, eps))
+        b = model.outputs(0.0, [0.0, 80.0, 30.0, 30.0, 0, 0, 0], (0.0, -eps))
         for n in names:
             # each output changes by at most ~|Δload| (forces per roller: Δload/N_R)
             assert abs(a[n] - b[n]) <= 2 * eps + 1e-9, n
@@ -234,7 +234,9 @@ def test_sign_iteration_converges_without_bracketing_when_bearing_force_is_negat
     calls = []
     original = mech._bracket
     mech._bracket = lambda *a: calls.append(a) or original(*a)
-    omega, load, torque = -18.42, 36.09, -0.05667
+    # a state where B_1 < 0: screw 2's inertial force m_S2 c_1 α and the nut-2 assembly's
+    # m_A2 c_2 α outweigh the 36 N load while the motor drives hard in the direction of motion
+    omega, load, torque = -18.42, 36.09, -0.2
     sol = mech.solve(omega, (), load, torque=torque, detail=True)
     assert sol.consistent and not calls
     assert sol.bearing_force[0] < 0     # the case that used to cycle

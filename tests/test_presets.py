@@ -15,8 +15,6 @@ from prsm_fmu.kinematics import RecirculatingParams
 from prsm_fmu.params import MechanismParams, StageParams
 from prsm_fmu.presets import seed002, seed003
 
-MM = 1e-3
-KG_MM2 = 1e-9
 SEED_FILE = re.compile(r"00[0-4]_[0-9a-f]{16}\.txt")
 
 
@@ -74,9 +72,9 @@ CASES = [
                    id=f"flank={v:.3f}") for v in (0.0, -0.1, math.pi / 2, 2.0)],
     *[pytest.param(_bad_mechanism(**{f: v}), f, "[0, 1)", id=f"{f}={v}")
       for f in ("mu_screw_roller", "mu_spline", "mu_nut_screw") for v in (-0.01, 1.0)],
-    pytest.param(_bad_stage(1, nut_radius=17.0 * MM), "stage[1].nut_radius",
+    pytest.param(_bad_stage(1, nut_radius=17.0e-3), "stage[1].nut_radius",
                  "screw_radius + 2*roller_radius", id="nut_radius_does_not_fit"),
-    pytest.param(_bad_stage(2, screw_starts=4, screw_lead=8.0 * MM), "stage[2].nut_radius",
+    pytest.param(_bad_stage(2, screw_starts=4, screw_lead=8.0e-3), "stage[2].nut_radius",
                  "screw_starts*roller_radius", id="nut_radius_not_starts_times_roller"),
     pytest.param(_bad_stage(2, spline_radius=0.0), "stage[2].spline_radius", "> 0",
                  id="spline_radius_missing"),
@@ -119,22 +117,87 @@ def test_invalid_recirculating_parameter_is_rejected_naming_field_and_range(chan
 
 
 # ---- the seeds' numbers ----------------------------------------------------------------------
+def _assert_stage_values(stage, expected: dict) -> None:
+    for field, value in expected.items():
+        assert getattr(stage, field) == pytest.approx(value, rel=1e-12), field
+
+
+def test_seed000_preset_holds_section_3_1_in_si():
+    # 000_a07c98907360be8b.txt §3.1.  Lengths: 1 mm = 1e-3 m.  Inertias: 1 kg·mm² =
+    # 1 kg × (1e-3 m)² = 1e-6 kg·m², so e.g. J_S1 = 55 kg·mm² = 55e-6 kg·m² = 5.5e-5 kg·m².
+    s1, s2 = presets.load("seed000_two_stage").stages
+    _assert_stage_values(s1, {
+        "screw_radius": 9.75e-3, "roller_radius": 3.25e-3, "nut_radius": 16.25e-3,
+        "screw_lead": 10e-3, "screw_starts": 5, "n_rollers": 7,
+        "flank_angle": math.pi / 4,                            # β_S1 = 45°
+        "roller_mass": 0.017, "nut_mass": 2.5,                 # m_R1, m_N1 [kg]
+        "screw_inertia": 55e-6,                                # J_S1 = 55 kg·mm²
+        "roller_inertia": 0.08e-6,                             # J_R1 = 0.08 kg·mm² = 8e-8 kg·m²
+        "carrier_inertia": 3e-6,                               # J_P1 = 3 kg·mm²
+        # not in the text: m_P = J_P / (r_S + r_R)² (preset docstring) = 3e-6 / (13e-3)²
+        # = 3e-6 / 1.69e-4 = 0.017751... kg
+        "carrier_mass": 3e-6 / 1.69e-4,
+    })
+    _assert_stage_values(s2, {
+        "screw_radius": 16.5e-3, "roller_radius": 5.5e-3, "nut_radius": 27.5e-3,
+        "screw_lead": 10e-3, "screw_starts": 5, "n_rollers": 7,
+        "flank_angle": math.pi / 4,                            # "β_S2 = 45 mm": 45° (typo)
+        "screw_mass": 0.77, "nut_mass": 18.0, "roller_mass": 0.04,
+        "screw_inertia": 170e-6,                               # J_S2 = 170 kg·mm² = 1.7e-4 kg·m²
+        "roller_inertia": 0.48e-6,                             # J_R2 = 0.48 kg·mm²
+        "carrier_inertia": 12e-6,                              # J_P2 = 12 kg·mm² = 1.2e-5 kg·m²
+        "spline_radius": 13e-3,                                # r_SS2 = 13 mm
+        # m_P2 = 12e-6 / (22e-3)² = 12e-6 / 4.84e-4 = 0.024793... kg
+        "carrier_mass": 12e-6 / 4.84e-4,
+    })
+
+
 def test_seed002_preset_holds_the_published_masses_and_inertias_in_si():
+    # 002_dfce4e5c6f831e77.txt, "numerical simulations" paragraph; kg·mm² × 1e-6 = kg·m²
     p = presets.load("seed002_two_stage")
     s1, s2 = p.stages
-    published = {
-        (s1, "roller_mass"): 0.014, (s2, "roller_mass"): 0.039,
-        (s1, "screw_mass"): 0.051, (s2, "screw_mass"): 0.761,
-        (s1, "nut_mass"): 2.2, (s2, "nut_mass"): 20.0,
-        (s1, "roller_inertia"): 0.077 * KG_MM2, (s2, "roller_inertia"): 0.471 * KG_MM2,
-        (s1, "screw_inertia"): 51.94 * KG_MM2, (s2, "screw_inertia"): 172.3 * KG_MM2,
-        (s1, "carrier_inertia"): 2.95 * KG_MM2, (s2, "carrier_inertia"): 19.88 * KG_MM2,
-        (s1, "screw_radius"): 9.75 * MM, (s2, "screw_radius"): 16.5 * MM,
-        (s2, "spline_radius"): 13.0 * MM,
-    }
-    for (stage, field), value in published.items():
-        assert getattr(stage, field) == pytest.approx(value, rel=1e-12), field
+    _assert_stage_values(s1, {
+        "roller_mass": 0.014, "screw_mass": 0.051, "nut_mass": 2.2,
+        "roller_inertia": 0.077e-6,                            # 0.077 kg·mm² = 7.7e-8 kg·m²
+        "screw_inertia": 51.94e-6,                             # 51.94 kg·mm² = 5.194e-5 kg·m²
+        "carrier_inertia": 2.95e-6,                            # 2.95 kg·mm²
+        "screw_radius": 9.75e-3,
+        # m_P1 = 2.95e-6 / (13e-3)² = 2.95e-6 / 1.69e-4 = 0.017456 kg (docstring: 0.0175)
+        "carrier_mass": 2.95e-6 / 1.69e-4,
+    })
+    _assert_stage_values(s2, {
+        "roller_mass": 0.039, "screw_mass": 0.761, "nut_mass": 20.0,
+        "roller_inertia": 0.471e-6, "screw_inertia": 172.3e-6, "carrier_inertia": 19.88e-6,
+        "screw_radius": 16.5e-3, "spline_radius": 13e-3,
+        # m_P2 = 19.88e-6 / (22e-3)² = 19.88e-6 / 4.84e-4 = 0.041074 kg (docstring: 0.0411)
+        "carrier_mass": 19.88e-6 / 4.84e-4,
+    })
     assert (p.mu_screw_roller, p.mu_spline, p.mu_nut_screw) == (0.05, 0.10, 0.005)
+
+
+def test_preset_docstrings_state_the_carrier_masses_the_presets_hold():
+    # the module docstrings quote m_P in kg to 3 significant figures; the fields must agree
+    from prsm_fmu.presets import seed000
+    for module, name, quoted in ((seed000, "seed000_two_stage", (0.0178, 0.0248)),
+                                 (seed002, "seed002_two_stage", (0.0175, 0.0411))):
+        stages = presets.load(name).stages
+        for k, q in enumerate(quoted):
+            assert f"{q} kg" in module.__doc__
+            assert stages[k].carrier_mass == pytest.approx(q, abs=5e-5), (name, k)
+
+
+def test_seed000_equivalent_inertia_from_section_3_1_by_hand():
+    # Eq. 11's θ̇_S² bracket with the carriers slaved at ζ (ζ ≈ 0.374, tested elsewhere):
+    # J_S1 + J_S2                                = 55e-6 + 170e-6              = 2.25e-4
+    # c_1 = 10 mm/2π = 1.59155e-3 m/rad: (m_N1 + N_R m_R1 + 2 m_P1) c_1²
+    #     = (2.5 + 0.119 + 0.0355) × 2.53303e-6                             = 6.7243e-6
+    # c_2 = 20 mm/2π = 3.18310e-3 m/rad: (m_N2 + N_R m_R2 + 2 m_P2) c_2²
+    #     = (18 + 0.28 + 0.0496) × 1.01321e-5                               = 1.85719e-4
+    # m_S2 c_1² = 0.77 × 2.53303e-6                                         = 1.9504e-6
+    # sum (without the carriers' own rotation)                             ≈ 4.1939e-4 kg·m²
+    from prsm_fmu.models import make_model
+    model = make_model(presets.load("seed000_two_stage"), "dynamic")
+    assert model.mechanism.equivalent_inertia() == pytest.approx(4.1939e-4, rel=2e-4)
 
 
 def test_seed002_lead_angles_reproduce_its_printed_helix_angles_within_rounding():
@@ -165,8 +228,8 @@ def test_seed003_preset_is_the_nearest_standard_prsm():
     assert stage.roller_radius == seed003.PUBLISHED["roller_radius"]
     assert stage.pitch == pytest.approx(seed003.PUBLISHED["pitch"], rel=1e-12)
     assert stage.screw_starts == 4
-    assert stage.screw_lead == pytest.approx(8.0 * MM, rel=1e-12)
-    assert stage.nut_radius == pytest.approx(20.0 * MM, rel=1e-12)
+    assert stage.screw_lead == pytest.approx(8.0e-3, rel=1e-12)
+    assert stage.nut_radius == pytest.approx(20.0e-3, rel=1e-12)
     assert stage.screw_radius == pytest.approx((stage.screw_starts - 2) * stage.roller_radius)
     for field in ("screw_mass", "nut_mass", "roller_mass", "carrier_mass"):
         assert getattr(stage, field) == seed003.PUBLISHED[field]
@@ -175,7 +238,7 @@ def test_seed003_preset_is_the_nearest_standard_prsm():
 def test_seed004_preset_holds_table_2_in_si():
     p = presets.load("seed004_recirculating")
     assert (p.screw_diameter, p.nut_diameter, p.roller_diameter) == pytest.approx(
-        (31.13 * MM, 44.14 * MM, 6.63 * MM), rel=1e-12)
-    assert (p.screw_lead, p.screw_starts, p.n_rollers) == (pytest.approx(1.0 * MM), 1, 12)
+        (31.13e-3, 44.14e-3, 6.63e-3), rel=1e-12)
+    assert (p.screw_lead, p.screw_starts, p.n_rollers) == (pytest.approx(1.0e-3), 1, 12)
     # the published diameters misfit by 0.25 mm (d_s + 2 d_r = 44.39 mm against 44.14 mm)
-    assert p.fit_mismatch == pytest.approx(-0.25 * MM, rel=1e-9)
+    assert p.fit_mismatch == pytest.approx(-0.25e-3, rel=1e-9)

@@ -30,10 +30,11 @@ def test_closed_form_step_equals_tight_integration(params, fidelity, opts, drive
     for _ in range(60):
         w = rng.choice([-1.0, 1.0]) * rng.uniform(2.0, 200.0)
         load = rng.uniform(-8000.0, 8000.0)
+        x = [0.3, w, 1.0, 2.0, 3.0]
         if drive == "torque":
-            x, u = [0.3, w, 1.0, 2.0, 3.0], (rng.uniform(-40.0, 40.0), load)
-        else:
-            x, u = [0.3, 1.0, 2.0, 3.0], (w, load)
+            u = (rng.uniform(-40.0, 40.0), load)
+        else:   # prescribed acceleration: constant speed in one case of three
+            u = (rng.choice([0.0, rng.uniform(-5e3, 5e3)]), load)
         h = rng.choice([1e-4, 1e-3])
         got = model.closed_form_advance(0.0, x, u, h)
         if got is None:
@@ -47,8 +48,10 @@ def test_closed_form_step_equals_tight_integration(params, fidelity, opts, drive
 
 def test_closed_form_declines_a_step_through_zero_speed():
     model = make_model(SEED000, "quasi-static", "torque")
-    # 5 N·m against 5 kN decelerates at ~7e4 rad/s²: from 30 rad/s, zero is reached in 0.4 ms
-    assert model.closed_form_advance(0.0, [0.0, 30.0, 0.0, 0.0, 0.0], (5.0, 5000.0), 1e-3) is None
+    # 5 N·m against 5 kN (≈ 19.7 N·m needed at η ≈ 0.8) decelerates at ~3e4 rad/s² on an inertia
+    # of ~4.3e-4 kg·m² (screws 55 + 170 kg·mm² = 2.25e-4; nut 2's 18 kg at c_2 = 20 mm/2π:
+    # 18 × (3.18e-3)² = 1.8e-4): from 30 rad/s, zero is reached after ~1 ms
+    assert model.closed_form_advance(0.0, [0.0, 30.0, 0.0, 0.0, 0.0], (5.0, 5000.0), 2e-3) is None
     assert model.closed_form_advance(0.0, [0.0, 30.0, 0.0, 0.0, 0.0], (5.0, 5000.0), 1e-4) is not None
     assert model.closed_form_advance(0.0, [0.0, 1e-3, 0.0, 0.0, 0.0], (30.0, 5000.0), 1e-6) is None
 

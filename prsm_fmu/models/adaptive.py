@@ -126,8 +126,8 @@ class AdaptiveModel(DynamicModel):
         return xr[:i] + [z * omega for z in self.zeta] + xr[i:]
 
     def screw_speed(self, x: list[float], u: tuple) -> float:
-        """Screw speed of a state [rad/s] (the input in the speed drive)."""
-        return x[1] if self._torque_drive else float(u[0])
+        """Screw speed of a state [rad/s]."""
+        return x[1]
 
     # ---- outputs of the active level -----------------------------------------------------
     def outputs(self, t: float, x: list[float], u: tuple) -> dict[str, float]:
@@ -341,9 +341,7 @@ class SwitchingStepper(Stepper):
     def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
         h = self._check_args(t, x, h)
         x1, stats = self._advance(t, x, u, h)
-        m = self.model
-        if m._torque_drive:
-            self.alpha = (x1[1] - x[1]) / h
+        self.alpha = (x1[1] - x[1]) / h
         return x1, stats
 
     def _advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
@@ -359,7 +357,7 @@ class SwitchingStepper(Stepper):
                 if z != 0.0:
                     d0[k] += x[i + k] / z - w0
             yr, stats = self.quasi_static_stepper.advance(t, m.reduced(x), u, h)
-            w1 = yr[1] if m._torque_drive else w0
+            w1 = yr[1]
             d1 = m.advance_lag(d0, (w1 - w0) / h, 0.5 * (w0 + w1), u[1], h)
             if abs(w1) > scale:
                 scale = abs(w1)

@@ -55,7 +55,7 @@ MARGIN = 2.0
 
 #: operating point at which the steady efficiency is evaluated when the run's own point has no
 #: load or speed (outside the friction band the Coulomb efficiency depends on neither)
-_EFFICIENCY_POINT = (100.0, 1000.0)      # [rad/s], [N]
+_EFFICIENCY_POINT = (100.0, 1000.0)      # screw speed [rad/s], load [N]
 
 
 @dataclass(frozen=True)
@@ -113,12 +113,12 @@ def carrier_time_constants(params: MechanismParams, screw_speed: float,
     """
     model = _dynamic_speed_model(params)
     omega, load = float(screw_speed), float(load_force)
-    u = (omega, load)
-    x = model.initial_state(u, carrier_ratio=None)
+    u = (0.0, load)
+    x = model.initial_state(u, screw_speed=omega, carrier_ratio=None)
     v_eps = params.slip_velocity_scale
     taus = []
     for k, s in enumerate(model.mechanism.stages):
-        i = 1 + k
+        i = 2 + k
         fl = s.flanks[0]
         # a thousandth of the carrier speed change that moves the slip across the friction band
         dw = max(1e-3 * v_eps / math.hypot(fl.bx, fl.by), 1e-9 * max(abs(x[i]), 1.0))
@@ -211,8 +211,9 @@ def _steady_outputs(params: MechanismParams) -> dict:
     from .quasi_static import QuasiStaticModel
 
     model = QuasiStaticModel(params, "speed")
-    u = _EFFICIENCY_POINT
-    return model.outputs(0.0, model.initial_state(u), u)
+    omega, load = _EFFICIENCY_POINT
+    u = (0.0, load)
+    return model.outputs(0.0, model.initial_state(u, screw_speed=omega), u)
 
 
 def steady_efficiency(params: MechanismParams) -> float:
@@ -320,10 +321,10 @@ def choose_for_start(params: MechanismParams, tolerance: float, drive: str, inpu
                      acceleration: float | None = None) -> AutoChoice:
     """:func:`choose_fidelity` at the start of a run (what simulate and the FMU use).
 
-    The operating point is the start: screw speed (``inputs[0]`` in the speed drive), load
-    ``inputs[1]``; the acceleration, unless given, is the quasi-static level's under the start
-    inputs (torque drive; 0 in the speed drive, where the speed is held); the start deviation is
-    the carriers' (``carrier_ratio`` None: at equilibrium) if the screw turns.
+    The operating point is the start: screw speed ``screw_speed``, load ``inputs[1]``; the
+    acceleration, unless given, is the quasi-static level's under the start inputs (torque
+    drive) or the prescribed one, ``inputs[0]`` (speed drive); the start deviation is the
+    carriers' (``carrier_ratio`` None: at equilibrium) if the screw turns.
 
     Parameters
     ----------
@@ -333,7 +334,7 @@ def choose_for_start(params: MechanismParams, tolerance: float, drive: str, inpu
     inputs : tuple
         Inputs at the start (drive input, load force).
     screw_speed : float
-        Torque drive: screw speed at the start [rad/s].
+        Screw speed at the start [rad/s].
     carrier_ratio : float or None
         Carrier speeds at the start as a fraction of the screw speed (None: equilibrium).
     comm_step : float, optional
@@ -345,7 +346,7 @@ def choose_for_start(params: MechanismParams, tolerance: float, drive: str, inpu
     from .quasi_static import QuasiStaticModel
 
     load = float(inputs[1])
-    omega = float(inputs[0]) if drive == "speed" else float(screw_speed)
+    omega = float(screw_speed)
     if acceleration is None:
         if drive == "torque":
             qs = QuasiStaticModel(params, "torque")
@@ -353,7 +354,7 @@ def choose_for_start(params: MechanismParams, tolerance: float, drive: str, inpu
             acceleration = qs.outputs(0.0, qs.initial_state(u, screw_speed=omega), u)[
                 "screw_acceleration"]
         else:
-            acceleration = 0.0
+            acceleration = float(inputs[0])
     deviation = 0.0
     if omega != 0.0 and carrier_ratio is not None:
         mech = Mechanism(params, "dynamic")

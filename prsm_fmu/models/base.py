@@ -2,15 +2,17 @@
 
 Drive modes
 -----------
-``torque``  (the FMU's): inputs u = (screw_torque [N·m], load_force [N]); the screw speed is a
-            state.
-``speed``   (the papers'): inputs u = (screw_speed [rad/s], load_force [N]); the screw speed is
-            prescribed, constant over each step (a change between steps is a step change,
-            whose kinetic-energy jump no work term accounts for), and the driven torques
-            are outputs.
+``torque``  (the FMU's): inputs u = (screw_torque [N·m], load_force [N]); the screw's motion
+            follows from the balances.
+``speed``   (the papers'): the screw's motion is prescribed.  Inputs u = (screw_acceleration
+            [rad/s²], load_force [N]), held over a step; the screw speed is a state that
+            integrates the prescribed acceleration, so a speed profile ω(t) is followed
+            exactly where it is piecewise linear (:func:`prsm_fmu.simulate` turns a profile
+            into accelerations, :mod:`prsm_fmu.profiles`).  The driven torques are outputs and
+            carry every inertia term J·α.
 
-State layout: ``screw_angle`` [rad], ``screw_speed`` [rad/s] (torque drive only), the carrier
-speeds ``carrier_k_speed`` [rad/s] (dynamic level only), then the energy accumulators
+State layout (both drives): ``screw_angle`` [rad], ``screw_speed`` [rad/s], the carrier speeds
+``carrier_k_speed`` [rad/s] (dynamic level only), then the energy accumulators
 ``input_work``, ``output_work``, ``friction_work`` [J] (integrals of motor power, load power and
 friction power).  Sign conventions: README.md "Conventions".
 """
@@ -48,14 +50,12 @@ class Model(ABC):
         self.mechanism = Mechanism(params, self.carriers)
         n = params.n_stages
         self.n_carrier_states = n if self.carriers == "dynamic" else 0
-        names = ["screw_angle"]
-        if drive == "torque":
-            names.append("screw_speed")
+        names = ["screw_angle", "screw_speed"]
         names += [f"carrier_{k}_speed" for k in range(1, self.n_carrier_states + 1)]
         names += ["input_work", "output_work", "friction_work"]
         self.state_names: tuple[str, ...] = tuple(names)
         self.n_states = len(names)
-        self._i_carrier = 2 if drive == "torque" else 1
+        self._i_carrier = 2
         self._torque_drive = drive == "torque"
         #: no losses outside the mechanism model (the hot path skips the hook)
         self._lossless = type(self)._extra_loss_torque is Model._extra_loss_torque
@@ -90,9 +90,9 @@ class Model(ABC):
         Parameters
         ----------
         u : tuple
-            Inputs at the start (the speed drive takes its screw speed from ``u[0]``).
+            Inputs at the start (unused; kept for the interface).
         screw_speed : float
-            Initial screw speed for the torque drive [rad/s].
+            Initial screw speed [rad/s] (speed drive: the prescribed speed at the start).
         screw_angle : float
             Initial screw angle [rad].
         carrier_ratio : float or None
@@ -103,20 +103,15 @@ class Model(ABC):
         -------
         list of float
         """
-        omega = float(u[0]) if self.drive == "speed" else float(screw_speed)
-        x = [float(screw_angle)]
-        if self.drive == "torque":
-            x.append(omega)
+        omega = float(screw_speed)
+        x = [float(screw_angle), omega]
         for s in self.mechanism.stages[: self.n_carrier_states]:
             ratio = s.zeta_geometric if carrier_ratio is None else float(carrier_ratio)
             x.append(ratio * omega)
         return x + [0.0, 0.0, 0.0]
 
     def _unpack(self, x, u):
-        if self.drive == "torque":
-            omega = x[1]
-            return omega, x[2:2 + self.n_carrier_states], u[1]
-        return float(u[0]), x[1:1 + self.n_carrier_states], u[1]
+        return x[1], x[2:2 + self.n_carrier_states], u[1]
 
     def _solve(self, x, u, detail: bool):
         omega, wp, load = self._unpack(x, u)
@@ -125,7 +120,7 @@ class Model(ABC):
             sol = self.mechanism.solve(omega, wp, load, torque=u[0] - loss, detail=detail)
             motor = u[0]
         else:
-            sol = self.mechanism.solve(omega, wp, load, acceleration=0.0, detail=detail)
+            sol = self.mechanism.solve(omega, wp, load, acceleration=u[0], detail=detail)
             motor = sol.motor_torque + loss
         return omega, wp, load, motor, loss, sol
 
@@ -147,18 +142,17 @@ class Model(ABC):
         """
         load = u[1]
         mech = self.mechanism
+        omega = x[1]
+        loss = 0.0 if self._lossless else self._extra_loss_torque(omega, load)
         if self._torque_drive:
-            omega = x[1]
             motor = u[0]
-            loss = 0.0 if self._lossless else self._extra_loss_torque(omega, load)
             alpha, _, acc, p_fric = mech.rates(omega, x[2:self._i_energy], load, motor - loss)
-            dx = [omega, alpha]
         else:
-            omega = u[0]
-            loss = self._extra_loss_torque(omega, load)
-            _, motor, acc, p_fric = mech.rates(omega, x[1:self._i_energy], load, acceleration=0.0)
+            alpha = u[0]
+            _, motor, acc, p_fric = mech.rates(omega, x[2:self._i_energy], load,
+                                               acceleration=alpha)
             motor += loss
-            dx = [omega]
+        dx = [omega, alpha]
         if self.n_carrier_states:
             dx += acc
         dx += (motor * omega, load * mech.c_out * omega, p_fric + loss * omega)
@@ -201,6 +195,18 @@ class Model(ABC):
         y["input_work"], y["output_work"], y["friction_work"] = x[ie], x[ie + 1], x[ie + 2]
         y["kinetic_energy"] = self.kinetic_energy(x, u)
         return y
+
+    def contact_diagnosis(self, x: list[float], u: tuple) -> str | None:
+        """Why the rigid contact has no solution at this state, or None where it has one.
+
+        Only the torque drive can meet such a state (a prescribed acceleration always has
+        exactly one solution); see :meth:`prsm_fmu.mechanics.Mechanism.diagnose`.
+        """
+        if not self._torque_drive or not is_finite_state(x):
+            return None
+        omega, wp, load = self._unpack(x, u)
+        loss = 0.0 if self._lossless else self._extra_loss_torque(omega, load)
+        return self.mechanism.diagnose(omega, wp, load, u[0] - loss)
 
     def kinetic_energy(self, x: list[float], u: tuple) -> float:
         """Kinetic energy of all moving parts [J]."""

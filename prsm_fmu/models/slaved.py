@@ -28,7 +28,7 @@ import math
 
 
 class SlavedAdvance:
-    """Exact step of a torque-driven model with slaved carriers (see module docstring).
+    """Exact step of a model with slaved carriers (see module docstring), either drive.
 
     Parameters
     ----------
@@ -94,9 +94,13 @@ class SlavedAdvance:
         return law
 
     def advance(self, x: list[float], u: tuple, h: float) -> list[float] | None:
-        """State after a step h [s] with inputs u held, or None if not exact (see module doc)."""
+        """State after a step h [s] with inputs u held, or None if not exact (see module doc).
+
+        Torque drive: u = (motor torque [N·m], load [N]); speed drive: u = (prescribed screw
+        acceleration [rad/s²], load [N]).
+        """
         w0 = x[1]
-        torque, load = u[0], u[1]
+        load = u[1]
         band = self.band_speed
         if abs(w0) < band or load == 0.0:
             return None
@@ -106,7 +110,12 @@ class SlavedAdvance:
             return None
         k_load, k_alpha, q_load, q_alpha, checks, loss_per_load = law
         loss = loss_per_load * abs(load) * sign_w
-        alpha = (torque - loss - k_load * load) / k_alpha
+        if self.model.drive == "torque":
+            torque = u[0]
+            alpha = (torque - loss - k_load * load) / k_alpha
+        else:
+            alpha = u[0]
+            torque = k_load * load + k_alpha * alpha + loss
         for c_load, c_alpha, positive in checks:
             if (c_load * load + c_alpha * alpha >= 0.0) != positive:
                 return None
@@ -125,10 +134,10 @@ class SlavedLevel:
     def closed_form_advance(self, t: float, x: list[float], u: tuple, h: float) -> list[float] | None:
         """State after a step h [s] in closed form, or None where it is not exact.
 
-        Speed drive: the derivative is constant over the step (ω held, no carrier state), so
-        one Euler step is exact. Torque drive: :class:`SlavedAdvance`.
+        Speed drive at constant speed (prescribed acceleration 0): the derivative is constant
+        over the step, so one Euler step is exact.  Otherwise :class:`SlavedAdvance`.
         """
-        if self.drive == "speed":
+        if self.drive == "speed" and u[0] == 0.0:
             return [xi + h * di for xi, di in zip(x, self.rhs(t, x, u))]
         adv = self.__dict__.get("_slaved_advance")
         if adv is None:

@@ -1,14 +1,14 @@
 """Seed 000 §3.1: the two-stage PRSM example of the multi-stage rigid-body Lagrange model.
 
 Source: ``000_a07c98907360be8b.txt`` §3.1 (geometry, masses, inertias, spline radius) and §3.2
-(friction coefficients).  Converted to SI: mm → m, kg·mm² → kg·m².
+(friction coefficients).  Converted to SI (``units.py``): mm → m, kg·mm² → kg·m² (× 1e-6).
 
 Assumptions, each because the text does not give the number:
 
 * Friction coefficients of the base case.  §3.1 gives none; §3.2 studies µ_SR ∈ {0.1, 0.2} and
   µ_SS ∈ {0.2, 0.3}.  We take the smallest pair of that study, µ_SR = 0.1 and µ_SS = 0.2, as the
-  base case; docs/model.md tables how the §3.1 figures (settling times 0.14 / 0.46 ms, efficiency
-  < 0.45 → ≈ 0.80) compare with this and with seed 002's µ_SR = 0.05.
+  base case; with it the model reproduces the §3.1 figures (settling times about 0.14 / 0.46 ms,
+  efficiency < 0.45 → ≈ 0.80; docs/paper_comparison.md, tests/test_seed000_paper.py).
 * Thrust-bearing (nut–screw) friction is ignored in seed 000 (§2.2), so µ_NS = 0.
 * The screw mass of stage 1 does not enter the dynamics (screw 1 does not translate); the value of
   seed 002 (0.051 kg) is used so that the preset validates.
@@ -23,9 +23,8 @@ from __future__ import annotations
 import math
 
 from ..params import MechanismParams, StageParams
+from .units import MM, KG_MM2
 
-MM = 1e-3
-KG_MM2 = 1e-9
 
 #: the seed 000 §3.1 operating point (not part of the parameters): screw speed [rad/s], load [N]
 SCENARIO = {"screw_speed": 100.0, "load_force": 5000.0, "t_end": 1e-3}

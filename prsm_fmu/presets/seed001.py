@@ -31,8 +31,8 @@ from __future__ import annotations
 import math
 
 from ..params import MechanismParams, StageParams
+from .units import MM
 
-MM = 1e-3
 STEEL_DENSITY = 7850.0  # kg/m³
 
 #: seed 001's kinematic check: screw speed [rad/s] and duration [s]

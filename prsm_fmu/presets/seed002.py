@@ -4,8 +4,8 @@ Source: ``002_dfce4e5c6f831e77.txt`` — the geometry table (radii, leads, start
 "numerical simulations" paragraph (masses, moments of inertia, µ_RS = 0.05, the 100 rad/s step
 and the 7000 N load) and the steady-state table (base scenario µ_SS = 0.10, µ_NS = 0.005).
 The geometry is that of seed ``000_a07c98907360be8b.txt`` §3.1, which also gives what seed 002
-omits: the flank angle β = 45° and the spline radius r_SS2 = 13 mm.  Converted to SI:
-mm → m, kg·mm² → kg·m².  Seed 002's "helix angles" 9.27° and 5.51° are the lead angles
+omits: the flank angle β = 45° and the spline radius r_SS2 = 13 mm.  Converted to SI
+(``units.py``): mm → m, kg·mm² → kg·m² (× 1e-6).  Seed 002's "helix angles" 9.27° and 5.51° are the lead angles
 atan(L_S / (2π r_S)) of the two screws, and its 20° "pressure angle" belongs to the ring-gear
 teeth, which these parameters do not describe.
 
@@ -27,9 +27,8 @@ from __future__ import annotations
 import math
 
 from ..params import MechanismParams, StageParams
+from .units import MM, KG_MM2
 
-MM = 1e-3
-KG_MM2 = 1e-9
 
 #: seed 002's operating point: screw speed [rad/s], load on nut 2 [N], simulated time [s]
 SCENARIO = {"screw_speed": 100.0, "load_force": 7000.0, "t_end": 0.5}

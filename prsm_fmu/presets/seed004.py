@@ -18,8 +18,9 @@ from __future__ import annotations
 import math
 
 from ..kinematics import RecirculatingParams
+from .units import MM
 
-MM = 1e-3
+
 
 #: seed 004's run: screw speed in the paper's sign [rad/s], duration [s], loads on the nut [N]
 SCENARIO = {"screw_speed": -4.0 * math.pi, "t_end": 1.0, "load_forces": (5e3, 10e3, 15e3)}

@@ -23,7 +23,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..cli import energy_balance_residual, is_settled, settling_time
+from ..cli import SETTLING_BAND, energy_balance_residual, is_settled, settling_time
 
 __all__ = ["settle", "value_at", "standard_metrics", "compute_metrics", "derive_series",
            "SERIES_KEEP", "stage_signals"]
@@ -47,8 +47,9 @@ def stage_signals(k: int) -> tuple[str, ...]:
     return tuple(f"stage[{k}].{s}" for s in STAGE_SIGNALS if k >= 2 or s != "spline_friction")
 
 
-def settle(time: Sequence[float], value: Sequence[float]) -> float:
-    """Settling time [s] of a signal (1 % band about its final value); NaN if not settled.
+def settle(time: Sequence[float], value: Sequence[float], band: float = SETTLING_BAND) -> float:
+    """Settling time [s] of a signal (band about its final value, default 1 %); NaN if not
+    settled.
 
     Samples before the first finite one are skipped (e.g. the friction torque at standstill).
     The band and the test of having settled are :func:`prsm_fmu.cli.settling_time` and
@@ -60,9 +61,9 @@ def settle(time: Sequence[float], value: Sequence[float]) -> float:
     if finite.size < 2:
         return math.nan
     t, z = t[finite[0]:], z[finite[0]:]
-    if not np.all(np.isfinite(z)) or not is_settled(t, z):
+    if not np.all(np.isfinite(z)) or not is_settled(t, z, band):
         return math.nan
-    return settling_time(t, z)
+    return settling_time(t, z, band)
 
 
 def value_at(res: Mapping[str, np.ndarray], name: str, t: float) -> float:

@@ -172,9 +172,8 @@ def simulate_point(params, scenario: Mapping[str, Any], backend: str,
                    tolerance: float = 1e-8) -> dict[str, np.ndarray]:
     """Run one scenario on the FMU or the model; the raw result (outputs → arrays).
 
-    ``backend = "model"`` calls :func:`prsm_fmu.simulate` with ``drive="speed"``; a ramp is
-    then held constant over each output interval at its mid-interval value (the speed drive
-    has no acceleration term: the screw's inertial torque is not in its driven torque).
+    ``backend = "model"`` calls :func:`prsm_fmu.simulate` with ``drive="speed"`` and the
+    prescribed profile (a ramp is followed exactly, with its inertial torque).
     ``backend = "fmu"`` runs the FMU with the speed prescribed by
     :class:`~prsm_fmu.sweep.fmu_runner.FmuRunner` (exact at every communication point; the
     driven torque includes the inertial torque of the ramp).
@@ -186,11 +185,12 @@ def simulate_point(params, scenario: Mapping[str, Any], backend: str,
     if backend == "model":
         from ..simulate import simulate
 
+        from ..profiles import RampSpeed
+
         if scenario["accel_time"] == 0.0:
             signal: Any = float(scenario["screw_speed"])
         else:
-            def signal(t: float) -> float:
-                return speed(t + 0.5 * h)
+            signal = RampSpeed(0.0, float(scenario["screw_speed"]), float(scenario["accel_time"]))
         return simulate(params, fidelity=fidelity, drive="speed", screw_speed=signal,
                         load_force=load, t_end=t_end, output_interval=h)
     if backend != "fmu":
