@@ -6,10 +6,10 @@ Usage::
 
 It writes ``OUT/paper_comparison.md`` and the figures ``OUT/figures/*.png``:
 
-* seed 000 §3.1 start-up (settling times, efficiencies, orderings) at the base case µ_SR = 0.1
+* Li et al. (2021) §3.1 start-up (settling times, efficiencies, orderings) at the base case µ_SR = 0.1
   (the ``seed000_two_stage`` preset), with the settling band's effect and µ_SR ∈ {0.05, 0.1, 0.2};
-* seed 000 §3.2 friction grid µ_SR ∈ {0.1, 0.2} × µ_SS ∈ {0.2, 0.3};
-* seed 000 §3.3 pitches summing to 4 mm;
+* Li et al. (2021) §3.2 friction grid µ_SR ∈ {0.1, 0.2} × µ_SS ∈ {0.2, 0.3};
+* Li et al. (2021) §3.3 pitches summing to 4 mm;
 * the seed 002 steady-state table (``seed002_two_stage``, 7000 N, 100 rad/s).
 
 Steady values come from :func:`prsm_fmu.steady_state` (root finding); transients from
@@ -46,14 +46,14 @@ __all__ = ["main", "generate", "COMMAND"]
 #: the command that regenerates the document
 COMMAND = "python -m prsm_fmu.report"
 
-SPEED = 100.0           # screw speed after the step [rad/s] (seed 000 §3.1, seed 002)
+SPEED = 100.0           # screw speed after the step [rad/s] (Li et al. (2021) §3.1, seed 002)
 LOAD_000 = 5000.0       # seed 000 load on nut 2 [N]
 LOAD_002 = 7000.0       # seed 002 load on nut 2 [N]
-T_END = 1e-3            # simulated time [s]
+T_END = 2e-3            # simulated time [s] (> 20 time constants of the slower carrier)
 INTERVAL = 1e-6         # output interval [s]
-T_CONTACT = 0.75e-3     # seed 000 §3.2 compares the contact force at t = 0 and t = 0.75 ms [s]
+T_CONTACT = 0.75e-3     # Li et al. (2021) §3.2 compares the contact force at t = 0 and t = 0.75 ms [s]
 
-# seed 000 §3.1 figures
+# Li et al. (2021) §3.1 figures
 PAPER_SETTLE = (0.14e-3, 0.46e-3)   # carrier 1, carrier 2 [s]
 PAPER_ETA_START = 0.45              # "less than 0.45 at the beginning"
 PAPER_ETA_END = 0.80                # "nearly to 0.80 at the steady state"
@@ -118,7 +118,7 @@ def _monotone(values: Sequence[float], increasing: bool) -> bool:
 
 def plot_runs(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str,
               title: str = "") -> None:
-    """Save a 2×2 figure like seed 000 Figs. 4 and 5 for several start-up runs.
+    """Save a 2×2 figure like Li et al. (2021) Figs. 4 and 5 for several start-up runs.
 
     Panels: (a) carrier speed ratios, (b) axial contact forces per roller F_Srzk [N],
     (c) efficiency η [-], (d) spline friction f_Sk [N] (k ≥ 2), against time in ms.  Runs are
@@ -139,7 +139,7 @@ def _section_startup(p0: MechanismParams, runs: dict[float, dict], fig_dir: str,
     r = runs[0.1]
     plot_startup([("µ_SR 0.1", r), ("µ_SR 0.05", runs[0.05])],
                  os.path.join(fig_dir, "seed000_startup.png"),
-                 title="seed 000 §3.1 start-up: 100 rad/s step, 5000 N "
+                 title="Li et al. (2021) §3.1 start-up: 100 rad/s step, 5000 N "
                        "(solid µ_SR 0.1, dashed µ_SR 0.05; µ_SS 0.2)")
     ts1, ts2 = _settle(r, 1), _settle(r, 2)
     m_ok, m_min = _always_greater(r, "stage[1].driven_torque", "stage[2].driven_torque")
@@ -165,7 +165,7 @@ def _section_startup(p0: MechanismParams, runs: dict[float, dict], fig_dir: str,
     ]
     n_agree = sum(row[-1] == _agree(True) for row in checks)
     differ = [row[0] for row in checks if row[-1] != _agree(True)]
-    table = markdown_table(["seed 000 §3.1 statement", "paper", "model, µ_SR = 0.1 (preset)",
+    table = markdown_table(["Li et al. (2021) §3.1 statement", "paper", "model, µ_SR = 0.1 (preset)",
                             "verdict"], checks + [
         ["energy-balance residual |W_in − W_out − W_f − ΔT| / W_in", "—",
          f"{energy_balance_residual(r):.1e}", "—"],
@@ -175,18 +175,23 @@ def _section_startup(p0: MechanismParams, runs: dict[float, dict], fig_dir: str,
     band_table = markdown_table(["band", "t_s1 [ms] (paper 0.14)", "t_s2 [ms] (paper 0.46)"],
                                 band_rows)
     mu_rows = []
+    prods: dict[int, list[float]] = {1: [], 2: []}
     for mu in sorted(runs):
         rm = runs[mu]
         t1, t2 = _settle(rm, 1), _settle(rm, 2)
+        prods[1].append(mu * t1)
+        prods[2].append(mu * t2)
         mu_rows.append([f"{mu:g}", _ms(t1), _ms(t2), f"{mu * t1 * 1e6:.2f}", f"{mu * t2 * 1e6:.2f}",
                         f"{rm['efficiency'][0]:.3f}", f"{rm['efficiency'][-1]:.3f}"])
     mu_table = markdown_table(["µ_SR", "t_s1 [ms]", "t_s2 [ms]", "µ_SR·t_s1 [µs]", "µ_SR·t_s2 [µs]",
                                "η(0)", f"η({T_END * 1e3:g} ms)"], mu_rows)
+    spread = {k: (max(v) - min(v)) / float(np.mean(v)) for k, v in prods.items()}
+    mus = sorted(runs)
     verdict = (f"All {len(checks)} statements agree." if not differ else
                f"{n_agree} of {len(checks)} statements agree; these differ: {'; '.join(differ)}.")
-    return f"""## 1. Seed 000 §3.1: start-up transient
+    return f"""## 1. Li et al. (2021) §3.1: start-up transient
 
-Scenario: the seed 000 §3.1 two-stage PRSM (preset `seed000_two_stage`: µ_SR = 0.1,
+Scenario: the Li et al. (2021) §3.1 two-stage PRSM (preset `seed000_two_stage`: µ_SR = 0.1,
 µ_SS = 0.2, µ_NS = 0), screw speed stepped to {SPEED:g} rad/s at t = 0 with both carriers at
 rest, F_N2 = {LOAD_000:g} N, dynamic level, outputs every {INTERVAL * 1e6:g} µs over
 {T_END * 1e3:g} ms.  Settling time: the first time after which |ζ − ζ_final| stays within
@@ -200,15 +205,18 @@ Regenerate: `{COMMAND}` (the µ_SR = 0.1 run alone: `prsm-fmu startup --out out`
 
 {verdict}
 
-![seed 000 §3.1 start-up]({fig_rel}/seed000_startup.png)
+![Li et al. (2021) §3.1 start-up]({fig_rel}/seed000_startup.png)
 
 The carriers approach their equilibrium exponentially, so the settling time depends on the
 band (base case):
 
 {band_table}
 
-Sensitivity to the screw–roller friction coefficient (µ_SS = 0.2; the carriers are driven only
-by that friction, so the product µ_SR·t_s is nearly constant):
+Sensitivity to the screw–roller friction coefficient (µ_SS = 0.2). The carriers are driven
+only by that friction, so their settling times scale roughly with 1/µ_SR: over µ_SR =
+{mus[0]:g} … {mus[-1]:g} the product µ_SR·t_s varies by {spread[1] * 100:.0f} % for carrier 1
+and {spread[2] * 100:.0f} % for carrier 2, while the efficiency moves with µ_SR through the slip
+losses.
 
 {mu_table}
 """
@@ -237,7 +245,7 @@ def _section_grid(p0: MechanismParams, runs: dict[tuple[float, float], dict], fi
                     "t_s1 [ms]", "t_s2 [ms]"], rows)
     plot_runs([(f"µ_SR {k[0]:g}, µ_SS {k[1]:g}", runs[k]) for k in sorted(runs)],
               os.path.join(fig_dir, "seed000_friction_grid.png"),
-              title="seed 000 §3.2 friction grid: 100 rad/s step, 5000 N")
+              title="Li et al. (2021) §3.2 friction grid: 100 rad/s step, 5000 N")
 
     mus_sr = sorted({k[0] for k in runs})
     mus_ss = sorted({k[1] for k in runs})
@@ -270,7 +278,7 @@ def _section_grid(p0: MechanismParams, runs: dict[tuple[float, float], dict], fi
             > ss[(s, mus_ss[0])]["stage[2].spline_friction"] for s in mus_sr)
     settle_faster = all(_settle(runs[(mus_sr[1], m)], j) < _settle(runs[(mus_sr[0], m)], j)
                         for m in mus_ss for j in (1, 2))
-    trends = markdown_table(["seed 000 §3.2 statement", "model", "verdict"], [
+    trends = markdown_table(["Li et al. (2021) §3.2 statement", "model", "verdict"], [
         ["efficiency decreases as µ_SR increases",
          f"η falls by ≥ {d_eta_sr:.3f} from µ_SR 0.1 to 0.2", _agree(eta_falls)],
         ["µ_SS has a slight effect on the efficiency",
@@ -289,7 +297,7 @@ def _section_grid(p0: MechanismParams, runs: dict[tuple[float, float], dict], fi
         ["f_S2 increases with both friction coefficients", "f_S2 grows with µ_SR and µ_SS",
          _agree(fs_up)],
     ])
-    return f"""## 2. Seed 000 §3.2: friction coefficients
+    return f"""## 2. Li et al. (2021) §3.2: friction coefficients
 
 Steady values (ζ, F_Srz per roller, η, f_S2) from `steady_state` at {SPEED:g} rad/s and
 {LOAD_000:g} N; the contact force at t = 0 and t = 0.75 ms and the settling times from the
@@ -299,7 +307,7 @@ dynamic start-up of §1. Regenerate: `{COMMAND}`.
 
 {trends}
 
-![seed 000 §3.2 friction grid]({fig_rel}/seed000_friction_grid.png)
+![Li et al. (2021) §3.2 friction grid]({fig_rel}/seed000_friction_grid.png)
 """
 
 
@@ -328,12 +336,12 @@ def _section_pitch(p0: MechanismParams, fig_dir: str, fig_rel: str,
                      f"{vals[-1]['f2']:.1f}", f"{vals[-1]['eta']:.4f}", f"{vals[-1]['fs']:.1f}",
                      _ms(t1), _ms(t2)])
     plot_runs(runs, os.path.join(fig_dir, "seed000_pitches.png"),
-              title="seed 000 §3.3 pitches (p1 + p2 = 4 mm): 100 rad/s step, 5000 N")
+              title="Li et al. (2021) §3.3 pitches (p1 + p2 = 4 mm): 100 rad/s step, 5000 N")
     table = markdown_table(["pitch 1 [mm]", "pitch 2 [mm]", "L_S1 [mm]", "L_S2 [mm]", "ζ_PS1", "ζ_PS2",
                     "F_Srz1 [N]", "F_Srz2 [N]", "η", "f_S2 [N]", "t_s1 [ms]", "t_s2 [ms]"], rows)
     col = {k: [v[k] for v in vals] for k in vals[0]}
     eta_range = max(col["eta"]) - min(col["eta"])
-    trends = markdown_table(["seed 000 §3.3 statement", "model", "verdict"], [
+    trends = markdown_table(["Li et al. (2021) §3.3 statement", "model", "verdict"], [
         ["F_Srz1 decreases as pitch 1 increases",
          f"F_Srz1 {col['f1'][0]:.1f} → {col['f1'][-1]:.1f} N", _agree(_monotone(col["f1"], False))],
         ["pitches have little influence on the efficiency (sum constant)",
@@ -356,7 +364,7 @@ def _section_pitch(p0: MechanismParams, fig_dir: str, fig_rel: str,
          f"{_ms(col['t2'][-1])} → {_ms(col['t2'][0])} ms",
          _agree(_monotone(col["z2"], True) and _monotone(col["t2"], False))],
     ])
-    return f"""## 3. Seed 000 §3.3: thread pitches summing to 4 mm
+    return f"""## 3. Li et al. (2021) §3.3: thread pitches summing to 4 mm
 
 Pitch of screw 1 p1 ∈ {{1, 1.5, 2, 2.5, 3}} mm, pitch of screw 2 p2 = 4 mm − p1; 5 starts on
 every screw, so each stage's lead is 5 × its pitch (`params.with_stage(k, screw_lead=...)`;
@@ -367,7 +375,7 @@ radii, rollers and masses unchanged, µ_SR = 0.1, µ_SS = 0.2). Steady values fr
 
 {trends}
 
-![seed 000 §3.3 pitches]({fig_rel}/seed000_pitches.png)
+![Li et al. (2021) §3.3 pitches]({fig_rel}/seed000_pitches.png)
 """
 
 
@@ -394,7 +402,7 @@ def _section_002(fig_rel: str, zetas_seen: list[float]) -> str:
                     "F_RG model"], rows)
     ttable = markdown_table(["scenario", "η(0) model (paper ≈ 0.60)",
                      "t_s1 model [ms] (paper ≈ 50 ms)", "t_s2 model [ms] (paper ≈ 150 ms)",
-                     "η(1 ms) model"], trans)
+                     f"η({T_END * 1e3:g} ms) model"], trans)
     base = presets.load("seed002_two_stage")
     st1, st2 = base.stages
     roll1 = st1.screw_radius / (st1.screw_radius + st1.nut_radius)
@@ -412,7 +420,14 @@ def _section_002(fig_rel: str, zetas_seen: list[float]) -> str:
     z2_gt = all(s["stage[2].carrier_speed_ratio"] > s["stage[1].carrier_speed_ratio"]
                 for s in ss.values())
     r_fit = brentq(lambda x: eta_at(x) - PAPER_002["high_mu_ns"][2], 1e-5, r_ns, xtol=1e-8)
-    return f"""## 4. Seed 002: steady-state table (two-stage, 7000 N, 100 rad/s)
+    r_spline = st2.spline_radius
+    bearing_verdict = (
+        f", smaller than screw 2's spline radius ({r_spline * 1e3:g} mm) on which such a bearing "
+        "would sit, so the paper's µ_NS effect is not consistent with a thrust bearing of "
+        "plausible radius loaded by the full load" if r_fit < r_spline else
+        f", not smaller than screw 2's spline radius ({r_spline * 1e3:g} mm): a plausible "
+        "thrust-bearing radius")
+    return f"""## 4. The assembly article: steady-state table (two-stage, 7000 N, 100 rad/s)
 
 Preset `seed002_two_stage` (µ_SR = 0.05; thrust-bearing radius r_NS1 = {r_ns * 1e3:g} mm, an
 assumption stated in `prsm_fmu/presets/seed002.py`) and its variants high µ_SS and high µ_NS;
@@ -422,7 +437,7 @@ F_N2 = {LOAD_002:g} N, {SPEED:g} rad/s. Steady values from `steady_state`. Regen
 {table}
 
 The gear-ring forces F_RG1 and F_RG2 are **not modelled**: the roller–nut contact is a
-workless rolling constraint (docs/model.md §1, assumption 4) and the ring-gear teeth are not
+workless rolling constraint ([model.md](model.md) §1, assumption 4) and the ring-gear teeth are not
 part of the parameters.
 
 Start-up transient (dynamic level, carriers at rest at t = 0, {T_END * 1e3:g} ms):
@@ -430,7 +445,7 @@ Start-up transient (dynamic level, carriers at rest at t = 0, {T_END * 1e3:g} ms
 {ttable}
 
 The paper's settling times (≈ 0.05 s and 0.15 s, from an integration step of 1 ms) are
-{slow[0]:.0f}× and {slow[1]:.0f}× the model's (base scenario), and far longer than seed 000's
+{slow[0]:.0f}× and {slow[1]:.0f}× the model's (base scenario), and far longer than Li et al.'s
 0.14 / 0.46 ms for the same geometry; a 1 ms step cannot resolve a sub-millisecond transient.
 
 **Carrier speed ratios.** In the model ζ_PS1 = {ss['base']['stage[1].carrier_speed_ratio']:.4f}
@@ -439,7 +454,7 @@ the paper's 0.195 / 0.198. At steady state nothing but the screw–roller fricti
 carrier (the roller–nut contact rolls, the journals are frictionless), so that friction must
 do no virtual work on it: the slip must be perpendicular to ∂s/∂ω_P, which fixes
 ζ = ζ* = −(a·b)/(b·b), a property of the contact geometry alone, independent of µ_SR, µ_SS,
-µ_NS, load and speed (docs/model.md §4). For any consistent standard geometry
+µ_NS, load and speed ([model.md](model.md) §4). For any consistent standard geometry
 (r_N = r_S + 2r_R = n_S r_R) ζ* lies just below the pure-rolling ratio r_S/(r_S + r_N)
 ({roll1:.4f} for stage 1, {roll2:.4f} for stage 2); across every steady state of this document
 (§§2–4, {len(zetas_seen)} values) it stays within {z_lo:.4f} … {z_hi:.4f}. A carrier turning at 0.195 ω would leave a large slip whose friction
@@ -455,9 +470,7 @@ lowers η by {d_eta_ss_model:.4f} in the model and by 0.002 in the paper (both s
 r_NS1 = {r_ns * 1e3:g} mm the bearing torque µ_NS·F·r_NS1 =
 {0.105 * LOAD_002 * r_ns:.2f} N·m is comparable with the {ss['base']['screw_torque']:.2f} N·m
 motor torque of the base case. The paper's 0.832 needs r_NS1 ≈ {r_fit * 1e3:.2f} mm in this
-model, smaller than screw 2's spline radius (13 mm) on which such a bearing would sit, so the
-paper's µ_NS effect is not consistent with a thrust bearing of plausible radius loaded by the
-full 7000 N; seed 002 does not give r_NS.
+model{bearing_verdict}; the assembly article does not give r_NS.
 """
 
 
@@ -494,12 +507,16 @@ def generate(out_dir: str = "docs") -> str:
     parts = [
         "# The model beside the seed papers\n",
         f"Generated by `{COMMAND}` (do not edit by hand; rerun it after changing the model). "
-        "Papers: `shared/seeds/000_a07c98907360be8b.txt` (seed 000) §3 and "
-        "`shared/seeds/002_dfce4e5c6f831e77.txt` (seed 002). Model: docs/model.md. "
+        "Papers (full references in [references.md](references.md)): Li, Liu, Fu and Ma, "
+        "\"Lagrange-method-based dynamic analysis of multi-stage planetary roller screw "
+        "mechanism\", Mechanical Sciences 12, 471–483 (2021), doi:10.5194/ms-12-471-2021, "
+        "cited as Li et al. (2021), §3; and the article \"Rigid-Body Dynamic Modeling and "
+        "Analysis of Multi-Stage Planetary Roller Screw Assembly\" (author not stated), cited as "
+        "the assembly article. Model: [model.md](model.md). "
         "F_Srzk is the axial component of the screw–roller normal force per roller "
         "(`stage[k].contact_force`), M_Sk the torque driving screw k, f_S2 the spline friction "
         "between screws 1 and 2, ζ_PSk the carrier-to-screw speed ratio and η = F_N ΣL_S / "
-        "(2π M_S1) (seed 000 Eq. 28). Dynamic runs use `simulate`'s default stepper for the "
+        "(2π M_S1) (Li et al. 2021, Eq. 28). Dynamic runs use `simulate`'s default stepper for the "
         f"dynamic level ({DEFAULT_STEPPER['dynamic']}) and tolerances.\n",
         _section_startup(p0, startup_runs, fig_dir, fig_rel),
         _section_grid(p0, grid_runs, fig_dir, fig_rel, zetas_seen),
