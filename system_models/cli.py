@@ -155,12 +155,16 @@ def _cmd_run(args, ap) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``prsm-ema``; returns the exit status."""
+    """Entry point of ``prsm-ema``; returns the exit status (2: a bad argument, one line on
+    stderr; 0 for ``--help``)."""
     ap = build_parser()
-    args = ap.parse_args(argv)
-    if args.command == "list":
-        return _cmd_list()
-    return _cmd_run(args, ap)
+    try:
+        args = ap.parse_args(argv)
+        if args.command == "list":
+            return _cmd_list()
+        return _cmd_run(args, ap)
+    except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
 
 
 if __name__ == "__main__":
