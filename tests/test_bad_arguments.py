@@ -184,8 +184,8 @@ CASES: list[tuple[str, list[str], str]] = [
                   FILE + "/sub"], "--out"),
 ]
 
-#: lines run through the installed console scripts as well (one per script, a few more)
-SUBPROCESS = [0, 3, 29, 42, 80, 88, 93, 99]
+#: lines run through the installed console scripts as well (every script, a few each)
+SUBPROCESS = [0, 3, 29, 42, 80, 81, 86, 88, 93, 99]
 
 
 def _main(script: str):
@@ -286,4 +286,5 @@ def test_the_console_scripts_answer_the_same_way(tmp_path, files):
                             f"{proc.stdout!r}, stderr {proc.stderr!r}")
     print(f"tried {tried} bad command lines through the console scripts")
     assert tried == len(SUBPROCESS)
+    assert {CASES[i][0] for i in SUBPROCESS} == {"prsm-fmu", "prsm-fmu-build", "prsm-ema"}
     assert not failures, "\n".join(failures)
