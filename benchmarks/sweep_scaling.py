@@ -61,9 +61,10 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=2, help="runs per configuration (best counts)")
     args = ap.parse_args()
 
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
     from prsm_fmu.sweep import ensure_fmus, load_study, run_study
+    from prsm_fmu.sweep.execute import local_cluster
 
     tmp = tempfile.mkdtemp(prefix="prsm_sweep_scaling_")
     fmu_dir = os.path.join(tmp, "fmu")
@@ -91,8 +92,7 @@ def main() -> None:
     t_loop = timed("loop", executor="loop")
     clusters = {}
     for workers in (1, 2):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0")
+        cluster = local_cluster(workers)          # the sweep's own (loopback only)
         client = Client(cluster)
         client.run(lambda: __import__("prsm_fmu.sweep.points"))    # imports done before timing
         clusters[workers] = (cluster, client)

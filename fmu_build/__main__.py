@@ -1,43 +1,90 @@
-"""Command line: ``python -m fmu_build [PRSM1 PRSM2 PRSM3 | --all] [--dest DIR]``.
+"""Command line ``prsm-fmu-build`` (also ``python -m fmu_build``): build the PRSM FMUs.
 
-Also ``--preset NAME --name ID`` to build an FMU from any preset of ``prsm_fmu.presets``
-(``ID`` is the FMI modelIdentifier, e.g. ``PRSM2_seed002``).
+::
+
+    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--dest DIR] [--no-validate]
+    prsm-fmu-build --preset NAME --name ID [--dest DIR]
+
+A bad argument is answered with one line naming it and its allowed values, exit status 2,
+before anything is built (:mod:`prsm_fmu.arguments`); a failed build exits with 1.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
+
+from prsm_fmu.arguments import ArgumentParser, one_line, writable_dir
 
 from . import FMUS, BuildError, build_fmu, build_named
 
+DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
+               "DIR: PRSM2 by default, any of the standard FMUs by name or all with --all, or "
+               "an FMU from any preset of prsm_fmu.presets with --preset NAME --name ID (ID "
+               "is the FMI modelIdentifier, e.g. PRSM2_seed002). Each FMU is checked with "
+               "fmpy validate and the project's modelDescription rules unless --no-validate. "
+               "Also runs as 'python -m fmu_build'.")
 
-def main(argv: list[str] | None = None) -> int:
-    """Build the FMUs named on the command line; return the exit status."""
-    ap = argparse.ArgumentParser(prog="python -m fmu_build", description=__doc__.splitlines()[0])
+
+def build_parser() -> ArgumentParser:
+    """The argument parser of ``prsm-fmu-build``."""
+    ap = ArgumentParser(prog="prsm-fmu-build", description=DESCRIPTION)
     ap.add_argument("names", nargs="*", metavar="FMU",
                     help=f"FMUs to build, of {', '.join(FMUS)} (default: PRSM2)")
     ap.add_argument("--all", action="store_true", help="build every standard FMU")
     ap.add_argument("--preset", help="build from this preset of prsm_fmu.presets instead")
     ap.add_argument("--name", help="FMU name (modelIdentifier) for --preset, e.g. PRSM2_seed002")
-    ap.add_argument("--dest", default="dist", help="output directory (default: dist)")
+    ap.add_argument("--dest", type=writable_dir, default="dist", metavar="DIR",
+                    help="output directory (default: dist)")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Build the FMUs named on the command line; return the exit status.
+
+    Returns
+    -------
+    int
+        0 if every FMU was built, 1 if a build failed, 2 for bad arguments.
+    """
+    ap = build_parser()
+    try:
+        args = ap.parse_args(argv)
+    except SystemExit as exc:           # --help (0) or a bad argument (2, one line printed)
+        return exc.code if isinstance(exc.code, int) else 2
     check = not args.no_validate
     try:
         if args.preset:
             from prsm_fmu import presets
+            from prsm_fmu.params import MechanismParams
 
             if args.names or args.all or not args.name:
-                ap.error("--preset needs --name and no FMU names")
-            targets = [build_fmu(args.name, presets.load(args.preset), args.preset, args.dest,
-                                 check)]
+                ap.error("argument --preset: needs --name ID and no FMU names or --all")
+            if not args.name.isidentifier():
+                ap.error(f"argument --name: {args.name!r} is not allowed: must be a valid "
+                         "identifier (the FMI modelIdentifier), e.g. PRSM2_seed002")
+            try:
+                params = presets.load(args.preset)
+            except ValueError as exc:
+                ap.error(f"argument --preset: {exc}")
+            if not isinstance(params, MechanismParams):
+                ap.error(f"argument --preset: {args.preset!r} is not a planetary roller screw "
+                         "mechanism the FMU can run: must be one of "
+                         + ", ".join(n for n in presets.names()
+                                     if isinstance(presets.load(n), MechanismParams)))
+            targets = [build_fmu(args.name, params, args.preset, args.dest, check)]
         else:
+            unknown = [n for n in args.names if n not in FMUS]
+            if unknown:
+                ap.error(f"argument FMU: invalid choice(s) {', '.join(map(repr, unknown))}: "
+                         f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
             targets = [build_named(n, args.dest, check) for n in names]
-    except (BuildError, ValueError) as exc:
-        print(f"fmu_build: {exc}", file=sys.stderr)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else 2
+    except (BuildError, ValueError, OSError) as exc:
+        print(f"prsm-fmu-build: error: {one_line(exc)}", file=sys.stderr)
         return 1
     for t in targets:
         print(t)

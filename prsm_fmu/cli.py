@@ -13,6 +13,7 @@ Subcommands::
                      [--stability-factor N] [--ends ENDS] [--teeth Z_R,Z_IG] [--set NAME=VALUE]
     prsm-fmu regress [--update] [--fmu PRSM2.fmu] [--baselines DIR|FMU] [--case NAME ...]
                      [--set NAME=VALUE] [--out DIR]
+    prsm-fmu plot    RESULT.csv --fmu PRSM2.fmu [--out RESULT.png] [--variables NAME ...]
 
 ``startup`` runs the start-up scenario of seed 000 §3.1 (the screw speed stepped at t = 0 with
 the carriers at rest, a constant load on the last nut), prints a table, the carriers' settling
@@ -21,7 +22,11 @@ times and the run's cost and energy balance, and writes ``startup.csv`` and ``st
 ``sweep`` runs a parameter study (:mod:`prsm_fmu.sweep`, docs/sweeps.md) and ``check`` the
 design checks of seed 001 (:mod:`prsm_fmu.design_checks`).  ``regress`` compares the built
 FMU's outputs with the stored baselines (:mod:`prsm_fmu.regress`, docs/regression.md).
-All quantities are SI (m, N, N·m, rad/s, s, W, J).
+``plot`` draws the result CSV of ``fmpy simulate`` with the FMU's units
+(:mod:`prsm_fmu.result_plot`).  A bad argument is answered with one line naming it and its
+allowed values, exit status 2, before anything is computed (:mod:`prsm_fmu.arguments`).
+All quantities are SI (m, N, N.m, rad/s, s, W, J); units are spelled as in the FMU
+(:mod:`prsm_fmu.units`).
 
 The helpers :func:`settling_time`, :func:`energy_balance_residual`, :func:`write_csv` and
 :func:`plot_startup` are shared with :mod:`prsm_fmu.report`.
@@ -39,11 +44,15 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from . import presets as _presets
+from .arguments import (ArgumentParser, existing_dir, existing_file, finite_float, float_in,
+                        int_in, nonzero_float, one_line, positive_float, writable_dir)
+from .fmu_variables import Variable, fmu_variables
 from .models import FIDELITIES
 from .params import MechanismParams
 from .simulate import simulate
 from .steady_state import steady_state
 from .steppers import StepFailure
+from .units import DIMENSIONLESS, MILLISECOND, NEWTON, NEWTON_METRE, label, unit_of
 
 __all__ = ["main", "build_parser", "settling_time", "is_settled", "energy_balance_residual", "unit_of",
            "write_csv", "plot_startup", "startup_table"]
@@ -54,38 +63,9 @@ SETTLING_BAND = 0.01
 #: steppers accepted by ``--stepper`` (see prsm_fmu.steppers)
 STEPPERS = ("rk4", "explicit_adaptive", "rosenbrock", "radau")
 
-# unit of each output, by full name or by the part after "stage[k]."
-_UNITS = {
-    "time": "s", "screw_speed": "rad/s", "screw_angle": "rad", "screw_acceleration": "rad/s^2",
-    "screw_torque": "N·m", "rod_position": "m", "rod_velocity": "m/s", "load_force": "N",
-    "contact_force": "N", "normal_force": "N", "driven_torque": "N·m", "spline_friction": "N",
-    "carrier_speed": "rad/s", "carrier_speed_ratio": "-", "efficiency": "-",
-    "friction_power": "W", "input_power": "W", "output_power": "W", "input_work": "J",
-    "output_work": "J", "friction_work": "J", "kinetic_energy": "J", "rod_force": "N",
-    "bearing_force": "N", "residual_norm": "-",
-}
-
-
 # ---------------------------------------------------------------------------------------------
 # analysis helpers (also used by prsm_fmu.report)
 # ---------------------------------------------------------------------------------------------
-def unit_of(name: str) -> str:
-    """SI unit of an output name, e.g. ``"stage[2].driven_torque"`` → ``"N·m"``.
-
-    Parameters
-    ----------
-    name : str
-        Output name of the vocabulary in README.md "Conventions" (``time`` included).
-
-    Returns
-    -------
-    str
-        The unit, ``"-"`` for dimensionless quantities, ``"?"`` if the name is not known.
-    """
-    base = name.split(".", 1)[1] if name.startswith("stage[") and "." in name else name
-    return _UNITS.get(base, "?")
-
-
 def settling_time(time: Sequence[float], value: Sequence[float],
                   band: float = SETTLING_BAND) -> float:
     """First time after which a signal stays within ``band`` of its final value.
@@ -183,8 +163,9 @@ def _output_columns(res: Mapping[str, np.ndarray]) -> list[str]:
 def write_csv(res: Mapping[str, np.ndarray], path: str) -> None:
     """Write every time series of a simulate result to a CSV file.
 
-    The header names each column with its unit, e.g. ``time [s],screw_speed [rad/s],...``;
-    the values are written with 12 significant digits.  UTF-8 (the unit ``N·m``).
+    The header names each column with its unit as the FMU spells it
+    (:mod:`prsm_fmu.units`), e.g. ``time [s],screw_speed [rad/s],...``; the values are written
+    with 12 significant digits.  UTF-8.
 
     Parameters
     ----------
@@ -197,7 +178,7 @@ def write_csv(res: Mapping[str, np.ndarray], path: str) -> None:
     data = np.column_stack([res[c] for c in cols])
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow([f"{c} [{unit_of(c)}]" for c in cols])
+        w.writerow([label(c, unit_of(c)) for c in cols])
         for row in data:
             w.writerow([f"{v:.12g}" for v in row])
 
@@ -213,8 +194,8 @@ def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str
                  title: str = "") -> None:
     """Save a 2×2 figure like seed 000 Fig. 3 for one or more start-up runs.
 
-    Panels: (a) carrier speed ratios ζ_k; (b) driven torques M_Sk [N·m]; (c) axial contact
-    forces per roller F_Srzk [N]; (d) efficiency η [-] (left axis) and spline friction f_Sk
+    Panels: (a) carrier speed ratios ζ_k; (b) driven torques M_Sk [N.m]; (c) axial contact
+    forces per roller F_Srzk [N]; (d) efficiency η [1] (left axis) and spline friction f_Sk
     [N] of stages k ≥ 2 (right axis, dotted), all against time in ms.  Stages are told apart
     by colour, runs by line style.  Uses matplotlib's Agg backend (no display needed).
 
@@ -237,9 +218,9 @@ def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str
     fig, axes = plt.subplots(2, 2, figsize=(10, 7.5), sharex=True)
     ax_z, ax_m, ax_f, ax_e = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
     ax_h = ax_e.twinx()
-    for j, (label, res) in enumerate(runs):
+    for j, (run_label, res) in enumerate(runs):
         ls = styles[j % len(styles)]
-        suffix = f", {label}" if label else ""
+        suffix = f", {run_label}" if run_label else ""
         t_ms = np.asarray(res["time"]) * 1e3
         n = _n_stages(res)
         for k in range(1, n + 1):
@@ -254,17 +235,17 @@ def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str
                 ax_h.plot(t_ms, res[f"stage[{k}].spline_friction"], ls, color=c, alpha=0.8,
                           label=f"f_S{k}{suffix}")
         ax_e.plot(t_ms, res["efficiency"], ls, color="black", label=f"η{suffix}")
-    ax_z.set_ylabel("carrier speed ratio ζ_PSk [-]")
+    ax_z.set_ylabel(label("carrier speed ratio ζ_PSk", DIMENSIONLESS))
     ax_z.set_title("(a) carrier speed ratios")
-    ax_m.set_ylabel("driven torque M_Sk [N·m]")
+    ax_m.set_ylabel(label("driven torque M_Sk", NEWTON_METRE))
     ax_m.set_title("(b) driven torques")
-    ax_f.set_ylabel("axial contact force per roller F_Srzk [N]")
+    ax_f.set_ylabel(label("axial contact force per roller F_Srzk", NEWTON))
     ax_f.set_title("(c) screw–roller axial contact forces")
-    ax_e.set_ylabel("efficiency η [-]")
-    ax_h.set_ylabel("spline friction f_Sk [N]")
+    ax_e.set_ylabel(label("efficiency η", DIMENSIONLESS))
+    ax_h.set_ylabel(label("spline friction f_Sk", NEWTON))
     ax_e.set_title("(d) efficiency (black) and spline friction (colour)")
     for ax in (ax_f, ax_e):
-        ax.set_xlabel("time [ms]")
+        ax.set_xlabel(label("time", MILLISECOND))
     for ax in (ax_z, ax_m, ax_f):
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="best")
@@ -289,21 +270,22 @@ def _sample_indices(time: np.ndarray, n_rows: int = 11) -> list[int]:
 def startup_table(res: Mapping[str, np.ndarray], n_rows: int = 11) -> str:
     """The start-up run as a fixed-width text table at ~``n_rows`` evenly spaced times.
 
-    Columns: time [ms], ζ_PSk [-], M_Sk [N·m], F_Srzk [N] for every stage k, f_Sk [N] for
-    k ≥ 2 and η [-].
+    Columns: time [ms], ζ_PSk [1], M_Sk [N.m], F_Srzk [N] for every stage k, f_Sk [N] for
+    k ≥ 2 and η [1] (units spelled as in :mod:`prsm_fmu.units`).
     """
     t = np.asarray(res["time"])
     n = _n_stages(res)
-    cols: list[tuple[str, Callable[[int], float]]] = [("time [ms]", lambda i: t[i] * 1e3)]
+    cols: list[tuple[str, Callable[[int], float]]] = [(label("time", MILLISECOND),
+                                                        lambda i: t[i] * 1e3)]
     for k in range(1, n + 1):
-        cols.append((f"ζ_PS{k} [-]", lambda i, k=k: res[f"stage[{k}].carrier_speed_ratio"][i]))
+        cols.append((label(f"ζ_PS{k}", DIMENSIONLESS), lambda i, k=k: res[f"stage[{k}].carrier_speed_ratio"][i]))
     for k in range(1, n + 1):
-        cols.append((f"M_S{k} [N·m]", lambda i, k=k: res[f"stage[{k}].driven_torque"][i]))
+        cols.append((label(f"M_S{k}", NEWTON_METRE), lambda i, k=k: res[f"stage[{k}].driven_torque"][i]))
     for k in range(1, n + 1):
-        cols.append((f"F_Srz{k} [N]", lambda i, k=k: res[f"stage[{k}].contact_force"][i]))
+        cols.append((label(f"F_Srz{k}", NEWTON), lambda i, k=k: res[f"stage[{k}].contact_force"][i]))
     for k in range(2, n + 1):
-        cols.append((f"f_S{k} [N]", lambda i, k=k: res[f"stage[{k}].spline_friction"][i]))
-    cols.append(("η [-]", lambda i: res["efficiency"][i]))
+        cols.append((label(f"f_S{k}", NEWTON), lambda i, k=k: res[f"stage[{k}].spline_friction"][i]))
+    cols.append((label("η", DIMENSIONLESS), lambda i: res["efficiency"][i]))
     widths = [max(len(h), 10) for h, _ in cols]
     lines = ["  ".join(h.rjust(w) for (h, _), w in zip(cols, widths))]
     for i in _sample_indices(t, n_rows):
@@ -318,31 +300,30 @@ def startup_table(res: Mapping[str, np.ndarray], n_rows: int = 11) -> str:
 # ---------------------------------------------------------------------------------------------
 # argument types
 # ---------------------------------------------------------------------------------------------
-def _finite_float(text: str) -> float:
-    """argparse type: a finite number."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"{text!r} is out of range: must be a finite number")
-    return v
+#: schemes of the Dask scheduler addresses ``--scheduler`` takes
+SCHEDULER_SCHEMES = ("tcp", "tls", "ucx", "ws", "wss")
 
 
-def _nonzero_float(text: str) -> float:
-    """argparse type: a finite, non-zero number."""
-    v = _finite_float(text)
-    if v == 0.0:
-        raise argparse.ArgumentTypeError(f"{text!r} is out of range: must be non-zero")
-    return v
-
-
-def _positive_float(text: str) -> float:
-    """argparse type: a finite number > 0."""
-    v = _finite_float(text)
-    if not v > 0.0:
-        raise argparse.ArgumentTypeError(f"{text!r} is out of range: must be > 0")
-    return v
+def _scheduler_address(text: str) -> str:
+    """argparse type of ``--scheduler``: ``[SCHEME://]HOST[:PORT]`` of a Dask scheduler."""
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    host, port = rest, ""
+    if rest.startswith("["):                      # [IPv6]:port
+        end = rest.find("]")
+        host, port = rest[:end + 1], rest[end + 1:].removeprefix(":")
+    elif rest.count(":") == 1:
+        host, port = rest.split(":")
+    ok = (scheme in SCHEDULER_SCHEMES and host and not any(c.isspace() or c in "/?#"
+                                                           for c in host)
+          and (not port or (port.isdigit() and 1 <= int(port) <= 65535)))
+    if not ok:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a Dask scheduler address: must be SCHEME://HOST:PORT with SCHEME "
+            f"one of {', '.join(SCHEDULER_SCHEMES)} and PORT in [1, 65535], e.g. "
+            "tcp://host:8786")
+    return text
 
 
 def _mechanism_names() -> list[str]:
@@ -385,7 +366,7 @@ def cmd_startup(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
                      f"--interval {args.interval!r} s")
     if n_steps > 10_000_000:
         parser.error(f"argument --interval: {args.interval!r} s gives {n_steps} output "
-                     "intervals over --t-end; at most 10 000 000")
+                     "intervals over --t-end; must give at most 10 000 000")
     params: MechanismParams = args.preset
     res = simulate(params, fidelity=args.fidelity, drive="speed", screw_speed=args.speed,
                    load_force=args.load, t_end=args.t_end, output_interval=args.interval,
@@ -472,13 +453,13 @@ def cmd_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from .sweep import StudyError, load_study, run_study
 
     if args.scheduler and (args.workers or args.no_dask):
-        parser.error("argument --scheduler: not allowed with --workers or --no-dask")
+        parser.error("argument --scheduler: must not be combined with --workers or --no-dask")
     if args.workers is not None and args.no_dask:
-        parser.error("argument --workers: not allowed with --no-dask")
+        parser.error("argument --workers: must not be combined with --no-dask")
     try:
         study = load_study(args.study, backend=args.backend)
     except (OSError, StudyError) as exc:
-        parser.error(f"argument STUDY: {exc}")
+        parser.error(f"argument STUDY: {exc}; must be a study file (TOML, docs/sweeps.md)")
     n_points = len(study.points())
     where = "this process" if args.no_dask else (
         f"the Dask cluster at {args.scheduler}" if args.scheduler else
@@ -491,8 +472,8 @@ def cmd_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
                         scheduler=args.scheduler, workers=args.workers, fmu_dir=args.fmu_dir,
                         resume=not args.rerun_all, figures=not args.no_figures,
                         progress=None if args.quiet else sys.stderr)
-    except (ValueError, RuntimeError, FileNotFoundError) as exc:
-        print(f"prsm-fmu: error: {exc}", file=sys.stderr)
+    except (ValueError, RuntimeError, OSError) as exc:
+        print(f"prsm-fmu: error: {one_line(exc)}", file=sys.stderr)
         return 1
     n_ok = sum(1 for r in res.rows if r.get("status") == "ok")
     print(f"{n_ok} of {len(res.rows)} points ok ({res.skipped} from an earlier run), "
@@ -524,13 +505,14 @@ def _set_value(text: str) -> tuple[str, object]:
         kind = ""
     if kind not in ("mechanism", "stage"):
         raise argparse.ArgumentTypeError(
-            f"{name!r} is not a mechanism or stage parameter (mu_screw_roller, mu_spline, "
-            "mu_nut_screw, slip_velocity_scale, stage[k].<field>, stage[k].pitch)")
+            f"{name!r} is not a mechanism or stage parameter: must be one of mu_screw_roller, "
+            "mu_spline, mu_nut_screw, slip_velocity_scale, stage[k].<field>, stage[k].pitch")
     integer = name.endswith((".screw_starts", ".n_rollers", ".carriers"))
     try:
-        v: object = int(value) if integer else _finite_float(value)
+        v: object = int(value) if integer else finite_float(value)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{name} = {value!r} is not an integer") from None
+        raise argparse.ArgumentTypeError(f"{name} = {value!r} is not allowed: must be an "
+                                         "integer") from None
     return name, v
 
 
@@ -548,7 +530,7 @@ def _teeth(text: str) -> tuple[int, int]:
 def _fractions(text: str) -> tuple[float, ...]:
     """argparse type of ``--sections F1,F2,...``."""
     try:
-        values = tuple(_positive_float(x) for x in text.split(","))
+        values = tuple(positive_float(x) for x in text.split(","))
     except argparse.ArgumentTypeError as exc:
         raise argparse.ArgumentTypeError(f"{text!r}: {exc}") from None
     return values
@@ -572,6 +554,7 @@ def cmd_check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         parser.error(f"argument PRESET: {exc}")
     try:
         params = apply_overrides(params, dict(args.set or []))
+        params.validate(geometry=False)        # ranges, as everywhere; meshing is graded
     except ValueError as exc:
         parser.error(f"argument --set: {exc}")
     if args.set:
@@ -586,12 +569,24 @@ def cmd_check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
                               section_fractions=args.sections, teeth=args.teeth)
         report = check_design(params, inputs)
     except ValueError as exc:
-        parser.error(str(exc))
-    if args.load is None and load is not None:
-        print(f"(axial load: {load:g} N, the largest load of the preset's seed scenario; "
-              "--load to change)")
-    print(format_report(report))
+        option = next((o for f, o in _CHECK_OPTIONS.items() if str(exc).startswith(f)), "")
+        parser.error(f"argument {option}: {exc}" if option else str(exc))
+    if args.load is None:
+        print(f"(axial load: {load:g} N, the largest load of {args.preset}'s seed scenario; "
+              "--load to change)" if load is not None else
+              f"(axial load: none — {args.preset}'s seed scenario gives no load, so strength "
+              "and buckling report the allowable load only; --load F_a [N] checks them)")
+    print(format_report(report, _CHECK_INPUTS))
     return 0 if report.valid else 1
+
+
+#: DesignInputs field -> the option that sets it (in error messages and the verdict)
+_CHECK_OPTIONS = {"axial_load": "--load", "extended_length": "--length",
+                  "safety_factor": "--safety-factor", "stability_factor": "--stability-factor",
+                  "section_fractions": "--sections", "teeth": "--teeth"}
+#: missing inputs as the verdict names them
+_CHECK_INPUTS = {"axial_load": "--load F_a", "extended_length": "--length L",
+                 "teeth": "--teeth Z_R,Z_IG"}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -601,7 +596,7 @@ def build_parser() -> argparse.ArgumentParser:
     -------
     argparse.ArgumentParser
     """
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="prsm-fmu",
         description="Planetary roller screw mechanism (PRSM) dynamics. SI units throughout.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -616,21 +611,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fidelity", choices=FIDELITIES + ("auto",), default="dynamic",
                    help="model level (auto: dynamic while the carriers lag, quasi-static once "
                         "they follow, docs/accuracy.md §4); default %(default)s")
-    p.add_argument("--tolerance", type=_positive_float, default=1e-8,
+    p.add_argument("--tolerance", type=float_in(0.0, 1.0, lo_open=True, hi_open=True),
+                   default=1e-8,
                    help="rtol of the adaptive steppers (atol = 0.01 tolerance) and, with auto, "
-                        "the accepted model error [-]; default %(default)g")
-    p.add_argument("--speed", type=_nonzero_float, default=100.0,
+                        "the accepted model error [1]; default %(default)g")
+    p.add_argument("--speed", type=nonzero_float, default=100.0,
                    help="screw speed after the step [rad/s], non-zero; default %(default)g")
-    p.add_argument("--load", type=_finite_float, default=5000.0,
+    p.add_argument("--load", type=finite_float, default=5000.0,
                    help="load force on the last nut [N], positive resists extension; "
                         "default %(default)g")
-    p.add_argument("--t-end", type=_positive_float, default=1e-3,
+    p.add_argument("--t-end", type=float_in(0.0, lo_open=True, unit="s"), default=1e-3,
                    help="simulated time [s], > 0; default %(default)g")
-    p.add_argument("--interval", type=_positive_float, default=1e-6,
+    p.add_argument("--interval", type=float_in(0.0, lo_open=True, unit="s"), default=1e-6,
                    help="output interval [s], > 0, dividing --t-end; default %(default)g")
     p.add_argument("--stepper", choices=STEPPERS, default=None,
                    help="time stepper; default by fidelity (rosenbrock for dynamic)")
-    p.add_argument("--out", default="out",
+    p.add_argument("--out", type=writable_dir, default="out",
                    help="output directory for startup.csv and startup.png; default %(default)s")
     p.set_defaults(func=cmd_startup, parser=p)
 
@@ -638,9 +634,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Print the steady state (root finding, no time stepping).")
     p.add_argument("--preset", type=_preset, default="seed000_two_stage",
                    help="preset name; default %(default)s")
-    p.add_argument("--speed", type=_nonzero_float, default=100.0,
+    p.add_argument("--speed", type=nonzero_float, default=100.0,
                    help="screw speed [rad/s], non-zero; default %(default)g")
-    p.add_argument("--load", type=_finite_float, default=5000.0,
+    p.add_argument("--load", type=finite_float, default=5000.0,
                    help="load force on the last nut [N], positive resists extension; "
                         "default %(default)g")
     p.set_defaults(func=cmd_steady, parser=p)
@@ -656,18 +652,18 @@ def build_parser() -> argparse.ArgumentParser:
                     "OUT/series/*.npz. Points already in OUT/results.csv are skipped. Exit "
                     "status 1 if a point failed (it is recorded with its error).")
     p.add_argument("study", metavar="STUDY", help="study file (TOML)")
-    p.add_argument("--out", default=None,
+    p.add_argument("--out", type=writable_dir, default=None,
                    help="output directory; default out/sweeps/<study name>")
     p.add_argument("--backend", choices=("fmu", "model"), default=None,
                    help="simulate the FMU (speed prescribed by the master) or the model "
                         "(prsm_fmu.simulate); default: the study's")
-    p.add_argument("--workers", type=int, default=None,
+    p.add_argument("--workers", type=int_in(1), default=None,
                    help="worker processes of the local Dask cluster; default: the cores")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+    p.add_argument("--scheduler", type=_scheduler_address, default=None, metavar="ADDRESS",
                    help="address of an existing Dask scheduler, e.g. tcp://host:8786")
     p.add_argument("--no-dask", action="store_true",
                    help="run the points one after the other in this process")
-    p.add_argument("--fmu-dir", default=None,
+    p.add_argument("--fmu-dir", type=existing_dir, default=None,
                    help="directory holding PRSM<n>.fmu (default: build them into OUT/fmu)")
     p.add_argument("--rerun-all", action="store_true",
                    help="run every point again, also those already done")
@@ -682,19 +678,26 @@ def build_parser() -> argparse.ArgumentParser:
                       "buckling",
         description="Check a preset against seed 001's parameter-matching conditions and "
                     "print a verdict naming every violated condition (exit status 1 if one "
-                    "is violated). Without --load the largest load of the preset's seed "
-                    "scenario is used; without --length the longest stable extension is "
-                    "reported.")
+                    "is violated). Always checked: geometric meshing and lead matching of "
+                    "every stage. Gear engagement needs --teeth. Strength of every screw needs "
+                    "an axial load: --load, or else the largest load of the preset's seed "
+                    "scenario if it has one (seed000, seed002 and seed003 do; seed001's "
+                    "scenario has none, so its default run reports the allowable loads and "
+                    "leaves strength and buckling not checked). Buckling needs the load and "
+                    "--length; with the load only, the longest stable extension is reported. "
+                    "The verdict lists every check not done and the option that would do it. "
+                    "--set values are validated like the preset's parameters.")
     p.add_argument("preset", metavar="PRESET", help="preset name (see 'prsm-fmu presets')")
-    p.add_argument("--load", type=_positive_float, default=None,
-                   help="axial load F_a [N] (compressive for buckling)")
-    p.add_argument("--length", type=_positive_float, default=None,
+    p.add_argument("--load", type=float_in(0.0, lo_open=True, unit="N"), default=None,
+                   help="axial load F_a [N] (compressive for buckling); default: the largest "
+                        "load of the preset's seed scenario, if any")
+    p.add_argument("--length", type=float_in(0.0, lo_open=True, unit="m"), default=None,
                    help="extended (unsupported) length L of the screw column [m]")
     p.add_argument("--material", choices=tuple(MATERIALS), default="carbon_steel",
                    help="screw material (straight-line buckling constants); default %(default)s")
-    p.add_argument("--safety-factor", type=_finite_float, default=2.0,
+    p.add_argument("--safety-factor", type=float_in(1.0), default=2.0,
                    help="K in [σ] = σ_s / K, >= 1; default %(default)g")
-    p.add_argument("--stability-factor", type=_finite_float, default=3.0,
+    p.add_argument("--stability-factor", type=float_in(1.0), default=3.0,
                    help="n_st in F_a <= F_cr / n_st, >= 1; default %(default)g")
     p.add_argument("--ends", choices=tuple(END_FACTORS), default="pinned-pinned",
                    help="end conditions of the column; default %(default)s")
@@ -716,7 +719,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "baselines at tight tolerance and baselines/REPORT.md (docs/regression.md).")
     p.add_argument("--update", action="store_true",
                    help="write new baselines and a report of what changed against the old")
-    p.add_argument("--fmu", default=None, help="use this FMU instead of building one")
+    p.add_argument("--fmu", type=existing_file, default=None,
+                   help="use this FMU instead of building one")
     p.add_argument("--baselines", default=None, metavar="DIR|FMU",
                    help="baselines directory, or an FMU holding them in extra/baselines "
                         "(default: the repository's baselines/)")
@@ -725,9 +729,69 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", type=_regress_value, action="append", metavar="NAME=VALUE",
                    help="set an FMU parameter in every case first, e.g. mu_screw_roller=0.101 "
                         "(to see what a change does); repeatable")
-    p.add_argument("--out", default="out/regress", help="output directory (default %(default)s)")
+    p.add_argument("--out", type=writable_dir, default="out/regress",
+                   help="output directory (default %(default)s)")
     p.set_defaults(func=cmd_regress, parser=p)
+
+    from .result_plot import DEFAULT_VARIABLES
+
+    p = sub.add_parser(
+        "plot", help="plot an FMU's result CSV (fmpy simulate --output-file) with its units",
+        description="Draw the result CSV that 'fmpy simulate FMU --output-file CSV' writes, one "
+                    "panel per variable against time, each axis labelled with the unit the "
+                    "FMU's modelDescription gives it (matplotlib; fmpy's own --show-plot needs "
+                    "plotly). Writes the PNG named by --out.")
+    p.add_argument("result", metavar="RESULT", type=existing_file,
+                   help="result CSV with a header row of variable names starting with 'time'")
+    p.add_argument("--fmu", type=existing_file, required=True,
+                   help="the FMU that produced it (for the units)")
+    p.add_argument("--out", type=_png_path, default=None,
+                   help="output PNG; default RESULT with the suffix .png")
+    p.add_argument("--variables", nargs="+", default=list(DEFAULT_VARIABLES), metavar="NAME",
+                   help="variables to draw, stage[k].NAME for every stage; default "
+                        + " ".join(DEFAULT_VARIABLES))
+    p.set_defaults(func=cmd_plot, parser=p)
     return parser
+
+
+def _png_path(text: str) -> str:
+    """argparse type of ``plot --out``: a .png file in a writable directory."""
+    if not text.lower().endswith(".png"):
+        raise argparse.ArgumentTypeError(f"{text!r} is not allowed: must be a .png file")
+    writable_dir(os.path.dirname(text) or ".")
+    return text
+
+
+def cmd_plot(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Plot an FMU result CSV with the FMU's units; print what was drawn and where.
+
+    Returns
+    -------
+    int
+        0, or 2 for a file that is not a result CSV or not an FMU.
+    """
+    from .result_plot import fmu_units, plot_fmu_result, read_result_csv
+
+    try:
+        res = read_result_csv(args.result)
+    except ValueError as exc:
+        parser.error(f"argument RESULT: {exc}; must be the CSV of 'fmpy simulate "
+                     "--output-file'")
+    try:
+        units = fmu_units(args.fmu)
+    except ValueError as exc:
+        parser.error(f"argument --fmu: {exc}")
+    out = args.out or os.path.splitext(args.result)[0] + ".png"
+    try:
+        drawn = plot_fmu_result(res, units, out, args.variables,
+                                title=f"{os.path.basename(args.fmu)}: {os.path.basename(args.result)}")
+    except ValueError as exc:
+        parser.error(f"argument --variables: {exc}")
+    t = res["time"]
+    print(f"{os.path.basename(args.result)}: {len(t)} samples, t = {t[0]:g} … {t[-1]:g} s; "
+          f"drew {', '.join(drawn)}")
+    print(f"wrote {out}")
+    return 0
 
 
 def _regress_value(text: str) -> tuple[str, float | str]:
@@ -741,6 +805,25 @@ def _regress_value(text: str) -> tuple[str, float | str]:
         return name.strip(), value.strip()
 
 
+def _parameter_problem(variables: Mapping[str, Variable], name: str,
+                       value: float | str) -> str:
+    """Why ``name = value`` cannot be set as an FMU parameter ("" if it can)."""
+    params = [n for n, v in variables.items() if v.causality == "parameter"]
+    v = variables.get(name)
+    if v is None or v.causality != "parameter":
+        return (f"{name!r} is not a parameter of the FMU: must be one of {', '.join(params)}")
+    if v.type in ("Real", "Integer"):
+        if not isinstance(value, float) or not math.isfinite(value) or (
+                v.type == "Integer" and value != int(value)):
+            return (f"{name} = {value!r} is not allowed: must be a finite "
+                    f"{'integer' if v.type == 'Integer' else 'number'}")
+        lo = v.min if v.min is not None else -math.inf
+        hi = v.max if v.max is not None else math.inf
+        if not lo <= value <= hi:
+            return f"{name} = {value!r} is out of range: must be in [{lo:g}, {hi:g}]"
+    return ""
+
+
 def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Build the FMU (child process), run the regression cases, compare or update baselines.
 
@@ -749,33 +832,54 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     int
         0 if every case passes (or the baselines were written), 1 if one fails.
     """
+    import zipfile
     from pathlib import Path
 
     from . import regress
     from .regress.report import verdict_table, write_report
 
     out = Path(args.out)
+    where = Path(args.baselines) if args.baselines else regress.DEFAULT_DIR
+    if args.update and (where.suffix == ".fmu" or args.set):
+        parser.error("argument --update: writes into a baselines directory: must not be "
+                     "combined with --set or an FMU as --baselines")
+    # everything a bad argument can spoil is checked before the FMU is built
+    try:
+        known = [c.name for c in regress.load_cases(where)]
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile) as exc:
+        parser.error(f"argument --baselines: {where}: no readable tolerances.toml "
+                     f"({type(exc).__name__}: {exc}); must be a baselines directory or an FMU "
+                     "holding extra/baselines")
+    unknown = [c for c in args.case or () if c not in known]
+    if unknown:
+        parser.error(f"argument --case: unknown case(s) {', '.join(unknown)}: must be one of "
+                     f"{', '.join(known)}")
     if args.fmu:
         fmu = Path(args.fmu)
-        if not fmu.is_file():
-            parser.error(f"argument --fmu: {fmu}: no such file")
+        try:
+            fmu_vars = fmu_variables(fmu)
+        except ValueError as exc:
+            parser.error(f"argument --fmu: {exc}")
     else:
         print(f"building PRSM2.fmu into {out / 'fmu'} (python -m fmu_build, child process) ...",
               flush=True)
-        fmu = regress.build_fmu(out / "fmu")
-    where = Path(args.baselines) if args.baselines else regress.DEFAULT_DIR
+        try:
+            fmu = regress.build_fmu(out / "fmu")
+        except RuntimeError as exc:
+            print(f"prsm-fmu: error: {one_line(exc)}", file=sys.stderr)
+            return 1
+        fmu_vars = fmu_variables(fmu)
+    for name, value in args.set or ():
+        problem = _parameter_problem(fmu_vars, name, value)
+        if problem:
+            parser.error(f"argument --set: {problem}")
     if args.update:
-        if where.suffix == ".fmu" or args.set:
-            parser.error("argument --update: writes into a baselines directory, without --set")
         print(regress.update(fmu, where, args.case))
         print(f"wrote the baselines and {where / 'REPORT.md'}: review the report, then pack "
               "them into the FMU by rebuilding it (python -m fmu_build)")
         return 0
     params = dict(args.set) if args.set else None
-    try:
-        results = regress.check(fmu, where, args.case, parameters=params)
-    except ValueError as exc:
-        parser.error(f"argument --case: {exc}")
+    results = regress.check(fmu, where, args.case, parameters=params)
     print(verdict_table(results))
     failed = [r.case.name for r in results if not r.passed]
     if failed:

@@ -44,7 +44,7 @@ from __future__ import annotations
 import importlib
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import brentq
@@ -133,13 +133,13 @@ class DesignInputs:
         if self.section_fractions is not None:
             f = list(self.section_fractions)
             if len(f) != n_stages or not all(math.isfinite(x) and x > 0 for x in f):
-                raise ValueError(f"section_fractions = {f!r} is out of range: need {n_stages} "
-                                 "positive numbers (one per stage)")
+                raise ValueError(f"section_fractions = {f!r} is out of range: must be "
+                                 f"{n_stages} positive numbers (one per stage)")
         if self.teeth is not None:
             z = self.teeth
             if len(z) != 2 or not all(isinstance(v, int) and v >= 1 for v in z):
-                raise ValueError(f"teeth = {z!r} is out of range: need two integers >= 1 "
-                                 "(z_R, z_ig)")
+                raise ValueError(f"teeth = {z!r} is out of range: must be two integers "
+                                 ">= 1 (z_R, z_ig)")
         m = self.material
         for name in ("yield_strength", "elastic_modulus", "a", "b", "lambda_p", "lambda_s"):
             v = getattr(m, name)
@@ -160,6 +160,7 @@ class Check:
     values: str
     verdict: str            # "pass", "FAIL" or "not checked"
     message: str = ""       # a FAIL names the violated condition and says what it means
+    needs: tuple[str, ...] = ()   # "not checked": the DesignInputs fields that would decide it
 
     @property
     def failed(self) -> bool:
@@ -350,7 +351,7 @@ def _geometry_checks(params: MechanismParams, inputs: DesignInputs) -> list[Chec
             checks.append(Check(
                 f"stage {k}: gear engagement", "z_ig / z_R = r_N / r_R",
                 f"r_N / r_R = {ratio:.6g}: the ring needs z_ig = {ratio:.6g} z_R "
-                "(give the tooth counts to check)", "not checked"))
+                "(give the tooth counts to check)", "not checked", needs=("teeth",)))
         else:
             z_r, z_ig = inputs.teeth
             ok = abs(z_ig / z_r - ratio) <= GEOMETRY_RTOL * ratio
@@ -380,7 +381,8 @@ def _strength_checks(params: MechanismParams, inputs: DesignInputs) -> list[Chec
         f_allow = allow * area
         if inputs.axial_load is None:
             checks.append(Check(name, cond, f"{desc}; [σ] = σ_s/K = {_mpa(allow)}; allowable "
-                                f"F_a < {_kn(f_allow)}", "not checked"))
+                                f"F_a < {_kn(f_allow)}", "not checked",
+                                needs=("axial_load",)))
             continue
         sigma = inputs.axial_load / area
         ok = sigma < allow
@@ -425,7 +427,8 @@ def _buckling_check(params: MechanismParams, inputs: DesignInputs) -> Check:
         vals = (f"L = {inputs.extended_length:g} m, µ_2 = {mu2:.4f}, λ = {lam:.1f}, {regime}, "
                 f"σ_cr = {_mpa(sigma)}, F_cr = {_kn(f_cr)}, F_cr / n_st = {_kn(f_cr / n_st)}")
         if inputs.axial_load is None:
-            return Check(name, cond, vals + " (allowable F_a)", "not checked")
+            return Check(name, cond, vals + " (allowable F_a)", "not checked",
+                         needs=("axial_load",))
         ok = inputs.axial_load <= f_cr / n_st
         return Check(name, cond, vals + f", F_a = {_kn(inputs.axial_load)}",
                      "pass" if ok else "FAIL",
@@ -433,7 +436,8 @@ def _buckling_check(params: MechanismParams, inputs: DesignInputs) -> Check:
                      f"{_kn(inputs.axial_load)} > F_cr / n_st = {_kn(f_cr / n_st)} at L = "
                      f"{inputs.extended_length:g} m (λ = {lam:.1f}, {regime.split(':')[0]})")
     if inputs.axial_load is None:
-        return Check(name, cond, "no axial load and no length given", "not checked")
+        return Check(name, cond, "no axial load and no length given", "not checked",
+                     needs=("axial_load", "extended_length"))
     # the longest stable extension: F_cr(L) decreases with L
     need = inputs.axial_load * n_st
 
@@ -451,18 +455,22 @@ def _buckling_check(params: MechanismParams, inputs: DesignInputs) -> Check:
         long_ *= 2.0
     l_max = brentq(margin, short, long_, xtol=1e-9)
     return Check(name, cond, f"no length given: stable (F_a ≤ F_cr / n_st) for an extended "
-                 f"length L ≤ {l_max:.4g} m", "not checked")
+                 f"length L ≤ {l_max:.4g} m", "not checked", needs=("extended_length",))
 
 
 def check_design(params: MechanismParams, inputs: DesignInputs | None = None) -> DesignReport:
-    """Run every check of the module docstring on ``params`` (not validated first, so that an
-    inconsistent design gets verdicts rather than an exception).
+    """Run every check of the module docstring on ``params``.
+
+    Each parameter is validated against its own range first (a negative radius is refused, as
+    everywhere), but not the meshing of the radii: an inconsistent design gets verdicts
+    rather than an exception.
 
     Raises
     ------
     ValueError
-        For invalid ``inputs`` (naming the input and its range).
+        For a parameter out of its range or invalid ``inputs`` (naming it and its range).
     """
+    params.validate(geometry=False)
     inputs = (inputs or DesignInputs()).validate(params.n_stages)
     checks = _geometry_checks(params, inputs) + _strength_checks(params, inputs)
     checks.append(_buckling_check(params, inputs))
@@ -494,8 +502,24 @@ def default_load(preset: str) -> float | None:
     return max(loads) if loads else None
 
 
-def format_report(report: DesignReport) -> str:
-    """The report as text: one block per check and a final verdict."""
+#: how :func:`format_report` names a missing input by default (the DesignInputs field)
+_INPUT_NAMES = {"axial_load": "axial_load F_a", "extended_length": "extended_length L",
+                "teeth": "teeth (z_R, z_ig)"}
+
+
+def format_report(report: DesignReport, inputs_named: Mapping[str, str] | None = None) -> str:
+    """The report as text: one block per check and a final verdict.
+
+    A verdict with checks not done names, for each missing input, the checks it would decide.
+
+    Parameters
+    ----------
+    report : DesignReport
+    inputs_named : mapping, optional
+        How to name a missing DesignInputs field (e.g. ``{"axial_load": "--load F_a"}`` for a
+        command line); default the field names.
+    """
+    names = {**_INPUT_NAMES, **(inputs_named or {})}
     inp = report.inputs
     lines = [f"design checks (seed 001): {report.mechanism}",
              f"axial load F_a = {'not given' if inp.axial_load is None else _kn(inp.axial_load)}, "
@@ -509,10 +533,17 @@ def format_report(report: DesignReport) -> str:
                      f"  {c.name.ljust(width)}  {c.condition}")
         lines.append(f"{'':>11}  {'':{width}}  {c.values}")
     lines.append("")
+    skipped = [c for c in report.checks if c.verdict == "not checked"]
     if report.valid:
-        skipped = sum(1 for c in report.checks if c.verdict == "not checked")
-        lines.append(f"verdict: VALID — {len(report.checks) - skipped} checks pass"
-                     + (f", {skipped} not checked (inputs missing)" if skipped else ""))
+        lines.append(f"verdict: VALID — no condition violated: "
+                     f"{len(report.checks) - len(skipped)} checks pass"
+                     + (f", {len(skipped)} not checked (inputs missing):" if skipped else ""))
+        wanted: dict[tuple[str, ...], list[str]] = {}
+        for c in skipped:
+            wanted.setdefault(c.needs, []).append(c.name)
+        for needs, checks in wanted.items():
+            what = " and ".join(names.get(n, n) for n in needs) or "more inputs"
+            lines.append(f"  - give {what} to check: {', '.join(checks)}")
     else:
         lines.append(f"verdict: INVALID — {len(report.failures)} condition(s) violated:")
         lines += [f"  - {c.message}" for c in report.failures]

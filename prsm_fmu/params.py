@@ -112,13 +112,17 @@ class StageParams:
         """Distance between screw axis and roller axis, r_S + r_R [m]."""
         return self.screw_radius + self.roller_radius
 
-    def validate(self, name: str = "stage") -> "StageParams":
+    def validate(self, name: str = "stage", geometry: bool = True) -> "StageParams":
         """Check every field against its physical range.
 
         Parameters
         ----------
         name : str
             Prefix used in error messages, e.g. ``"stage[2]"``.
+        geometry : bool
+            Also require the radii to mesh (r_N = r_S + 2 r_R = n_S r_R).  False checks each
+            field's own range only, for design checks that grade the meshing conditions
+            instead of refusing them (:mod:`prsm_fmu.design_checks`).
 
         Returns
         -------
@@ -144,6 +148,8 @@ class StageParams:
             raise ValueError(
                 f"{name}.flank_angle = {beta!r} rad is out of range: must be in (0, pi/2) rad, "
                 "i.e. (0°, 90°)")
+        if not geometry:
+            return self
         fit = self.screw_radius + 2.0 * self.roller_radius
         if abs(self.nut_radius - fit) > GEOMETRY_RTOL * fit:
             raise ValueError(
@@ -201,8 +207,13 @@ class MechanismParams:
         """Output (rod) travel per screw revolution, Σ L_Sk [m]."""
         return sum(s.screw_lead for s in self.stages)
 
-    def validate(self) -> "MechanismParams":
+    def validate(self, geometry: bool = True) -> "MechanismParams":
         """Check every stage and every friction parameter.
+
+        Parameters
+        ----------
+        geometry : bool
+            Also require every stage's radii to mesh (see :meth:`StageParams.validate`).
 
         Returns
         -------
@@ -220,7 +231,7 @@ class MechanismParams:
         for k, st in enumerate(self.stages, start=1):
             if not isinstance(st, StageParams):
                 raise ValueError(f"stage[{k}] = {st!r} is not a StageParams")
-            st.validate(f"stage[{k}]")
+            st.validate(f"stage[{k}]", geometry)
             if k > 1 and self.mu_spline > 0.0:
                 _check_positive(f"stage[{k}].spline_radius", st.spline_radius)
             if k < len(self.stages) and self.mu_nut_screw > 0.0:

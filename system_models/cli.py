@@ -16,7 +16,8 @@ bookkeeping, and writes ``DIR/<scene>.csv`` (every output, units in the header),
 than two seconds.
 
 Exit status: 0 every check passed; 1 a check failed, or the co-simulation stopped (a refused
-step: the message names the time, the block and the reason); 2 bad arguments.
+step: the message names the time, the block and the reason); 2 bad arguments (one line on
+stderr naming the argument and its allowed values, before anything runs).
 """
 
 from __future__ import annotations
@@ -25,26 +26,42 @@ import argparse
 import sys
 from pathlib import Path
 
+from prsm_fmu.arguments import ArgumentParser, existing_file, float_in, int_in, writable_dir
+
 __all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="prsm-ema", description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="list the scenes (./scenes first, then the built-in ones)")
-    r = sub.add_parser("run", help="run a scene, print its checks, write CSV and plots")
+    """The argument parser of ``prsm-ema`` (bad arguments: one line, exit status 2)."""
+    from .master import MAX_HALVINGS
+
+    ap = ArgumentParser(prog="prsm-ema", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub.add_parser("list", help="list the scenes (./scenes first, then the built-in ones)",
+                   description="List the scenes, one per line with its description: those in "
+                               "./scenes first, then the built-in ones.")
+    r = sub.add_parser("run", help="run a scene, print its checks, write CSV and plots",
+                       description="Co-simulate a scene (the PRSM FMU stepped by fmpy, or the "
+                                   "plain Python model), print its checks and the power "
+                                   "bookkeeping, and write DIR/<scene>.csv, plots and a summary. "
+                                   "Exit status 0 if every check passed, 1 if one failed or the "
+                                   "run stopped, 2 for bad arguments.")
     r.add_argument("--scene", required=True, help="scene name (see 'prsm-ema list') or a .toml file")
     r.add_argument("--fidelity", choices=["kinematic", "quasi-static", "dynamic", "auto"],
                    help="PRSM fidelity level (default: the scene's)")
-    r.add_argument("--step", type=float, help="communication step h [s] (default: the scene's)")
-    r.add_argument("--out", default="out", help="output directory (default: out)")
+    r.add_argument("--step", type=float_in(0.0, lo_open=True, unit="s"),
+                   help="communication step h [s] (default: the scene's)")
+    r.add_argument("--out", type=writable_dir, default="out",
+                   help="output directory (default: out)")
     r.add_argument("--prsm", choices=["fmu", "python"], default="fmu",
                    help="the PRSM as the FMU stepped by fmpy (default) or as the plain Python model")
-    r.add_argument("--fmu", help="the FMU file (default: dist/<mechanism>.fmu, built if missing)")
+    r.add_argument("--fmu", type=existing_file,
+                   help="the FMU file (default: dist/<mechanism>.fmu, built if missing)")
     r.add_argument("--order", choices=["jacobi", "gauss-seidel"], help="coupling order")
-    r.add_argument("--extrapolation", type=int, choices=[0, 1], help="input extrapolation order")
-    r.add_argument("--retry", type=int, metavar="N",
-                   help="retry a refused step up to N times with halved substeps (default: scene)")
+    r.add_argument("--extrapolation", type=int_in(0, 1), help="input extrapolation order, 0 or 1")
+    r.add_argument("--retry", type=int_in(0, MAX_HALVINGS), metavar="N",
+                   help="retry a refused step up to N times with halved substeps, N in "
+                        f"[0, {MAX_HALVINGS}] (default: the scene's)")
     r.add_argument("--no-plots", action="store_true", help="write the CSV and summary only")
     return ap
 
@@ -61,7 +78,7 @@ def _cmd_list() -> int:
 
 def _cmd_run(args, ap) -> int:
     from .fmu import FMUError, ensure_fmu
-    from .master import CoSimulationError, RetryPolicy
+    from .master import CoSimulationError, RetryPolicy, whole_steps
     from .output import write_csv, write_plots, write_summary
     from .progress import Progress
     from .run import run_scene
@@ -70,13 +87,14 @@ def _cmd_run(args, ap) -> int:
     try:
         scene = load_scene(args.scene)
     except ValueError as exc:
-        ap.error(str(exc))
-    if args.step is not None and not args.step > 0:
-        ap.error(f"--step {args.step!r}: must be > 0")
+        ap.error(f"argument --scene: {exc}; must be a scene of 'prsm-ema list' or a .toml file")
+    if args.step is not None:
+        try:
+            whole_steps(scene.t0, scene.t_end, args.step)
+        except ValueError as exc:
+            ap.error(f"argument --step: {exc}; must divide the scene's run into whole steps")
     retry = None
     if args.retry is not None:
-        if args.retry < 0:
-            ap.error(f"--retry {args.retry}: must be >= 0")
         retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
     fmu_path = None
     if args.prsm == "fmu":
@@ -98,8 +116,10 @@ def _cmd_run(args, ap) -> int:
         return 1
     except (ValueError, FMUError) as exc:
         prog.close()
-        print(f"prsm-ema: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, FMUError) else 2
+        if isinstance(exc, FMUError):
+            print(f"prsm-ema: {exc}", file=sys.stderr)
+            return 1
+        ap.error(str(exc))          # the scene and the options do not fit: one line, status 2
     prog.close()
     s = run.summary()
     st = s["stats"]
@@ -135,12 +155,16 @@ def _cmd_run(args, ap) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``prsm-ema``; returns the exit status."""
+    """Entry point of ``prsm-ema``; returns the exit status (2: a bad argument, one line on
+    stderr; 0 for ``--help``)."""
     ap = build_parser()
-    args = ap.parse_args(argv)
-    if args.command == "list":
-        return _cmd_list()
-    return _cmd_run(args, ap)
+    try:
+        args = ap.parse_args(argv)
+        if args.command == "list":
+            return _cmd_list()
+        return _cmd_run(args, ap)
+    except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
 
 
 if __name__ == "__main__":

@@ -27,11 +27,12 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from prsm_fmu.fmu_log import STATUS as _STATUS
+from prsm_fmu.fmu_log import FmuLog
+
 from .blocks import Block, Port, StepRefused
 
 __all__ = ["FMUBlock", "FMUError", "ensure_fmu", "fmu_is_stale"]
-
-_STATUS = ["ok", "warning", "discard", "error", "fatal", "pending"]
 
 
 class FMUError(RuntimeError):
@@ -121,9 +122,7 @@ class FMUBlock(Block):
                  parameters: dict[str, Any] | None = None, start_time: float = 0.0) -> None:
         try:
             from fmpy import extract, read_model_description
-            from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE,
-                                   fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                                   fmi2CallbackLoggerTYPE, free)
+            from fmpy.fmi2 import FMU2Slave
         except ImportError as exc:
             raise FMUError(f"fmpy is needed to run an FMU ({exc}): pip install -e \".[fmu]\", "
                            "or run the PRSM as the plain Python model (--prsm python)") from None
@@ -153,18 +152,14 @@ class FMUBlock(Block):
                         if self.vars[n].type != "Real"]
         self._real_pos = [i for i, n in enumerate(out_names) if self.vars[n].type == "Real"]
         self._int_pos = [i for i, n in enumerate(out_names) if self.vars[n].type != "Real"]
-        self.messages: list[tuple[str, str]] = []
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(self._log)
-        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        self._callbacks = cb                     # keep the ctypes callbacks alive
+        self._log = FmuLog()                     # keeps the ctypes callbacks alive
+        self.messages = self._log.messages
         self._unzipdir = extract(str(self.path))
         self._alive = False
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         try:
-            self.fmu.instantiate(callbacks=cb, loggingOn=True)
+            self.fmu.instantiate(callbacks=self._log.callbacks, loggingOn=True)
         except Exception as exc:
             shutil.rmtree(self._unzipdir, ignore_errors=True)
             raise FMUError(f"{self.path}: instantiation failed: {exc}") from exc
@@ -185,10 +180,6 @@ class FMUBlock(Block):
                                             else None) or ("1" if v.type != "Real" else "")
         return Port(name, unit, v.description or "", discrete=v.variability == "discrete")
 
-    def _log(self, env, instance, status, category, message) -> None:
-        label = _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
-        self.messages.append((label, message.decode("utf-8", "replace")))
-
     def _call(self, fname: str, *args, **kwargs):
         from fmpy.fmi1 import FMICallException
 
@@ -201,8 +192,8 @@ class FMUBlock(Block):
                            + self._since(n0)) from exc
 
     def _since(self, n0: int) -> str:
-        msgs = [m for _, m in self.messages[n0:]]
-        return (": " + "; ".join(msgs)) if msgs else " (the FMU logged no message)"
+        msgs = self._log.reason(n0)
+        return (": " + msgs) if msgs else " (the FMU logged no message)"
 
     def set_values(self, values: dict[str, Any]) -> None:
         """Set variables by name with the setter of their type."""

@@ -49,6 +49,25 @@ __all__ = ["Master", "RetryPolicy", "Result", "CoSimulationError", "ORDERS"]
 
 ORDERS = ("jacobi", "gauss-seidel")
 
+#: most halvings of a macro step a RetryPolicy allows (2**30 substeps)
+MAX_HALVINGS = 30
+
+
+def whole_steps(t0: float, t_end: float, h: float) -> int:
+    """Number n of macro steps h [s] from t0 to t_end [s]; ValueError unless t_end = t0 + n·h.
+
+    Raises
+    ------
+    ValueError
+        If ``t_end − t0`` is not a positive whole number of steps (to 1e-9 relative).
+    """
+    span = float(t_end) - t0
+    n = int(round(span / h))
+    if n < 1 or abs(t0 + n * h - t_end) > 1e-9 * max(abs(t_end), abs(t0), h):
+        raise ValueError(f"t_end = {t_end!r} s is not t0 + n·h for a whole n >= 1 "
+                         f"(t0 = {t0!r} s, h = {h!r} s, (t_end − t0)/h = {span / h!r})")
+    return n
+
 
 @dataclass(frozen=True)
 class RetryPolicy:
@@ -68,9 +87,9 @@ class RetryPolicy:
 
     def __post_init__(self) -> None:
         if isinstance(self.max_halvings, bool) or not isinstance(self.max_halvings, int) \
-                or not 0 <= self.max_halvings <= 30:
+                or not 0 <= self.max_halvings <= MAX_HALVINGS:
             raise ValueError(f"max_halvings = {self.max_halvings!r} is out of range: must be an "
-                             "integer in [0, 30]")
+                             f"integer in [0, {MAX_HALVINGS}]")
         if self.tolerance is not None and not (math.isfinite(self.tolerance) and self.tolerance > 0):
             raise ValueError(f"tolerance = {self.tolerance!r} is out of range: must be > 0 or None")
 
@@ -399,11 +418,7 @@ class Master:
             If a block refuses a step that no retry can take (message: time, block, reason).
         """
         h, t0 = self.step, self.t0
-        span = float(t_end) - t0
-        n = int(round(span / h))
-        if n < 1 or abs(t0 + n * h - t_end) > 1e-9 * max(abs(t_end), abs(t0), h):
-            raise ValueError(f"t_end = {t_end!r} s is not t0 + n·h for a whole n >= 1 "
-                             f"(t0 = {t0!r} s, h = {h!r} s, (t_end − t0)/h = {span / h!r})")
+        n = whole_steps(t0, t_end, h)
         self._stats = {"macro_steps": 0, "substeps": 0, "retries": 0, "refusals": 0,
                        "max_coupling_error": 0.0, "max_substeps_per_step": 1}
         self._block_time = [0.0] * len(self.blocks)

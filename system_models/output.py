@@ -1,5 +1,7 @@
 """Files a run writes: the CSV of every output (units in the header), the plots, a summary.
 
+Units are spelled as in the FMU's modelDescription (:mod:`prsm_fmu.units`).
+
 Plots (matplotlib, PNG, one figure per question a reader asks):
 
 ``<scene>_position.png``    rod position against the reference, and the tracking error
@@ -20,6 +22,10 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, MICROMETRE, MILLIMETRE,
+                            MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
+                            RADIAN_PER_SECOND, SECOND, label)
+
 from .master import Result
 
 __all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns"]
@@ -39,7 +45,8 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     path = Path(path)
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow(["time [s]"] + [f"{c} [{res.units.get(c) or '1'}]" for c in cols])
+        w.writerow([label("time", SECOND)]
+                   + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
         data = np.column_stack([res.time] + [res[c] for c in cols])
         for row in data:
             w.writerow([f"{v:.15g}" for v in row])
@@ -99,15 +106,15 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
         r = np.array([reference(v) for v in t])
         a1.plot(tm, 1e3 * r, "--", label="reference")
         a2.plot(tm, 1e6 * (x - r), color="C3")
-        a2.set_ylabel("error [µm]")
+        a2.set_ylabel(label("error", MICROMETRE))
     else:
         a2.plot(tm, 1e3 * res["prsm.rod_velocity"], color="C2")
-        a2.set_ylabel("rod velocity [mm/s]")
-    a1.set_ylabel("rod position [mm]")
+        a2.set_ylabel(label("rod velocity", MILLIMETRE_PER_SECOND))
+    a1.set_ylabel(label("rod position", MILLIMETRE))
     a1.legend()
     a1.grid(True)
     a2.grid(True)
-    a2.set_xlabel("time [ms]")
+    a2.set_xlabel(label("time", MILLISECOND))
     a1.set_title(f"{scene}: position tracking")
     save(fig, "position")
 
@@ -115,8 +122,8 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
     fig, ax = plt.subplots(figsize=(8, 4))
     ax.plot(tm, res["prsm.screw_speed"], label="screw speed")
     ax.step(tm, res["controller.speed_ref"], where="post", ls="--", label="speed reference")
-    ax.set_xlabel("time [ms]")
-    ax.set_ylabel("speed [rad/s]")
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("speed", RADIAN_PER_SECOND))
     ax.grid(True)
     ax.legend()
     ax.set_title(f"{scene}: screw (motor) speed")
@@ -130,13 +137,13 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
     if current_limit:
         for s in (1, -1):
             a1.axhline(s * current_limit, color="k", lw=0.8, ls=":")
-    a1.set_ylabel("current [A]")
+    a1.set_ylabel(label("current", AMPERE))
     a1.legend()
     a1.grid(True)
     a2.plot(tm, res["motor.torque"], label="electromagnetic torque")
     a2.plot(tm, res["prsm.stage[1].driven_torque"], "--", label="torque held at the screw (PRSM input)")
-    a2.set_ylabel("torque [N·m]")
-    a2.set_xlabel("time [ms]")
+    a2.set_ylabel(label("torque", NEWTON_METRE))
+    a2.set_xlabel(label("time", MILLISECOND))
     a2.legend()
     a2.grid(True)
     a1.set_title(f"{scene}: motor current and torque")
@@ -148,14 +155,14 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
     for k in range(1, n + 1):
         a1.plot(tm, 1e-3 * res[f"prsm.stage[{k}].contact_force"], label=f"stage {k} contact (axial)")
     a1.plot(tm, 1e-3 * res["load.force"], "k--", lw=0.9, label="load force (input)")
-    a1.set_ylabel("force [kN]")
+    a1.set_ylabel(label("force", KILONEWTON))
     a1.legend()
     a1.grid(True)
     for k in range(2, n + 1):
         a2.plot(tm, res[f"prsm.stage[{k}].spline_friction"], color=f"C{k - 1}",
                 label=f"stage {k} spline friction")
-    a2.set_ylabel("force [N]")
-    a2.set_xlabel("time [ms]")
+    a2.set_ylabel(label("force", NEWTON))
+    a2.set_xlabel(label("time", MILLISECOND))
     a2.legend()
     a2.grid(True)
     a1.set_title(f"{scene}: per-stage forces")
@@ -170,8 +177,8 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
         eta = np.where((pel > 1.0) & (pout >= 0.0), pout / pel, np.nan)
     ax.plot(tm, eta, label="actuator: load power / electrical power")
     ax.set_ylim(-0.05, 1.2)
-    ax.set_xlabel("time [ms]")
-    ax.set_ylabel("efficiency [-]")
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("efficiency", DIMENSIONLESS))
     ax.grid(True)
     ax.legend()
     ax.set_title(f"{scene}: efficiency (instantaneous; > 1 while stored energy is released)")
@@ -188,8 +195,8 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
     resid = (res["motor.electrical_energy"] - res["motor.copper_energy"] - res["prsm.friction_work"]
              - res["prsm.output_work"] - e0["motor.magnetic_energy"] - e0["prsm.kinetic_energy"])
     ax.plot(tm, resid, "k:", label="residual")
-    ax.set_xlabel("time [ms]")
-    ax.set_ylabel("energy [J]")
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("energy", JOULE))
     ax.grid(True)
     ax.legend(fontsize=8)
     ax.set_title(f"{scene}: power bookkeeping (integrated)")

@@ -23,6 +23,7 @@ from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, active_level, configu
 from prsm_fmu.params import MechanismParams, stage_field_names
 from prsm_fmu.simulate import DEFAULT_STEPPER
 from prsm_fmu.steppers import StepFailure
+from prsm_fmu.units import DIMENSIONLESS, NEWTON, NEWTON_METRE, unit_of
 
 from .blocks import Port, PythonBlock, StepRefused
 
@@ -34,12 +35,12 @@ MECHANISMS = {"PRSM1": "seed003_single_stage", "PRSM2": "seed000_two_stage",
               "PRSM3": "seed000_three_stage"}
 
 
-_HEAD = {"screw_speed": "rad/s", "screw_angle": "rad", "screw_acceleration": "rad/s2",
-         "rod_position": "m", "rod_velocity": "m/s"}
-_STAGE = {"contact_force": "N", "normal_force": "N", "driven_torque": "N.m",
-          "spline_friction": "N", "carrier_speed": "rad/s", "carrier_speed_ratio": "1"}
-_TAIL = {"efficiency": "1", "friction_power": "W", "input_power": "W", "output_power": "W",
-         "input_work": "J", "output_work": "J", "friction_work": "J", "kinetic_energy": "J"}
+# the FMU's Real outputs in its order; units from prsm_fmu.units (the FMU's spellings)
+_HEAD = ("screw_speed", "screw_angle", "screw_acceleration", "rod_position", "rod_velocity")
+_STAGE = ("contact_force", "normal_force", "driven_torque", "spline_friction", "carrier_speed",
+          "carrier_speed_ratio")
+_TAIL = ("efficiency", "friction_power", "input_power", "output_power", "input_work",
+         "output_work", "friction_work", "kinetic_energy")
 COUNTERS = ("step_rhs_calls", "step_substeps", "step_fidelity")
 
 
@@ -52,8 +53,7 @@ def prsm_output_names(n_stages: int) -> list[str]:
 
 
 def _unit(name: str) -> str:
-    base = name.split(".", 1)[1] if name.startswith("stage[") else name
-    return {**_HEAD, **_STAGE, **_TAIL}.get(base, "1")
+    return unit_of(name, DIMENSIONLESS)
 
 
 def mechanism_params(mechanism: str) -> MechanismParams:
@@ -133,11 +133,12 @@ class PythonPRSM(PythonBlock):
         p = config.params()
         s = config.solver()
         n = p.n_stages
-        self.inputs = (Port("screw_torque", "N.m", "motor torque on screw 1"),
-                       Port("load_force", "N", "force on the last nut, positive resists extension"))
+        self.inputs = (Port("screw_torque", NEWTON_METRE, "motor torque on screw 1"),
+                       Port("load_force", NEWTON, "force on the last nut, positive resists "
+                                                  "extension"))
         self._names = prsm_output_names(n)
         self.outputs = tuple(Port(o, _unit(o)) for o in self._names) + tuple(
-            Port(c, "1", discrete=True) for c in COUNTERS)
+            Port(c, DIMENSIONLESS, discrete=True) for c in COUNTERS)
         super().__init__(name)
         self.u = [float(v) for v in config.initial_inputs]
         self.u_held = tuple(self.u)

@@ -31,8 +31,8 @@ def test_startup_exit_code_and_files(startup_run):
     header = rows[0]
     assert header[0] == "time [s]"
     assert header[1] == "screw_speed [rad/s]"
-    assert "stage[1].carrier_speed_ratio [-]" in header
-    assert "screw_torque [N·m]" in header
+    assert "stage[1].carrier_speed_ratio [1]" in header
+    assert "screw_torque [N.m]" in header
     assert all(h.endswith("]") and " [" in h and "[?]" not in h for h in header)
     data = np.array(rows[1:], dtype=float)
     assert data.shape[0] >= 100              # 1 ms / 10 µs + 1 = 101 rows
@@ -46,7 +46,7 @@ def test_startup_prints_table_settling_and_cost(tmp_path, capsys):
     assert main(["startup", "--out", str(tmp_path), "--interval", "1e-5", "--t-end",
                  "5e-4"]) == 0
     text = capsys.readouterr().out
-    assert "ζ_PS1" in text and "M_S1 [N·m]" in text and "f_S2 [N]" in text
+    assert "ζ_PS1" in text and "M_S1 [N.m]" in text and "f_S2 [N]" in text
     assert "carrier 1: settles" in text and "carrier 2: settles" in text
     assert "rhs calls" in text and "energy-balance residual" in text
 
@@ -94,7 +94,7 @@ def test_energy_balance_residual_and_units():
     res = {"input_work": np.array([0.0, 10.0]), "output_work": np.array([0.0, 7.0]),
            "friction_work": np.array([0.0, 2.0]), "kinetic_energy": np.array([1.0, 1.5])}
     assert energy_balance_residual(res) == pytest.approx(0.05)
-    assert unit_of("stage[2].driven_torque") == "N·m"
+    assert unit_of("stage[2].driven_torque") == "N.m"
     assert unit_of("time") == "s"
 
 
@@ -113,7 +113,7 @@ def test_startup_auto_matches_the_dynamic_level_within_its_tolerance(tmp_path, c
     assert "fidelity auto at tolerance 1e-06: starts with 'dynamic'" in capsys.readouterr().out
     header, dyn = runs["dynamic"]
     _, auto = runs["auto"]
-    for name in ("stage[1].carrier_speed_ratio [-]", "stage[2].carrier_speed_ratio [-]",
-                 "efficiency [-]", "stage[2].spline_friction [N]"):
+    for name in ("stage[1].carrier_speed_ratio [1]", "stage[2].carrier_speed_ratio [1]",
+                 "efficiency [1]", "stage[2].spline_friction [N]"):
         j = header.index(name)
         assert np.max(np.abs(auto[:, j] - dyn[:, j])) <= 1e-6 * np.max(np.abs(dyn[:, j])), name

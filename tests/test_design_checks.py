@@ -195,3 +195,48 @@ def test_cli_check_valid_and_invalid(capsys):
     assert "screw 1: strength" in out
     assert main(["check", "no_such_preset"]) == 2
     assert main(["check", "seed000_two_stage", "--set", "load_force=3"]) == 2
+
+
+def test_cli_check_default_run_does_what_its_help_says(capsys):
+    """seed001's scenario has no load: the default run says so, and its verdict lists every
+    check it did not do with the option that would do it (the help says the same); seed000's
+    scenario load (seed 000 §3.1: 5000 N on nut 2) is used and checks screw 1's strength:
+    σ_1 = 4 F / (π d_01²) = 4 · 5000 / (π · 0.0195²) = 16.74 MPa (r_S1 = 9.75 mm, seed 000)."""
+    assert main(["check", "seed001_two_stage"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    not_checked = [ln for ln in lines if ln.lstrip().startswith("not checked")]
+    assert len(not_checked) == 5                  # 2 gear engagements, 2 strengths, buckling
+    assert "seed scenario gives no load" in out
+    verdict = out[out.index("verdict:"):]
+    for name in ("stage 1: gear engagement", "stage 2: gear engagement",
+                 "screw 1: strength", "screw 2: strength", "column: buckling"):
+        reason = next(ln for ln in verdict.splitlines() if name in ln)
+        assert ("--teeth" if "gear" in name else "--load") in reason, reason
+    assert main(["check", "--help"]) == 0
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "seed001's scenario has none" in help_text and "needs --teeth" in help_text
+    assert main(["check", "seed000_two_stage"]) == 0
+    out = capsys.readouterr().out
+    assert "5000 N, the largest load" in out
+    assert "σ_1 = 16.74 MPa" in out
+
+
+@pytest.mark.parametrize("value, name, allowed", [
+    ("stage[1].screw_radius=-1", "stage[1].screw_radius", "> 0"),
+    ("stage[2].nut_mass=0", "stage[2].nut_mass", "> 0"),
+    ("stage[1].flank_angle=1.6", "stage[1].flank_angle", "(0, pi/2)"),
+    ("stage[1].screw_starts=0", "stage[1].screw_starts", ">= 1"),
+    ("mu_spline=2", "mu_spline", "[0, 1)"),
+])
+def test_cli_check_set_values_are_validated_like_the_parameters(value, name, allowed, capsys):
+    """A --set value out of its parameter's range is refused in one line naming it and the
+    range, before any check is printed (a negative radius used to print d = −2000 mm)."""
+    assert main(["check", "seed001_two_stage", "--set", value]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == ""
+    err = cap.err.strip().splitlines()
+    assert len(err) == 1 and name in err[0] and allowed in err[0] and "--set" in err[0]
+    # a value in range that breaks the meshing is graded, not refused
+    assert main(["check", "seed001_two_stage", "--set", "stage[1].nut_radius=0.03"]) == 1
+    assert "geometric meshing r_N = r_S + 2 r_R is violated" in capsys.readouterr().out

@@ -51,10 +51,12 @@ def fmu_dir(tmp_path_factory) -> str:
 
 @pytest.fixture(scope="module")
 def client():
-    from dask.distributed import Client, LocalCluster
+    """A client of the local cluster the sweep starts (prsm_fmu.sweep.execute.local_cluster)."""
+    from dask.distributed import Client
 
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                           dashboard_address=":0")
+    from prsm_fmu.sweep.execute import local_cluster
+
+    cluster = local_cluster(2)
     c = Client(cluster)
     yield c
     c.close()
@@ -277,6 +279,60 @@ def test_a_failing_point_is_recorded_and_the_others_complete(tmp_path, client, f
     # the same rerun in a plain loop: nothing pending but the failed point
     loop = run_study(study, out, executor="loop", progress=None, figures=False)
     assert loop.skipped == 2 and len(loop.results) == 1
+
+
+def _listening_addresses() -> list[tuple[int, str, int]]:
+    """(pid, ip, port) of every listening TCP socket of this process and its children."""
+    import psutil
+
+    me = psutil.Process()
+    out = []
+    for proc in [me] + me.children(recursive=True):
+        try:
+            conns = proc.net_connections(kind="inet")
+        except psutil.NoSuchProcess:
+            continue
+        out += [(proc.pid, c.laddr.ip, c.laddr.port) for c in conns
+                if c.status == psutil.CONN_LISTEN]
+    return out
+
+
+def test_the_local_cluster_listens_on_loopback_only(client):
+    """The cluster a local sweep starts: scheduler, 2 workers, their nannies and the
+    scheduler's HTTP (dashboard) server all listen, and none on an address other machines can
+    reach: every listening socket is on 127.0.0.1 or ::1."""
+    from urllib.parse import urlparse
+
+    socks = _listening_addresses()
+    cluster = client.cluster
+    ports = {port for _, _, port in socks}
+    # the scheduler's comm port and its dashboard port are among them
+    assert urlparse(cluster.scheduler_address).port in ports
+    assert urlparse(cluster.dashboard_link).port in ports
+    # scheduler: comm + HTTP; each of the 2 workers: worker + nanny (at least)
+    assert len(socks) >= 2 + 2 * 2, socks
+    exposed = [s for s in socks if s[1] not in ("127.0.0.1", "::1")]
+    assert not exposed, f"listening beyond this machine: {exposed}"
+
+
+def test_a_point_the_fmu_refuses_records_the_fmus_own_reason(fmu_dir):
+    """A refused step (a non-finite load on the FMU's input) and a failed initialization (a
+    friction coefficient out of the FMU's range, bypassing the caller's validation): the point's
+    error carries what the FMU logged, which names the input or parameter; the runner itself
+    knows neither."""
+    from prsm_fmu.sweep.fmu_runner import FmuPointError, FmuRunner
+
+    runner = FmuRunner(os.path.join(fmu_dir, "PRSM2.fmu"))
+    p = presets.load("seed000_two_stage")
+    with pytest.raises(FmuPointError) as refused:
+        runner.run(p, "quasi-static", lambda t: 100.0, 0.0, math.nan, 1e-4, 1e-5)
+    # the runner's own words name the torque it tried; the FMU's name the load input
+    assert "load_force" in str(refused.value) and "finite" in str(refused.value)
+    bad = p.with_changes(mu_spline=1.5)          # the FMU's range is [0, 1)
+    with pytest.raises(FmuPointError) as failed:
+        runner.run(bad, "quasi-static", lambda t: 100.0, 0.0, 5000.0, 1e-4, 1e-5)
+    assert "mu_spline" in str(failed.value) and "1.5" in str(failed.value)
+    runner.close()
 
 
 def test_the_fmu_runner_recovers_after_a_refused_step(fmu_dir):

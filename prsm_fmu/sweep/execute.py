@@ -19,8 +19,10 @@
 Execution
 ---------
 ``executor="dask"`` (default): with ``scheduler=None`` a ``LocalCluster`` of ``workers``
-processes (default: the machine's cores) with one thread each is started and closed again;
-with ``scheduler="tcp://host:port"`` the points go to that cluster, and the FMU files are sent
+processes (default: the machine's cores) with one thread each is started and closed again
+(:func:`local_cluster`: scheduler, workers, nannies and the HTTP/dashboard server all listen on
+the loopback interface only, so a local study exposes nothing beyond this machine); only with
+``scheduler="tcp://host:port"`` do the points go to another cluster, and the FMU files are sent
 to its workers once (``Client.scatter(..., broadcast=True)``), since they may not share this
 machine's file system (they need ``prsm_fmu``, numpy, scipy, fmpy and pythonfmu installed).
 A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points one after the
@@ -55,9 +57,12 @@ from .table import (append_row, columns, markdown_table, numeric_rows, read_tabl
 from .trends import TrendResult, evaluate
 
 __all__ = ["run_study", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
-           "EXECUTORS", "Progress"]
+           "EXECUTORS", "Progress", "local_cluster", "LOOPBACK"]
 
 EXECUTORS = ("dask", "loop")
+
+#: the interface every process of a local cluster listens on (never all interfaces)
+LOOPBACK = "127.0.0.1"
 
 #: most runs drawn in one time figure (evenly chosen over the points)
 MAX_TIME_RUNS = 12
@@ -201,11 +206,36 @@ def _label(values: dict[str, Any]) -> str:
     return ", ".join(short_label(k, v) for k, v in values.items())
 
 
+def local_cluster(workers: int | None = None):
+    """A Dask ``LocalCluster`` for a study on this machine, reachable from this machine only.
+
+    ``workers`` processes (default: the cores) with one thread each.  The scheduler, the
+    workers, their nannies and the scheduler's HTTP server (dashboard, ``/health``, metrics)
+    bind to :data:`LOOPBACK` with ports chosen by the system; a local study never listens on
+    another interface (Dask's default dashboard address ``:8787`` is every interface).
+
+    Parameters
+    ----------
+    workers : int, optional
+        Worker processes, >= 1; default ``os.cpu_count()``.
+
+    Returns
+    -------
+    dask.distributed.LocalCluster
+        Started; the caller closes it (``cluster.close()``).
+    """
+    from dask.distributed import LocalCluster
+
+    n = workers or os.cpu_count() or 1
+    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOOPBACK,
+                        dashboard_address=f"{LOOPBACK}:0")
+
+
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
                   ship_fmus: bool) -> tuple[Callable, Callable]:
     """(iterator over results as they complete, closer) for the Dask executor."""
     try:
-        from dask.distributed import Client, LocalCluster, as_completed
+        from dask.distributed import Client, as_completed
     except ImportError:
         raise RuntimeError("dask.distributed is not installed: pip install 'prsm-fmu[sweep]', "
                            "or run the points in a plain loop (--no-dask)") from None
@@ -215,9 +245,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         if scheduler:
             client = own_client = Client(scheduler)
         else:
-            n = workers or os.cpu_count() or 1
-            own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                       dashboard_address=":0")
+            own_cluster = local_cluster(workers)
             client = own_client = Client(own_cluster)
     blobs = None
     if ship_fmus:

@@ -21,7 +21,8 @@ An instance loads the FMU once (extract, read the model description, instantiate
 any number of points on it, resetting it (``fmi2Reset``) between them; every parameter of
 the point's mechanism is set in initialization mode, so no value leaks from one point into
 the next.  After a failure inside the FMU (fmi2Error, fmi2Fatal) the instance is freed and a
-new one is made for the next point.
+new one is made for the next point.  The FMU is instantiated with logging on and its messages
+are kept (:class:`~prsm_fmu.fmu_log.FmuLog`): a point that fails says the FMU's own reason.
 
 Imports fmpy (only when a runner is made); never imported by the physics.
 """
@@ -34,6 +35,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..fmu_log import FmuLog
 from ..params import MechanismParams, StageParams
 
 #: mechanism-level parameters of the FMU (fields of MechanismParams that are FMU parameters)
@@ -89,6 +91,7 @@ class FmuRunner:
         self._i_speed = self.output_names.index("screw_speed")
         self.n_stages = sum(1 for n in self.output_names if n.endswith(".contact_force"))
         self.fmu = None
+        self.log = FmuLog()           # the FMU's messages of the current point
         self.points_run = 0
         self.instances_made = 0
 
@@ -100,7 +103,7 @@ class FmuRunner:
             self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
                                  modelIdentifier=self.md.coSimulation.modelIdentifier,
                                  instanceName="prsm_sweep")
-            self.fmu.instantiate(loggingOn=False)
+            self.fmu.instantiate(callbacks=self.log.callbacks, loggingOn=True)
             self.instances_made += 1
             self._fresh = True
         elif not self._fresh:
@@ -180,17 +183,24 @@ class FmuRunner:
             raise ValueError(f"the mechanism has {params.n_stages} stages but "
                              f"{self.fmu_path} has {self.n_stages}")
         n_steps = round(t_end / output_interval)
+        self.log.clear()
         try:
             return self._run(params, fidelity, speed, acceleration0, load_force, n_steps,
                              output_interval)
-        except FmuPointError:
+        except FmuPointError as exc:
             self.discard()
-            raise
+            raise FmuPointError(f"{exc}{self._fmu_says()}") from exc
         except Exception as exc:  # FMICallException and friends
             self.discard()
-            raise FmuPointError(f"the FMU failed: {type(exc).__name__}: {exc}") from exc
+            raise FmuPointError(f"the FMU failed: {type(exc).__name__}: {exc}"
+                                f"{self._fmu_says()}") from exc
         finally:
             self.points_run += 1
+
+    def _fmu_says(self) -> str:
+        """The FMU's warnings and errors of this point, as ``": the FMU says: ..."``."""
+        reason = self.log.reason(problems_only=True)
+        return f": the FMU says: {reason}" if reason else " (the FMU logged no reason)"
 
     def _run(self, params, fidelity, speed, acceleration0, load_force, n_steps, h):
         fmu = self._instance()

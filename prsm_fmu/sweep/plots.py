@@ -18,20 +18,26 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..units import (DIMENSIONLESS, METRE, METRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
+                     RADIAN_PER_SECOND, SECOND, label, unit_of)
+
 __all__ = ["plot_time_panels", "plot_steady", "PANELS", "DEFAULT_PANELS", "label_of",
            "short_label"]
 
 #: time panels: signal -> (title, y label, per stage?, first stage)
 PANELS: dict[str, tuple[str, str, bool, int]] = {
     "carrier_speed_ratio": ("carrier speed ratios ζ_PSk (solid k = 1, dashed k = 2)",
-                            "ζ_PSk [-]", True, 1),
-    "contact_force": ("axial contact force per roller F_Srzk", "F_Srzk [N]", True, 1),
-    "efficiency": ("efficiency η", "η [-]", False, 0),
-    "spline_friction": ("spline friction f_S2 between screws 1 and 2", "f_S2 [N]", True, 2),
-    "driven_torque": ("driven torques M_Sk (solid k = 1, dashed k = 2)", "M_Sk [N·m]", True, 1),
-    "friction_torque": ("friction torque at the screw M_f = P_f / ω", "M_f [N·m]", False, 0),
-    "screw_torque": ("motor torque M_S1", "M_S1 [N·m]", False, 0),
-    "screw_speed": ("screw speed ω", "ω [rad/s]", False, 0),
+                            label("ζ_PSk", DIMENSIONLESS), True, 1),
+    "contact_force": ("axial contact force per roller F_Srzk", label("F_Srzk", NEWTON), True, 1),
+    "efficiency": ("efficiency η", label("η", DIMENSIONLESS), False, 0),
+    "spline_friction": ("spline friction f_S2 between screws 1 and 2", label("f_S2", NEWTON),
+                        True, 2),
+    "driven_torque": ("driven torques M_Sk (solid k = 1, dashed k = 2)",
+                      label("M_Sk", NEWTON_METRE), True, 1),
+    "friction_torque": ("friction torque at the screw M_f = P_f / ω", label("M_f", NEWTON_METRE),
+                        False, 0),
+    "screw_torque": ("motor torque M_S1", label("M_S1", NEWTON_METRE), False, 0),
+    "screw_speed": ("screw speed ω", label("ω", RADIAN_PER_SECOND), False, 0),
 }
 
 #: seed 000 Figs. 4 and 5: (a) ζ_PSk, (b) F_Srzk, (c) η, (d) f_S2
@@ -39,9 +45,9 @@ DEFAULT_PANELS = ("carrier_speed_ratio", "contact_force", "efficiency", "spline_
 
 _LABELS = {
     "mu_screw_roller": "µ_SR", "mu_spline": "µ_SS", "mu_nut_screw": "µ_NS",
-    "load_force": "load F [N]", "screw_speed": "screw speed [rad/s]",
-    "accel_time": "acceleration time t_a [s]", "n_stages": "stages",
-    "slip_velocity_scale": "v_ε [m/s]",
+    "load_force": label("load F", NEWTON), "screw_speed": label("screw speed", RADIAN_PER_SECOND),
+    "accel_time": label("acceleration time t_a", SECOND), "n_stages": "stages",
+    "slip_velocity_scale": label("v_ε", METRE_PER_SECOND),
 }
 
 
@@ -68,7 +74,7 @@ def label_of(name: str) -> str:
     if name in _LABELS:
         return _LABELS[name]
     if name.startswith("stage[") and name.endswith("].pitch"):
-        return f"pitch of screw {name[6:name.index(']')]} [m]"
+        return label(f"pitch of screw {name[6:name.index(']')]}", METRE)
     return name
 
 
@@ -110,7 +116,7 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
         ax.set_visible(False)
     stage_panels = [p for p in panels if PANELS[p][2]]
     global_panels = [p for p in panels if not PANELS[p][2]]
-    for j, (label, res) in enumerate(runs):
+    for j, (run_label, res) in enumerate(runs):
         c = colours[j % len(colours)]
         t_ms = np.asarray(res["time"]) * 1e3
         k = 1
@@ -121,11 +127,11 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
                 name = f"stage[{k}].{p}"
                 if k >= first and name in res:
                     ax_of[p].plot(t_ms, res[name], ls, color=c,
-                                  label=label if k == first else None)
+                                  label=run_label if k == first else None)
             k += 1
         for p in global_panels:
             if p in res:
-                ax_of[p].plot(t_ms, res[p], "-", color=c, label=label)
+                ax_of[p].plot(t_ms, res[p], "-", color=c, label=run_label)
     for i, p in enumerate(panels):
         ax = ax_of[p]
         ax.set_title(f"({chr(ord('a') + i)}) {PANELS[p][0]}", fontsize=10)
@@ -136,7 +142,7 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
             ax.legend(fontsize=8, loc="best")
     for i in range(n):
         if i >= n - ncols:
-            axes.flat[i].set_xlabel("time [ms]")
+            axes.flat[i].set_xlabel(label("time", MILLISECOND))
     if title:
         fig.suptitle(title)
     fig.tight_layout()
@@ -146,13 +152,9 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
 
 def _unit(metric: str) -> str:
     """``[unit]`` of a metric column (settling times in s)."""
-    from ..cli import unit_of
-
     signal, _, how = metric.rpartition("@")
     if how == "settle":
-        return "[s]"
-    if signal == "friction_torque":
-        return "[N·m]"
+        return f"[{SECOND}]"
     u = unit_of(signal)
     return "" if u == "?" else f"[{u}]"
 

@@ -155,7 +155,9 @@ def resolve_preset(name: str) -> MechanismParams:
         raise
     if not isinstance(p, MechanismParams):
         raise ValueError(f"preset {name!r} is not a planetary roller screw mechanism the models "
-                         "can run")
+                         "can run: must be one of "
+                         + ", ".join(n for n in presets.names()
+                                     if isinstance(presets.load(n), MechanismParams)))
     return p
 
 
@@ -187,8 +189,8 @@ def apply_overrides(params: MechanismParams, values: Mapping[str, Any]) -> Mecha
             continue
         k, f = int(m.group(1)), m.group(2)
         if not 1 <= k <= params.n_stages:
-            raise ValueError(f"{name} = {value!r}: stage {k} is out of range: the mechanism has "
-                             f"{params.n_stages} stage(s)")
+            raise ValueError(f"{name} = {value!r}: stage {k} is out of range: must be in "
+                             f"[1, {params.n_stages}] (the stages of the mechanism)")
         if f == "pitch":
             pitches.append((k, value))
         else:
