@@ -29,7 +29,8 @@ Provided steppers (see :func:`make_stepper`), one module each on the shared base
     :class:`ClosedForm` (:mod:`.closed_form`), the model's exact step where it has one.
 
 The methods' coefficients are data in :mod:`.tableaux`; the small dense LU of the linearly
-implicit steppers is in :mod:`.linalg`.
+implicit steppers is in :mod:`.linalg`; the options tuned for the PRSM models in
+:mod:`.options`.
 
 Model protocol (duck typed, see :class:`OdeModel`): ``n_states``, ``rhs(t, x, u)``,
 ``state_scale`` and optionally ``jacobian(t, x, u)``, ``error_mask`` and
@@ -46,6 +47,7 @@ from .factory import STEPPER_NAMES, make_stepper
 from .linalg import SMALL_LU as _SMALL_LU
 from .linalg import lu_factor as _lu_factor
 from .linalg import lu_solve as _lu_solve
+from .options import TUNED_OPTIONS, tuned_stepper_options
 from .radau import ScipyRadau
 from .rk4 import RK4
 from .rosenbrock import Rosenbrock
@@ -70,4 +72,6 @@ __all__ = [
     "ROS_GAMMA_IJ",
     "ROS_B",
     "ROS_BHAT",
+    "TUNED_OPTIONS",
+    "tuned_stepper_options",
 ]

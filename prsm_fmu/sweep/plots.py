@@ -146,7 +146,7 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
 
 def _unit(metric: str) -> str:
     """``[unit]`` of a metric column (settling times in s)."""
-    from ..cli import unit_of
+    from ..results import unit_of
 
     signal, _, how = metric.rpartition("@")
     if how == "settle":
