@@ -32,7 +32,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from . import presets
-from .cli import energy_balance_residual, plot_startup
+from .cli import plot_startup
+from .results import energy_balance_residual
 from .params import MechanismParams
 from .presets import seed002
 from .simulate import DEFAULT_STEPPER, simulate

@@ -17,6 +17,7 @@ from .models.base import is_finite_state
 from .params import MechanismParams
 from .profiles import SpeedLike, as_speed_profile
 from .steppers import StepFailure, StepStats, make_stepper
+from .steppers.options import TUNED_OPTIONS, tuned_stepper_options
 
 Signal = Union[float, Callable[[float], float]]
 
@@ -25,32 +26,6 @@ Signal = Union[float, Callable[[float], float]]
 #: carriers' time constant (prsm_fmu/models/adaptive.py)
 DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
                    "kinematic": "closed_form", "auto": "default"}
-
-#: options that make an adaptive stepper cheapest at equal accuracy on this model
-#: (benchmarks/step_cost.py: Jacobian reuse within a step while h·‖J‖·|Δx|/|x| ≤ 0.1, and a first
-#: internal step of at most 8/‖J‖ after an input change)
-TUNED_OPTIONS = {"rosenbrock": {"jacobian_reuse": 0.1, "first_step_stiffness": 8.0}}
-
-
-def tuned_stepper_options(name: str, rtol: float, atol: float) -> dict:
-    """Options of stepper ``name`` at the given tolerances, as simulate and the FMU use them.
-
-    Parameters
-    ----------
-    name : str
-        Stepper name (see :func:`prsm_fmu.steppers.make_stepper`).
-    rtol, atol : float
-        Relative [-] and absolute [state units] tolerances (ignored by ``rk4``).
-
-    Returns
-    -------
-    dict
-        Keyword arguments for :func:`~prsm_fmu.steppers.make_stepper`.
-    """
-    if name == "rk4":
-        return {}
-    return {"rtol": rtol, "atol": atol, **TUNED_OPTIONS.get(name, {})}
-
 
 def _signal(value: Signal, name: str) -> Callable[[float], float]:
     if callable(value):
@@ -210,4 +185,4 @@ def _advance(st, model, t: float, x: list[float], u: tuple, h: float) -> tuple:
     return x1, stats
 
 
-__all__ = ["simulate", "StepStats"]
+__all__ = ["simulate", "StepStats", "DEFAULT_STEPPER", "TUNED_OPTIONS", "tuned_stepper_options"]

@@ -229,32 +229,50 @@ class CascadeController(PythonBlock):
         #: integrators: position, speed, d current, q current
         self.integrals = [ini.get("position", 0.0), ini.get("speed", 0.0), ini.get("i_d", 0.0),
                           ini.get("i_q", 0.0)]
+        p = self.params
+        #: anti-windup gains K_i/K_p of the position, speed and current loops (as :class:`PI`)
+        self._kaw_position = PI(p.position_kp, p.position_ki, p.sample_time).kaw
+        self._kaw_speed = PI(p.speed_kp, p.speed_ki, p.sample_time).kaw
+        self._kaw_current = PI(p.current_kp, p.current_ki, p.sample_time).kaw
 
     def _sample(self, t: float, x: float, w: float, idd: float, iq: float) -> None:
+        """One sample at ``t`` [s] with the measurements x [m], ω [rad/s], i_d, i_q [A].
+
+        The loops are :class:`PI` updates written out (no objects per sample); the arithmetic
+        is :meth:`PI.update`'s, term by term."""
         p = self.params
         ts = p.sample_time
         j = self.j
         cmd, integ = self.cmd, self.integrals
         ref = self.reference(t)
         cmd[2] = ref
-        # position loop
-        if self.mode == "position" and j % p.position_divider == 0:
+        mode = self.mode
+        # position loop (PI with period ts · position_divider)
+        if mode == "position" and j % p.position_divider == 0:
             tp = ts * p.position_divider
-            pi = PI(p.position_kp, p.position_ki, tp, integ[0])
             ff = 0.0
             if p.velocity_feedforward > 0.0:     # the planned trajectory's rate, central difference
                 ff = p.velocity_feedforward * (self.reference(t + tp) - self.reference(t - tp)) \
                     / (2.0 * tp * self.c)
-            cmd[3] = pi.update(ref - x, -p.speed_limit, p.speed_limit, ff)
-            integ[0] = pi.integral
-        elif self.mode == "speed":
+            e = ref - x
+            u = p.position_kp * e + integ[0] + ff
+            us = min(p.speed_limit, max(-p.speed_limit, u))
+            ki = p.position_ki
+            if ki > 0.0:
+                integ[0] += tp * (ki * e + self._kaw_position * (us - u))
+            cmd[3] = us
+        elif mode == "speed":
             cmd[3] = min(p.speed_limit, max(-p.speed_limit, ref))
-        # speed loop
-        if self.mode != "current" and j % p.speed_divider == 0:
-            pi = PI(p.speed_kp, p.speed_ki, ts * p.speed_divider, integ[1])
-            cmd[4] = pi.update(cmd[3] - w, -p.current_limit, p.current_limit)
-            integ[1] = pi.integral
-        elif self.mode == "current":
+        # speed loop (PI with period ts · speed_divider)
+        if mode != "current" and j % p.speed_divider == 0:
+            e = cmd[3] - w
+            u = p.speed_kp * e + integ[1] + 0.0
+            us = min(p.current_limit, max(-p.current_limit, u))
+            ki = p.speed_ki
+            if ki > 0.0:
+                integ[1] += (ts * p.speed_divider) * (ki * e + self._kaw_speed * (us - u))
+            cmd[4] = us
+        elif mode == "current":
             cmd[4] = min(p.current_limit, max(-p.current_limit, ref))
         # current loop, d axis first on the voltage circle
         m = self.motor
@@ -262,18 +280,17 @@ class CascadeController(PythonBlock):
         ffd, ffq = (-we * m.inductance * iq, we * (m.inductance * idd + m.flux_linkage)) \
             if p.decoupling else (0.0, 0.0)
         vmax = p.voltage_limit
-        pid = PI(p.current_kp, p.current_ki, ts, integ[2])
+        kp, ki, kaw = p.current_kp, p.current_ki, self._kaw_current
         ed = 0.0 - idd
-        vd_u = pid.unsaturated(ed, ffd)
+        vd_u = kp * ed + integ[2] + ffd
         vd = min(vmax, max(-vmax, vd_u))
         vq_lim = math.sqrt(max(0.0, vmax * vmax - vd * vd))
-        piq = PI(p.current_kp, p.current_ki, ts, integ[3])
         eq = cmd[4] - iq
-        vq_u = piq.unsaturated(eq, ffq)
+        vq_u = kp * eq + integ[3] + ffq
         vq = min(vq_lim, max(-vq_lim, vq_u))
-        pid.commit(ed, vd_u, vd)
-        piq.commit(eq, vq_u, vq)
-        integ[2], integ[3] = pid.integral, piq.integral
+        if ki > 0.0:
+            integ[2] += ts * (ki * ed + kaw * (vd - vd_u))
+            integ[3] += ts * (ki * eq + kaw * (vq - vq_u))
         cmd[0], cmd[1] = vd, vq
         cmd[5] += 1.0
         self.j = j + 1
@@ -284,23 +301,21 @@ class CascadeController(PythonBlock):
         ts = self.params.sample_time
         eps = 1e-9 * min(h, ts)
         u, du = self.u, self.du
-        if not all(math.isfinite(v) for v in u + du):
+        u0, u1, u2, u3 = u
+        s0, s1, s2, s3 = du
+        if not (all(map(math.isfinite, u)) and all(map(math.isfinite, du))):
             raise StepRefused(self.name, t, h, f"non-finite measurement: {u}, slopes {du}")
-        saved = (self.j, list(self.cmd), list(self.integrals))
-        try:
-            while True:
-                tj = self.t0 + self.j * ts
-                if tj >= t + h - eps:
-                    break
-                if tj < t - eps:
-                    raise StepRefused(self.name, t, h, f"sample {self.j} at t = {tj!r} s lies "
-                                      "before the step: steps must be contiguous")
-                dt = tj - t
-                self._sample(tj, u[0] + du[0] * dt, u[1] + du[1] * dt, u[2] + du[2] * dt,
-                             u[3] + du[3] * dt)
-        except StepRefused:
-            self.j, self.cmd, self.integrals = saved
-            raise
+        t_end = t + h - eps
+        tj = self.t0 + self.j * ts
+        # the sample instants only grow, so only the first can lie before the step, and then
+        # nothing has been executed yet: the state is unchanged when the step is refused
+        if tj < t - eps and tj < t_end:
+            raise StepRefused(self.name, t, h, f"sample {self.j} at t = {tj!r} s lies "
+                              "before the step: steps must be contiguous")
+        while tj < t_end:
+            dt = tj - t
+            self._sample(tj, u0 + s0 * dt, u1 + s1 * dt, u2 + s2 * dt, u3 + s3 * dt)
+            tj = self.t0 + self.j * ts
 
     def get_outputs(self) -> list[float]:
         return list(self.cmd)

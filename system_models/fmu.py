@@ -154,6 +154,15 @@ class FMUBlock(Block):
         self._int_pos = [i for i, n in enumerate(out_names) if self.vars[n].type != "Real"]
         self._log = FmuLog()                     # keeps the ctypes callbacks alive
         self.messages = self._log.messages
+        # the step loop's calls go straight to the FMU's C functions with buffers made once
+        # (fmpy's wrappers build two ctypes arrays per call); statuses are checked here
+        from fmpy.fmi2 import fmi2Integer, fmi2Real, fmi2ValueReference
+        self._buf_in = (fmi2Real * len(self._vr_in))()
+        self._arr_in = (fmi2ValueReference * len(self._vr_in))(*self._vr_in)
+        self._buf_real = (fmi2Real * len(self._vr_real))()
+        self._arr_real = (fmi2ValueReference * len(self._vr_real))(*self._vr_real)
+        self._buf_int = (fmi2Integer * len(self._vr_int))()
+        self._arr_int = (fmi2ValueReference * len(self._vr_int))(*self._vr_int)
         self._unzipdir = extract(str(self.path))
         self._alive = False
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
@@ -164,6 +173,9 @@ class FMUBlock(Block):
             shutil.rmtree(self._unzipdir, ignore_errors=True)
             raise FMUError(f"{self.path}: instantiation failed: {exc}") from exc
         self._alive = True
+        dll = self.fmu.dll
+        self._c_set_real, self._c_get_real = dll.fmi2SetReal, dll.fmi2GetReal
+        self._c_get_integer, self._c_do_step = dll.fmi2GetInteger, dll.fmi2DoStep
         try:
             self._call("setupExperiment", startTime=float(start_time))
             self._call("enterInitializationMode")
@@ -190,6 +202,12 @@ class FMUBlock(Block):
             raise FMUError(f"{self.name}: {fname} failed with status {exc.status} "
                            f"({_STATUS[exc.status] if 0 <= exc.status < 6 else '?'})"
                            + self._since(n0)) from exc
+
+    def _check(self, fname: str, status: int, n0: int) -> None:
+        """Raise :class:`FMUError` for a status above fmi2Warning of a direct call."""
+        if status > 1:
+            raise FMUError(f"{self.name}: {fname} failed with status {status} "
+                           f"({_STATUS[status] if 0 <= status < 6 else '?'})" + self._since(n0))
 
     def _since(self, n0: int) -> str:
         msgs = self._log.reason(n0)
@@ -220,31 +238,41 @@ class FMUBlock(Block):
 
     # ---- Block interface ------------------------------------------------------------------
     def set_inputs(self, values: Sequence[float], slopes: Sequence[float] | None = None) -> None:
-        self._call("setReal", self._vr_in, [float(v) for v in values])
+        buf = self._buf_in
+        if len(values) != len(buf):
+            raise ValueError(f"{self.name}: {len(values)} input values for {len(buf)} inputs")
+        for k, v in enumerate(values):
+            buf[k] = v                   # ctypes converts to double (TypeError if it cannot)
+        n0 = len(self.messages)
+        self._check("setReal", self._c_set_real(self.fmu.component, self._arr_in, len(buf), buf),
+                    n0)
 
     def get_outputs(self) -> list[float]:
-        real = self._call("getReal", self._vr_real) if self._vr_real else []
+        n0 = len(self.messages)
+        comp = self.fmu.component
+        real = self._buf_real
+        if len(real):
+            self._check("getReal", self._c_get_real(comp, self._arr_real, len(real), real), n0)
         if not self._vr_int:
-            return list(real)
+            return real[:]
+        ints = self._buf_int
+        self._check("getInteger", self._c_get_integer(comp, self._arr_int, len(ints), ints), n0)
         out = [0.0] * len(self.outputs)
         for i, v in zip(self._real_pos, real):
             out[i] = v
-        for i, v in zip(self._int_pos, self._call("getInteger", self._vr_int)):
+        for i, v in zip(self._int_pos, ints):
             out[i] = float(v)
         return out
 
     def do_step(self, t: float, h: float) -> None:
-        from fmpy.fmi1 import FMICallException
-
         n0 = len(self.messages)
-        try:
-            self.fmu.doStep(t, h)
-        except FMICallException as exc:
-            if exc.status == 2:      # fmi2Discard: state unchanged, may retry
-                raise StepRefused(self.name, t, h, self._since(n0)[2:]) from None
+        status = self._c_do_step(self.fmu.component, t, h, 1)
+        if status == 2:              # fmi2Discard: state unchanged, may retry
+            raise StepRefused(self.name, t, h, self._since(n0)[2:])
+        if status > 1:
             raise FMUError(f"{self.name}: doStep(t = {t!r} s, h = {h!r} s) failed with status "
-                           f"{exc.status} ({_STATUS[exc.status] if 0 <= exc.status < 6 else '?'})"
-                           + self._since(n0)) from exc
+                           f"{status} ({_STATUS[status] if 0 <= status < 6 else '?'})"
+                           + self._since(n0))
 
     def get_state(self) -> Any:
         return self._call("getFMUstate")

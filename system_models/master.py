@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 import time as _time
 from dataclasses import dataclass, field
+from operator import itemgetter
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
@@ -196,6 +197,7 @@ class Master:
         self.order, self.extrapolation, self.retry = order, extrapolation, retry
         self._sources = self._connect(connections)
         self._record = self._record_list(record)
+        self._plan_step()
         self._nominal = [[port.nominal for port in b.outputs] for b in self.blocks]
         for ref, value in (nominals or {}).items():
             i, port = self._split(ref)
@@ -259,6 +261,45 @@ class Master:
             out.append((i, p, ref, self.blocks[i].outputs[p].unit))
         return out
 
+    def _plan_step(self) -> None:
+        """What each step needs, worked out once: the outputs whose coupling error is
+        estimated (sources of continuous connections read before their block has stepped:
+        their running maxima scale the estimate), the getters of the recorded outputs per
+        block, and the feedthrough blocks whose outputs right after ``do_step`` nobody reads
+        (their outputs at t_(k+1) come from the feedthrough update)."""
+        gs = self.order == "gauss-seidel"
+        watched = set()
+        read_after_step: set[int] = set()      # blocks read in the step loop once stepped
+        for i, srcs in enumerate(self._sources):
+            for src in srcs:
+                if src[0] == "const":
+                    continue
+                _, s_, p_, discrete = src
+                if gs and s_ < i:
+                    read_after_step.add(s_)
+                elif not discrete:
+                    watched.add((s_, p_))
+        #: (block, port) of the outputs whose running maximum scales the coupling error
+        self._watched = sorted(watched)
+        # a feedthrough block read by an earlier feedthrough block's update sees its outputs
+        # from right after its step: those must be read then
+        for i, b in enumerate(self.blocks):
+            if b.feedthrough:
+                for src in self._sources[i]:
+                    if src[0] != "const" and src[1] > i and self.blocks[src[1]].feedthrough:
+                        read_after_step.add(src[1])
+        self._read_after_step = [not (b.feedthrough and gs and i not in read_after_step)
+                                 for i, b in enumerate(self.blocks)]
+        by_block: dict[int, list[int]] = {}
+        for i, p_, _, _ in self._record:
+            by_block.setdefault(i, []).append(p_)
+        # one getter per block in recording order, when the recorded columns come block by
+        # block (the default: every output); else a per-column row
+        order = [i for i, _, _, _ in self._record]
+        grouped = all(order[k] <= order[k + 1] for k in range(len(order) - 1))
+        self._row_getters = ([(i, itemgetter(*ps) if len(ps) > 1 else (lambda v, q=ps[0]: (v[q],)))
+                              for i, ps in by_block.items()] if grouped else None)
+
     # ---- stepping ----------------------------------------------------------------------------
     def _values(self, i: int, y: list) -> list[float]:
         out = []
@@ -299,6 +340,7 @@ class Master:
         y_new: list[list[float] | None] = [None] * len(blocks)
         predictions: list[tuple[int, int, float]] = []
         timers = self._block_time
+        read_after = self._read_after_step
         for i, b in enumerate(blocks):
             vals, slopes = [], []
             for src in self._sources[i]:
@@ -331,7 +373,7 @@ class Master:
             else:
                 b.set_inputs([v + 0.5 * h * sl for v, sl in zip(vals, slopes)])
             b.do_step(t, h)
-            if gs:
+            if gs and read_after[i]:
                 y_new[i] = b.get_outputs()
             timers[i] += _time.perf_counter() - c0
         if not gs:
@@ -341,18 +383,20 @@ class Master:
                 timers[i] += _time.perf_counter() - c0
         for i, b in enumerate(blocks):
             if b.feedthrough:
+                c0 = _time.perf_counter()
                 b.set_inputs(self._values(i, y_new))
                 b.update_outputs(t + h)
                 y_new[i] = b.get_outputs()
+                timers[i] += _time.perf_counter() - c0
         err = 0.0
         scale = self.scale
         for s, p, pred in predictions:
             ref = max(scale[s][p], abs(y_new[s][p]))
             err = max(err, abs(y_new[s][p] - pred) / ref)
-        for row_s, row in zip(scale, y_new):
-            for p, v in enumerate(row):
-                if abs(v) > row_s[p]:
-                    row_s[p] = abs(v)
+        for s, p in self._watched:      # the only scales the estimate reads
+            v = abs(y_new[s][p])
+            if v > scale[s][p]:
+                scale[s][p] = v
         self.y_prev, self.t_prev, self.y = y, t, y_new
         self._stats["substeps"] += 1
         return err
@@ -448,7 +492,13 @@ class Master:
 
     def _row(self) -> list[float]:
         y = self.y
-        return [y[i][p] for i, p, _, _ in self._record]
+        getters = self._row_getters
+        if getters is None:
+            return [y[i][p] for i, p, _, _ in self._record]
+        row: list[float] = []
+        for i, get in getters:
+            row += get(y[i])
+        return row
 
     def _result(self, times: list[float], rows: list[list[float]], wall0: float) -> Result:
         data = np.asarray(rows, dtype=float).reshape(len(rows), len(self._record))

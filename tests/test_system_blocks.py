@@ -7,6 +7,7 @@ integrals of ramps, a second-order system's overshoot exp(−πζ/√(1−ζ²))
 
 from __future__ import annotations
 
+import cmath
 import io
 import math
 
@@ -276,6 +277,55 @@ def test_steady_voltages_hold_the_current_and_the_dq_power_identity_closes():
     resid = y["electrical_energy"] - y["copper_energy"] - (y["magnetic_energy"] - e_mag0) - y["airgap_energy"]
     assert abs(resid) <= 1e-9 * y["electrical_energy"]
     assert y["torque"] == pytest.approx(p.torque_constant * y["i_q"])
+
+
+def test_exponential_motor_step_is_exact_under_held_speed_and_of_second_order_otherwise():
+    p = MotorParams()
+    tau = p.inductance / p.resistance                    # 2e-3 H / 0.5 Ω = 4 ms
+    # locked rotor, one step of 5 ms: i_q = v/R (1 − e^{−t/τ}) exactly, whatever the step
+    mot = Motor(p, integrator="exponential")
+    v, h = 10.0, 5e-3
+    mot.set_inputs([0.0, v, 0.0], [0.0, 0.0, 0.0])
+    mot.do_step(0.0, h)
+    y = dict(zip(mot.output_names(), mot.get_outputs()))
+    assert y["i_q"] == pytest.approx(v / p.resistance * (1 - math.exp(-h / tau)), rel=1e-13)
+    # E_el = ∫ 1.5 v i_q dt = 1.5 v (v/R) (h − τ (1 − e^{−h/τ})) at zero speed, and E_cu = E_el − E_mag
+    e_el = 1.5 * v * v / p.resistance * (h - tau * (1 - math.exp(-h / tau)))
+    assert y["electrical_energy"] == pytest.approx(e_el, rel=1e-12)
+    assert y["copper_energy"] == pytest.approx(e_el - y["magnetic_energy"], rel=1e-12)
+    # at a held speed ω the current rotates and decays: i(t) = i_∞ + (i_0 − i_∞) e^{−(R/L + j p ω) t}
+    w, h = 80.0, 3e-3
+    vd, vq = 4.0, 90.0
+    mot = Motor(p, integrator="exponential", i_d=1.0, i_q=-2.0)
+    mot.set_inputs([vd, vq, w], [0.0, 0.0, 0.0])
+    mot.do_step(0.0, h)
+    a = complex(p.resistance / p.inductance, p.pole_pairs * w)
+    i_inf = complex(vd, vq - p.pole_pairs * w * p.flux_linkage) / (p.inductance * a)
+    i_h = i_inf + (complex(1.0, -2.0) - i_inf) * cmath.exp(-a * h)
+    y = mot.get_outputs()
+    assert abs(complex(y[0], y[1]) - i_h) <= 1e-13 * abs(i_h)
+    # a speed that changes over the step: second order in the substep against RK4 at 0.1 µs, and
+    # the block's own energy balance E_el = E_cu + ΔE_mag + W_airgap to rounding
+    def run(integrator, max_substep):
+        m = Motor(p, integrator=integrator, max_substep=max_substep, i_q=3.0)
+        e_mag0 = m.get_outputs()[-1]
+        for k in range(40):
+            w = 50.0 + 2.0 * k                               # slope 2 rad/s per 0.1 ms = 2e4 rad/s²
+            m.set_inputs([5 * math.sin(0.1 * k), 2.5 + w + 3 * math.cos(0.07 * k), w],
+                         [0.0, 0.0, 2e4])
+            m.do_step(k * 1e-4, 1e-4)
+        return dict(zip(m.output_names(), m.get_outputs())), e_mag0
+    ref, _ = run("rk4", 1e-7)
+    errors = []
+    for sub in (2e-5, 1e-5):
+        y, e_mag0 = run("exponential", sub)
+        errors.append(abs(complex(y["i_d"] - ref["i_d"], y["i_q"] - ref["i_q"])))
+        resid = y["electrical_energy"] - y["copper_energy"] - (y["magnetic_energy"] - e_mag0) \
+            - y["airgap_energy"]
+        assert abs(resid) <= 1e-12 * y["electrical_energy"]
+    assert 3.5 < errors[0] / errors[1] < 4.5            # halving the substep: error / 4
+    with pytest.raises(ValueError, match="integrator"):
+        Motor(p, integrator="euler")
 
 
 def test_the_inverter_limits_the_voltage_and_overcurrent_trips_the_drive():

@@ -45,6 +45,7 @@ import math
 from typing import Any
 
 from ..steppers import ClosedForm, StepStats, Stepper, make_stepper
+from ..steppers.options import TUNED_OPTIONS
 from .auto import MARGIN, carrier_time_constants, effective_load
 from .dynamic import DynamicModel
 from .quasi_static import QuasiStaticModel
@@ -245,7 +246,7 @@ class SwitchingStepper(Stepper):
         Stepper of the dynamic level; ``default``: each dynamic step explicit (DP5(4)) where
         the communication step is at most :data:`EXPLICIT_STEP_PER_TAU` times the fastest
         carrier time constant at the step's start (τ_k = c_k |ω|/|F|), ROS34PW2 with the tuned
-        options of :data:`prsm_fmu.simulate.TUNED_OPTIONS` elsewhere; ``closed_form`` means
+        options of :data:`prsm_fmu.steppers.options.TUNED_OPTIONS` elsewhere; ``closed_form`` means
         ``rosenbrock``.
     **options
         That stepper's options; ``rtol``, ``atol`` and ``max_substeps`` also set the
@@ -261,8 +262,6 @@ class SwitchingStepper(Stepper):
             raise ValueError("SwitchingStepper needs an AdaptiveModel (fidelity = 'auto')")
         fallback = {k: options[k] for k in ("rtol", "atol", "max_substeps") if k in options}
         if name == "default":
-            from ..simulate import TUNED_OPTIONS
-
             common = dict(fallback)
             tuned = dict(TUNED_OPTIONS["rosenbrock"])
             if "fixed_substeps" in options:          # fixed steps: no step-size tuning

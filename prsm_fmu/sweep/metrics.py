@@ -23,7 +23,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..cli import SETTLING_BAND, energy_balance_residual, is_settled, settling_time
+from ..results import SETTLING_BAND, energy_balance_residual, is_settled, settling_time
 
 __all__ = ["settle", "value_at", "standard_metrics", "compute_metrics", "derive_series",
            "SERIES_KEEP", "stage_signals"]
@@ -52,8 +52,8 @@ def settle(time: Sequence[float], value: Sequence[float], band: float = SETTLING
     settled.
 
     Samples before the first finite one are skipped (e.g. the friction torque at standstill).
-    The band and the test of having settled are :func:`prsm_fmu.cli.settling_time` and
-    :func:`prsm_fmu.cli.is_settled` (shared with ``prsm-fmu startup`` and the paper report).
+    The band and the test of having settled are :func:`prsm_fmu.results.settling_time` and
+    :func:`prsm_fmu.results.is_settled` (shared with ``prsm-fmu startup`` and the paper report).
     """
     t = np.asarray(time, dtype=float)
     z = np.asarray(value, dtype=float)

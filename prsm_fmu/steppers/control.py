@@ -1,0 +1,104 @@
+"""Shared machinery of the adaptive steppers: tolerances, error weights, the first-step norms
+and the elementary step-size controller (memory: the proposal for the next internal step)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+from .base import Stepper, _INF, _check_count, _check_tol, _model_mask, _model_scale
+
+__all__ = ["AdaptiveBase"]
+
+
+class AdaptiveBase(Stepper):
+    """Common tolerance handling, error norm and step-size controller."""
+
+    #: exponent denominator of the controller: err ~ h**(q+1), q = min(order, embedded order)
+    _q1: float = 1.0
+
+    def __init__(
+        self,
+        model: Any,
+        rtol: float,
+        atol: float,
+        h_min: float,
+        max_substeps: int,
+        fixed_substeps: int | None,
+        safety: float,
+        fac_min: float,
+        fac_max: float,
+    ) -> None:
+        super().__init__(model)
+        n = self.n_states
+        self.rtol = _check_tol("rtol", rtol, strictly_positive=False)
+        self.atol = _check_tol("atol", atol, strictly_positive=True)
+        self.h_min = _check_tol("h_min", h_min, strictly_positive=True)
+        self.max_substeps = _check_count("max_substeps", max_substeps, 1)
+        self.fixed_substeps = (
+            None if fixed_substeps is None else _check_count("fixed_substeps", fixed_substeps, 1)
+        )
+        if not (0.0 < safety <= 1.0):
+            raise ValueError(f"safety = {safety!r} is out of range: must be in (0, 1]")
+        if not (0.0 < fac_min < 1.0):
+            raise ValueError(f"fac_min = {fac_min!r} is out of range: must be in (0, 1)")
+        if not (1.0 < fac_max < _INF):
+            raise ValueError(f"fac_max = {fac_max!r} is out of range: must be finite and > 1")
+        self.safety = float(safety)
+        self.fac_min = float(fac_min)
+        self.fac_max = float(fac_max)
+        self.state_scale = _model_scale(model, n)
+        self.error_mask = _model_mask(model, n)
+        # absolute error weights; excluded states get an infinite weight, so they add 0
+        # to the norm (while a non-finite error in them still shows up as nan)
+        self._atol_w = [self.atol * s if m else _INF for s, m in zip(self.state_scale, self.error_mask)]
+        self._n_err = sum(self.error_mask)
+        self._h_prop: float | None = None
+
+    # --- memory ---------------------------------------------------------------------
+
+    def get_memory(self) -> tuple:
+        """Return ``(h_proposal,)``: the step size [s] proposed for the next internal
+        step (``None`` before the first adaptive advance or after :meth:`reset`)."""
+        return (self._h_prop,)
+
+    def set_memory(self, m: tuple) -> None:
+        """Restore ``(h_proposal,)`` from :meth:`get_memory`."""
+        m = tuple(m)
+        if len(m) != 1 or not (m[0] is None or (isinstance(m[0], float) and 0.0 < m[0] < _INF)):
+            raise ValueError(
+                f"{self.name}: memory must be (h_proposal,) with None or a finite float > 0, got {m!r}"
+            )
+        self._h_prop = m[0]
+
+    def reset(self) -> None:
+        """Forget the step-size proposal."""
+        self._h_prop = None
+
+    # --- helpers --------------------------------------------------------------------
+
+    def _initial_step(self, x: Sequence[float], f0: Sequence[float], h: float) -> float:
+        """Cheap first-step guess [s] without extra rhs calls, after Hairer, Norsett &
+        Wanner, Solving ODEs I, Sec. II.4 (first part only): ``0.01 * max(d0, 1) / d1``
+        with ``d0``, ``d1`` the weighted RMS norms of ``x`` and ``f(t, x)``, at most ``h``."""
+        _, d0, d1 = self._start_norms(x, f0)
+        if not d1 > 1e-5:  # practically at rest (or nan, handled by the step itself)
+            return h
+        return min(h, 0.01 * max(d0, 1.0) / d1)
+
+    def _start_norms(self, x: Sequence[float], f0: Sequence[float]) -> tuple:
+        """Error weights at ``x`` and the weighted RMS norms of ``x`` and ``f0`` (Hairer,
+        Norsett & Wanner's d0, d1)."""
+        rtol = self.rtol
+        w = [at + rtol * abs(a) for a, at in zip(x, self._atol_w)]
+        d0 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(x, w)]) / self._n_err)
+        d1 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(f0, w)]) / self._n_err)
+        return w, d0, d1
+
+    def _factor(self, err: float) -> float:
+        """Step-size ratio proposed by the elementary controller for error norm ``err``."""
+        if err == 0.0:
+            return self.fac_max
+        if not err < _INF:
+            return self.fac_min
+        return min(self.fac_max, max(self.fac_min, self.safety * err ** (-1.0 / self._q1)))
