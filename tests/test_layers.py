@@ -8,7 +8,8 @@ the importing module.
 
 Layers, lowest first (a module may import its own layer or lower ones, never a higher one):
 
-0. ``params``, ``geometry``, ``friction`` — parameter types and the laws they feed;
+0. ``params``, ``geometry``, ``friction`` — parameter types and the laws they feed; ``units``
+   (the unit spellings) and ``profiles`` (prescribed speed profiles), which import nothing;
 1. ``mechanics``, ``kinematics`` — the mechanism's equations;
 2. ``models``, ``steppers`` (siblings: a stepper knows a model only by its protocol, so
    ``steppers`` never imports ``models``) and ``presets`` (parameter sets built from the types
@@ -16,7 +17,8 @@ Layers, lowest first (a module may import its own layer or lower ones, never a h
 3. ``simulate``, ``steady_state`` and the package's ``__init__`` that re-exports them;
 4. ``slave`` and ``configure`` — what the FMU needs;
 5. the tools that use the package: ``cli``, ``report``, ``results`` (what they read off a run),
-   ``design_checks``, ``sweep``, ``regress``.
+   ``design_checks``, ``sweep``, ``regress``, ``arguments`` (their argument checks),
+   ``fmu_log``, ``fmu_variables`` and ``result_plot`` (what a host reads off an FMU).
 
 Layers 0–3 (the physics and its time stepping) import neither an FMI library nor the tools
 outside the package (``system_models``, ``fmu_build``).
@@ -33,12 +35,13 @@ PACKAGE_DIR = Path(prsm_fmu.__file__).parent
 
 #: layer of each top-level module or subpackage of prsm_fmu ("" is the package's __init__)
 LAYERS = {
-    "params": 0, "geometry": 0, "friction": 0,
+    "params": 0, "geometry": 0, "friction": 0, "units": 0, "profiles": 0,
     "mechanics": 1, "kinematics": 1,
     "models": 2, "steppers": 2, "presets": 2,
     "simulate": 3, "steady_state": 3, "": 3,
     "slave": 4, "configure": 4,
     "cli": 5, "report": 5, "results": 5, "design_checks": 5, "sweep": 5, "regress": 5,
+    "arguments": 5, "fmu_log": 5, "fmu_variables": 5, "result_plot": 5,
 }
 
 #: top-level names the physics layers (0-3) must not import
