@@ -59,6 +59,12 @@ def _cmd_list() -> int:
     return 0
 
 
+def _refuse(message: str) -> int:
+    """A bad scene or argument: one line on stderr, exit status 2, nothing run."""
+    print(f"prsm-ema: error: {' '.join(message.split())}", file=sys.stderr)
+    return 2
+
+
 def _cmd_run(args, ap) -> int:
     from .fmu import FMUError, ensure_fmu
     from .master import CoSimulationError, RetryPolicy
@@ -70,7 +76,7 @@ def _cmd_run(args, ap) -> int:
     try:
         scene = load_scene(args.scene)
     except ValueError as exc:
-        ap.error(str(exc))
+        return _refuse(str(exc))
     if args.step is not None and not args.step > 0:
         ap.error(f"--step {args.step!r}: must be > 0")
     retry = None

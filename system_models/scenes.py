@@ -121,22 +121,44 @@ def parse_scene(data: dict[str, Any], name: str, path: Path | None = None) -> Sc
                  checks=[dict(c) for c in checks], path=path)
 
 
+#: what a scene *name* may contain: no path separator, no leading dot (names resolve only
+#: inside the scene folders; anything else must be given as a path to a ``.toml`` file)
+_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
+
+
+def is_scene_path(name: str) -> bool:
+    """True if ``name`` is given as a path (``./my.toml``, ``/abs/x.toml``, ``dir/x.toml``,
+    ``x.toml``), False if it is a scene name looked up in the scene folders only."""
+    return name.endswith(".toml") or "/" in name or "\\" in name or Path(name).is_absolute() \
+        or name.startswith(".")
+
+
 def _find(name: str) -> Path:
-    p = Path(name)
-    if p.suffix == ".toml" or p.is_file():
+    names = ", ".join(n for n, _ in list_scenes())
+    if is_scene_path(name):
+        p = Path(name)
+        if p.suffix != ".toml":
+            raise ValueError(f"--scene {name!r} is neither a scene name ({names}) nor a path to "
+                             "a .toml file")
         if not p.is_file():
-            raise ValueError(f"scene file {name!r} does not exist")
+            raise ValueError(f"--scene {name!r}: scene file does not exist (scene names: {names})")
         return p
+    if not name or not set(name) <= _NAME_CHARS:
+        raise ValueError(f"--scene {name!r} is not a scene name: names are letters, digits, '_' "
+                         f"and '-' ({names}), or give a path to a .toml file")
     for d in scene_dirs():
         f = d / f"{name}.toml"
         if f.is_file():
             return f
-    raise ValueError(f"unknown scene {name!r}: known scenes are "
-                     f"{', '.join(n for n, _ in list_scenes())} (or give a path to a .toml file)")
+    raise ValueError(f"--scene: unknown scene {name!r}: known scenes are {names} "
+                     "(or give a path to a .toml file)")
 
 
 def load_scene(name: str) -> Scene:
     """Load a scene by name (``./scenes``, then built-in) or from a ``.toml`` path.
+
+    A name resolves only inside the scene folders (:func:`scene_dirs`); a path is taken only
+    when given as one (:func:`is_scene_path`) and must name a ``.toml`` file.
 
     Raises
     ------
