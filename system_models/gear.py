@@ -144,7 +144,7 @@ def mesh_input_torque(tau_t: float, w_a: float, p: GearParams) -> float:
     target = tau_t / p.ratio
     g0 = -mesh_loss(0.0, w_a, p)                 # value of the left side at τ_a = 0
     probe = 1.0 if target >= g0 else -1.0        # the branch the root lies on
-    slope = (probe - mesh_loss(probe, w_a, p)) - g0
+    slope = ((probe - mesh_loss(probe, w_a, p)) - g0) / probe
     return (target - g0) / slope
 
 
