@@ -25,7 +25,7 @@ import numpy as np
 
 from .master import Result
 
-__all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns"]
+__all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns", "figure_writer"]
 
 
 def ordered_columns(res: Result, first: Iterable[str] = ()) -> list[str]:
@@ -73,6 +73,27 @@ def _stages(res: Result) -> int:
     return n
 
 
+def figure_writer(out_dir: str | Path, scene: str):
+    """(pyplot, save, files): ``save(fig, name)`` writes ``<out_dir>/<scene>_<name>.png``
+    (tight layout, 110 dpi), closes the figure and appends the path to ``files``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    files: list[Path] = []
+
+    def save(fig, name: str) -> None:
+        p = out / f"{scene}_{name}.png"
+        fig.tight_layout()
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        files.append(p)
+
+    return plt, save, files
+
+
 def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mode: str = "position",
                 current_limit: float | None = None, *, description: str = "",
                 voltage_limit: float | None = None, n_rollers: list[int] | None = None,
@@ -98,23 +119,10 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
         Stage -> the carriers' equilibrium speed ratio (the steady-state solver's), drawn on
         ``<scene>_carriers.png``; the figure is written when the ratios are recorded and given.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out = Path(out_dir)
+    plt, save, files = figure_writer(out_dir, scene)
     t = res.time
     tm = 1e3 * t
-    files: list[Path] = []
     sub = f"\n{description}" if description else ""
-
-    def save(fig, name):
-        p = out / f"{scene}_{name}.png"
-        fig.tight_layout()
-        fig.savefig(p, dpi=110)
-        plt.close(fig)
-        files.append(p)
 
     def limit_lines(ax, value, label, unit, symmetric=True):
         ax.axhline(value, color="k", lw=0.9, ls=":", label=f"{label} ±{value:.4g} {unit}"

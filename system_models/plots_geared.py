@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .master import Result
+from .output import figure_writer
 
 __all__ = ["write_geared_plots"]
 
@@ -30,22 +31,9 @@ def write_geared_plots(res: Result, out_dir: str | Path, scene: str, reference=N
     [m/rad] carry it to the rod (r c / N); ``backlash`` b [rad] and ``current_limit`` [A] are
     drawn as labelled lines.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out = Path(out_dir)
+    plt, save, files = figure_writer(out_dir, scene)
     t = res.time
-    files: list[Path] = []
     sub = f"\n{description}" if description else ""
-
-    def save(fig, name):
-        p = out / f"{scene}_{name}.png"
-        fig.tight_layout()
-        fig.savefig(p, dpi=110)
-        plt.close(fig)
-        files.append(p)
 
     k = lead_per_radian / ratio
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True,
