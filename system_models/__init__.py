@@ -13,7 +13,12 @@ Modules (docs/ema.md):
 * :mod:`.ema` — a scene turned into blocks and connections; :mod:`.run` — run and check a scene;
 * :mod:`.scenes`, :mod:`.signals` — scenes as TOML data, time profiles;
 * :mod:`.analysis`, :mod:`.output`, :mod:`.progress`, :mod:`.cli` — checks and power
-  bookkeeping, CSV and plots, progress bar, the ``prsm-ema`` command.
+  bookkeeping, CSV and plots, progress bar, the ``prsm-ema`` command;
+* the ``geared`` topology (:mod:`.geared`, docs/ema.md §10): :mod:`.gear` (losses, backlash,
+  compliance), :mod:`.current_motor` (current source behind a bus delay),
+  :mod:`.continuous_controller` with :mod:`.filters`, :mod:`.slew` and :mod:`.noise`,
+  :mod:`.contact` (gap contact, end stops), :mod:`.plots_geared`;
+* :mod:`.scene_check` — a scene checked whole before anything runs.
 
 The physics of the mechanism stays in :mod:`prsm_fmu`; nothing here imports pythonfmu.
 """

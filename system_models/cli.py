@@ -76,18 +76,64 @@ def _cmd_list() -> int:
     return 0
 
 
+def _refuse(message: str) -> int:
+    """A bad scene or argument: one line on stderr, exit status 2, nothing run."""
+    print(f"prsm-ema: error: {' '.join(message.split())}", file=sys.stderr)
+    return 2
+
+
+def _plots(run, out: Path) -> list[Path]:
+    """The run's figures for its topology (system_models.output, .plots_geared)."""
+    scene, system = run.scene, run.system
+    if scene.topology == "geared":
+        from .plots_geared import write_geared_plots
+
+        return write_geared_plots(run.result, out, scene.name, system.reference,
+                                  description=scene.description, ratio=system.gear.ratio,
+                                  lead_per_radian=system.lead_per_radian,
+                                  backlash=system.gear.backlash,
+                                  current_limit=system.motor.current_limit)
+    from .output import write_plots
+
+    params = system.prsm.params()
+    res = run.result
+    equilibrium = None
+    if any("carrier_speed_ratio" in o for o in scene.outputs):
+        from prsm_fmu import steady_state
+
+        ss = steady_state(params, screw_speed=float(res["prsm.screw_speed"][-1]),
+                          load_force=float(res["load.force"][-1]))
+        equilibrium = {k: float(ss[f"stage[{k}].carrier_speed_ratio"])
+                       for k in range(1, params.n_stages + 1)}
+    return write_plots(res, out, scene.name, system.reference, system.master.blocks[0].mode,
+                       system.motor.current_limit, description=scene.description,
+                       voltage_limit=system.motor.voltage_limit,
+                       n_rollers=[st.n_rollers for st in params.stages],
+                       carrier_equilibrium=equilibrium)
+
+
 def _cmd_run(args, ap) -> int:
     from .fmu import FMUError, ensure_fmu
     from .master import CoSimulationError, RetryPolicy, whole_steps
-    from .output import write_csv, write_plots, write_summary
+    from .output import write_csv, write_summary
     from .progress import Progress
     from .run import run_scene
+    from .scene_check import check_fmu_stages, check_output_dir, check_scene
     from .scenes import load_scene
 
     try:
         scene = load_scene(args.scene)
+        if args.retry is not None and args.retry < 0:
+            raise ValueError(f"--retry {args.retry}: must be >= 0")
+        # the whole scene, the run's size and the output directory, before anything runs
+        facts = check_scene(scene, prsm=args.prsm, fidelity=args.fidelity, step=args.step,
+                            order=args.order, extrapolation=args.extrapolation)
+        mech = scene.prsm.get("mechanism", "PRSM1" if scene.topology == "geared" else "PRSM2")
+        if args.prsm == "fmu" and args.fmu:
+            check_fmu_stages(args.fmu, facts["n_stages"], mech)
+        check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
-        ap.error(f"argument --scene: {exc}; must be a scene of 'prsm-ema list' or a .toml file")
+        return _refuse(str(exc))
     if args.step is not None:
         try:
             whole_steps(scene.t0, scene.t_end, args.step)
@@ -98,7 +144,6 @@ def _cmd_run(args, ap) -> int:
         retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
     fmu_path = None
     if args.prsm == "fmu":
-        mech = scene.prsm.get("mechanism", "PRSM2")
         try:
             fmu_path = ensure_fmu(args.fmu or f"dist/{mech}.fmu", rebuild_stale=args.fmu is None)
         except FMUError as exc:
@@ -128,26 +173,32 @@ def _cmd_run(args, ap) -> int:
           f"{s['extrapolation']}, h = {s['step']:g} s, {st['macro_steps']} steps "
           f"({st['retries']} retries) in {st['wall_time']:.2f} s")
     d = s["system"]
-    print(f"actuator: inertia on the screw {d['inertia_on_screw_kg_m2']:.4g} kg·m² "
-          f"(reflected mass {d['reflected_mass_kg']:.4g} kg), peak torque "
-          f"{d['motor_peak_torque_Nm']:.4g} N·m, controller sample time "
-          f"{1e6 * d['controller_sample_time_s']:.4g} µs")
+    if scene.topology == "geared":
+        print(f"actuator: gear ratio {d['gear_ratio']:g}, rod {1e6 * d['rod_per_motor_radian_m']:.4g} µm "
+              f"per motor radian, inertia on the screw {d['inertia_on_screw_kg_m2']:.4g} kg·m² "
+              f"(of which the PRSM's own {d['prsm_own_inertia_on_screw_kg_m2']:.3g}), reflected "
+              f"mass {d['reflected_mass_kg']:.4g} kg, k_t {d['motor_torque_constant_Nm_A']:.5g} N·m/A")
+    else:
+        print(f"actuator: inertia on the screw {d['inertia_on_screw_kg_m2']:.4g} kg·m² "
+              f"(reflected mass {d['reflected_mass_kg']:.4g} kg), peak torque "
+              f"{d['motor_peak_torque_Nm']:.4g} N·m, controller sample time "
+              f"{1e6 * d['controller_sample_time_s']:.4g} µs")
     if s["final"]:
         print("at the end: " + ", ".join(f"{k} = {v:.6g} {run.result.units.get(k, '')}".rstrip()
                                          for k, v in s["final"].items()))
     for c in run.checks:
         print(c.line())
     e = run.energy
-    print(f"power bookkeeping: electrical input {e['electrical_input']:.6g} J = copper losses "
-          f"{e['copper_losses']:.6g} J + friction {e['friction_work']:.6g} J + load work "
-          f"{e['load_work']:.6g} J + Δstored {e['delta_magnetic_energy'] + e['delta_kinetic_energy']:.6g} J "
-          f"+ residual {e['residual']:.3g} J ({e['relative_residual']:.3g} relative)")
+    if e:
+        print(f"power bookkeeping: electrical input {e['electrical_input']:.6g} J = copper losses "
+              f"{e['copper_losses']:.6g} J + friction {e['friction_work']:.6g} J + load work "
+              f"{e['load_work']:.6g} J + Δstored {e['delta_magnetic_energy'] + e['delta_kinetic_energy']:.6g} J "
+              f"+ residual {e['residual']:.3g} J ({e['relative_residual']:.3g} relative)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
     if not args.no_plots:
-        files += write_plots(run.result, out, scene.name, run.system.reference,
-                             run.system.master.blocks[0].mode, run.system.motor.current_limit)
+        files += _plots(run, out)
     files.append(write_summary(out / f"{scene.name}_summary.json", s))
     print("wrote " + ", ".join(str(f) for f in files))
     print("all checks passed" if run.passed else "SOME CHECKS FAILED")

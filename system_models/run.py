@@ -10,7 +10,26 @@ from .ema import System, build_system, describe
 from .master import Result, RetryPolicy
 from .scenes import Scene, load_scene
 
-__all__ = ["SceneRun", "run_scene"]
+__all__ = ["SceneRun", "run_scene", "build_scene_system", "describe_system"]
+
+
+def build_scene_system(scene: Scene, **options) -> System:
+    """The scene's blocks and master for its topology (``direct``: :func:`.ema.build_system`,
+    ``geared``: :func:`.geared.build_geared_system`); options as :func:`run_scene`'s."""
+    if scene.topology == "geared":
+        from .geared import build_geared_system
+
+        return build_geared_system(scene, **options)
+    return build_system(scene, **options)
+
+
+def describe_system(system: System) -> dict[str, Any]:
+    """Plain numbers of a built system, for its topology."""
+    if system.scene.topology == "geared":
+        from .geared import describe_geared
+
+        return describe_geared(system)
+    return describe(system)
 
 
 @dataclass
@@ -35,7 +54,7 @@ class SceneRun:
             "fidelity": self.system.prsm.solver()["fidelity"],
             "step": self.system.master.step, "order": self.system.master.order,
             "extrapolation": self.system.master.extrapolation, "t_end": float(r.time[-1]),
-            "system": describe(self.system),
+            "system": describe_system(self.system),
             "stats": {k: v for k, v in r.stats.items()},
             "final": {n: float(r[n][-1]) for n in self.scene.outputs if n in r},
             "energy": self.energy,
@@ -61,9 +80,11 @@ def run_scene(scene: Scene | str, prsm: str = "fmu", fmu_path=None, fidelity: st
         If a step is refused and no retry can take it (time, block and reason in the message).
     """
     sc = load_scene(scene) if isinstance(scene, str) else scene
-    system = build_system(sc, prsm=prsm, fmu_path=fmu_path, fidelity=fidelity, step=step,
-                          order=order, extrapolation=extrapolation, retry=retry)
+    system = build_scene_system(sc, prsm=prsm, fmu_path=fmu_path, fidelity=fidelity, step=step,
+                                order=order, extrapolation=extrapolation, retry=retry)
     res = system.run(progress)
     checks = evaluate(res, sc.checks, {"reference": system.reference,
                                        "params": system.prsm.params()})
-    return SceneRun(sc, system, res, checks, energy_balance(res))
+    # the power bookkeeping needs the PMSM's electrical energies (direct topology)
+    energy = energy_balance(res) if sc.topology == "direct" else {}
+    return SceneRun(sc, system, res, checks, energy)

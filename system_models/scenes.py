@@ -25,6 +25,8 @@ Layout (every table but ``[controller]`` optional; SI units; see the built-in sc
     [initial]                    # screw_speed, rod_position, carriers = "rest"|"equilibrium",
                                  #   steady = true|false
     [retry]                      # max_halvings, tolerance (RetryPolicy)
+    topology = "geared"          # optional (default "direct"): which blocks (TOPOLOGIES)
+    [gear]                       # geared only: GearParams fields, initial_side
     [[check]]                    # one table per requirement (system_models.analysis.CHECKS)
     kind = "step_response"
     ...
@@ -46,7 +48,13 @@ BUILTIN_DIR = Path(__file__).resolve().parent / "scenes"
 FIDELITIES = ("kinematic", "quasi-static", "dynamic", "auto")
 
 _TOP = {"description", "t_end", "step", "order", "extrapolation", "fidelity", "outputs",
-        "controller", "motor", "load", "prsm", "initial", "retry", "check", "t0"}
+        "controller", "motor", "load", "prsm", "initial", "retry", "check", "t0", "topology", "gear"}
+
+#: which blocks a scene assembles (docs/ema.md): ``direct`` the PMSM in dq with the digital
+#: cascade driving the screw directly and the spring-damper load (system_models.ema);
+#: ``geared`` a current-fed motor through a gear reduction, the continuous cascade on the
+#: measured motor angle, the load behind an elastic gap contact (system_models.geared)
+TOPOLOGIES = ("direct", "geared")
 
 
 @dataclass
@@ -70,6 +78,8 @@ class Scene:
     retry: dict[str, Any] = field(default_factory=dict)
     checks: list[dict[str, Any]] = field(default_factory=list)
     path: Path | None = None
+    topology: str = "direct"
+    gear: dict[str, Any] = field(default_factory=dict)
 
 
 def scene_dirs() -> list[Path]:
@@ -92,7 +102,7 @@ def parse_scene(data: dict[str, Any], name: str, path: Path | None = None) -> Sc
         raise ValueError(f"{where}: unknown field(s) {sorted(unknown)} (allowed: {sorted(_TOP)})")
     if "controller" not in data:
         raise ValueError(f"{where}: the [controller] table (mode, reference) is missing")
-    for key in ("controller", "motor", "load", "prsm", "initial", "retry"):
+    for key in ("controller", "motor", "load", "prsm", "initial", "retry", "gear"):
         if key in data and not isinstance(data[key], dict):
             raise ValueError(f"{where}: {key} must be a table")
     checks = data.get("check", [])
@@ -106,6 +116,12 @@ def parse_scene(data: dict[str, Any], name: str, path: Path | None = None) -> Sc
     if fid not in FIDELITIES:
         raise ValueError(f"{where}: fidelity = {fid!r} is not allowed: must be one of "
                          f"{', '.join(FIDELITIES)}")
+    topology = data.get("topology", "direct")
+    if topology not in TOPOLOGIES:
+        raise ValueError(f"{where}: topology = {topology!r} is not allowed: must be one of "
+                         f"{', '.join(TOPOLOGIES)}")
+    if "gear" in data and topology != "geared":
+        raise ValueError(f"{where}: a [gear] table needs topology = \"geared\"")
     outputs = data.get("outputs", [])
     if not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
         raise ValueError(f"{where}: outputs must be a list of 'block.port' names")
@@ -118,25 +134,48 @@ def parse_scene(data: dict[str, Any], name: str, path: Path | None = None) -> Sc
                  controller=dict(data["controller"]), motor=dict(data.get("motor", {})),
                  load=dict(data.get("load", {})), prsm=dict(data.get("prsm", {})),
                  initial=dict(data.get("initial", {})), retry=dict(data.get("retry", {})),
-                 checks=[dict(c) for c in checks], path=path)
+                 checks=[dict(c) for c in checks], path=path, topology=topology,
+                 gear=dict(data.get("gear", {})))
+
+
+#: what a scene *name* may contain: no path separator, no leading dot (names resolve only
+#: inside the scene folders; anything else must be given as a path to a ``.toml`` file)
+_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
+
+
+def is_scene_path(name: str) -> bool:
+    """True if ``name`` is given as a path (``./my.toml``, ``/abs/x.toml``, ``dir/x.toml``,
+    ``x.toml``), False if it is a scene name looked up in the scene folders only."""
+    return name.endswith(".toml") or "/" in name or "\\" in name or Path(name).is_absolute() \
+        or name.startswith(".")
 
 
 def _find(name: str) -> Path:
-    p = Path(name)
-    if p.suffix == ".toml" or p.is_file():
+    names = ", ".join(n for n, _ in list_scenes())
+    if is_scene_path(name):
+        p = Path(name)
+        if p.suffix != ".toml":
+            raise ValueError(f"--scene {name!r} is neither a scene name ({names}) nor a path to "
+                             "a .toml file")
         if not p.is_file():
-            raise ValueError(f"scene file {name!r} does not exist")
+            raise ValueError(f"--scene {name!r}: scene file does not exist (scene names: {names})")
         return p
+    if not name or not set(name) <= _NAME_CHARS:
+        raise ValueError(f"--scene {name!r} is not a scene name: names are letters, digits, '_' "
+                         f"and '-' ({names}), or give a path to a .toml file")
     for d in scene_dirs():
         f = d / f"{name}.toml"
         if f.is_file():
             return f
-    raise ValueError(f"unknown scene {name!r}: known scenes are "
-                     f"{', '.join(n for n, _ in list_scenes())} (or give a path to a .toml file)")
+    raise ValueError(f"--scene: unknown scene {name!r}: known scenes are {names} "
+                     "(or give a path to a .toml file)")
 
 
 def load_scene(name: str) -> Scene:
     """Load a scene by name (``./scenes``, then built-in) or from a ``.toml`` path.
+
+    A name resolves only inside the scene folders (:func:`scene_dirs`); a path is taken only
+    when given as one (:func:`is_scene_path`) and must name a ``.toml`` file.
 
     Raises
     ------

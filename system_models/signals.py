@@ -13,6 +13,8 @@ kind           fields (SI)                                     value
                ``ramp_periods``=0                              − A sin φ, the amplitude ramped
                                                                linearly over the first periods
 ``points``     ``time`` (increasing), ``value`` (same length)  piecewise linear, held outside
+``slew``       ``input`` (a profile), ``rising`` [unit/s],     the input through a slew-rate
+               ``falling`` = −rising, ``time_constant``=1e-3   limiter (system_models.slew)
 =============  ==============================================  =================================
 
 A bare number is a constant.  Every profile is continuous unless ``rise = 0`` (a true step) or
@@ -27,7 +29,7 @@ from typing import Any, Callable, Mapping
 
 __all__ = ["make_profile", "PROFILE_KINDS"]
 
-PROFILE_KINDS = ("constant", "step", "sine", "points")
+PROFILE_KINDS = ("constant", "step", "sine", "points", "slew")
 
 Profile = Callable[[float], float]
 
@@ -72,7 +74,8 @@ def make_profile(spec: Any, where: str = "profile") -> Profile:
     known = {"constant": {"kind", "value"},
              "step": {"kind", "initial", "final", "time", "rise"},
              "sine": {"kind", "offset", "amplitude", "frequency", "start", "phase", "ramp_periods"},
-             "points": {"kind", "time", "value"}}
+             "points": {"kind", "time", "value"},
+             "slew": {"kind", "input", "rising", "falling", "time_constant"}}
     if kind not in known:
         raise ValueError(f"{where}.kind = {kind!r} is not allowed: must be one of "
                          f"{', '.join(PROFILE_KINDS)}")
@@ -80,6 +83,15 @@ def make_profile(spec: Any, where: str = "profile") -> Profile:
     if extra:
         raise ValueError(f"{where}: unknown field(s) {sorted(extra)} for kind {kind!r} "
                          f"(allowed: {sorted(known[kind])})")
+    if kind == "slew":
+        from .slew import SlewRateLimiter, slew_limited
+
+        if "input" not in spec:
+            raise ValueError(f"{where}.input is missing (the profile to limit)")
+        rising = _num(spec, "rising", where)
+        falling = _num(spec, "falling", where, -rising)
+        limiter = SlewRateLimiter(rising, falling, _num(spec, "time_constant", where, 1e-3))
+        return slew_limited(make_profile(spec["input"], f"{where}.input"), limiter)
     if kind == "constant":
         c = _num(spec, "value", where)
         return lambda t: c
