@@ -101,8 +101,8 @@ def check_scene(scene: Scene, prsm: str = "fmu", fidelity: str | None = None,
                          "shorten t_end or lengthen step")
     k = round(n)
     if k < 1 or abs(k * h - scene.t_end) > 1e-9 * max(scene.t_end, h):
-        raise ValueError(f"{where}: t_end = {scene.t_end!r} s is not a whole number of steps of "
-                         f"{h!r} s (t_end/step = {n!r})")
+        raise ValueError(f"--step {h!r} s: must divide the run of {where} into whole steps "
+                         f"(t_end = {scene.t_end!r} s, t_end/step = {n!r})")
     system = build_scene_system(scene, prsm="python", fidelity=fidelity, step=h, order=order,
                                 extrapolation=extrapolation)
     try:

@@ -167,8 +167,8 @@ def _find(name: str) -> Path:
         f = d / f"{name}.toml"
         if f.is_file():
             return f
-    raise ValueError(f"--scene: unknown scene {name!r}: known scenes are {names} "
-                     "(or give a path to a .toml file)")
+    raise ValueError(f"--scene: unknown scene {name!r}: must be one of {names} "
+                     "or a path to a .toml file")
 
 
 def load_scene(name: str) -> Scene:
