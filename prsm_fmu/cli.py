@@ -40,7 +40,7 @@ import numpy as np
 
 from . import presets as _presets
 from .models import FIDELITIES
-from .params import MechanismParams
+from .params import MECHANISM_FIELD_NAMES, MechanismParams
 from .simulate import simulate
 from .steady_state import steady_state
 from .steppers import StepFailure
@@ -63,6 +63,9 @@ _UNITS = {
     "friction_power": "W", "input_power": "W", "output_power": "W", "input_work": "J",
     "output_work": "J", "friction_work": "J", "kinetic_energy": "J", "rod_force": "N",
     "bearing_force": "N", "residual_norm": "-",
+    "friction_power_coulomb": "W", "friction_power_viscous": "W",
+    "friction_power_differential": "W", "friction_power_joints": "W", "friction_torque": "N·m",
+    "overall_efficiency": "-",
 }
 
 
@@ -524,9 +527,9 @@ def _set_value(text: str) -> tuple[str, object]:
         kind = ""
     if kind not in ("mechanism", "stage"):
         raise argparse.ArgumentTypeError(
-            f"{name!r} is not a mechanism or stage parameter (mu_screw_roller, mu_spline, "
-            "mu_nut_screw, slip_velocity_scale, stage[k].<field>, stage[k].pitch)")
-    integer = name.endswith((".screw_starts", ".n_rollers", ".carriers"))
+            f"{name!r} is not a mechanism or stage parameter ({', '.join(MECHANISM_FIELD_NAMES)}, "
+            "stage[k].<field>, stage[k].pitch)")
+    integer = name.endswith((".screw_starts", ".n_rollers", ".carriers", ".threads_per_roller"))
     try:
         v: object = int(value) if integer else _finite_float(value)
     except ValueError:

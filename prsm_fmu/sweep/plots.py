@@ -41,7 +41,8 @@ _LABELS = {
     "mu_screw_roller": "µ_SR", "mu_spline": "µ_SS", "mu_nut_screw": "µ_NS",
     "load_force": "load F [N]", "screw_speed": "screw speed [rad/s]",
     "accel_time": "acceleration time t_a [s]", "n_stages": "stages",
-    "slip_velocity_scale": "v_ε [m/s]",
+    "slip_velocity_scale": "v_ε [m/s]", "mu_viscous": "µ_1 [N·s/m]",
+    "mu_differential": "µ_3 [m]",
 }
 
 
@@ -49,6 +50,7 @@ _SHORT = {
     "mu_screw_roller": ("µ_SR", ""), "mu_spline": ("µ_SS", ""), "mu_nut_screw": ("µ_NS", ""),
     "load_force": ("F", " N"), "screw_speed": ("ω", " rad/s"), "accel_time": ("t_a", " s"),
     "n_stages": ("stages", ""), "slip_velocity_scale": ("v_ε", " m/s"), "preset": ("", ""),
+    "mu_viscous": ("µ_1", " N·s/m"), "mu_differential": ("µ_3", " m"),
 }
 
 
