@@ -64,7 +64,8 @@ _UNITS = {
     "output_work": "J", "friction_work": "J", "kinetic_energy": "J", "rod_force": "N",
     "bearing_force": "N", "residual_norm": "-",
     "friction_power_coulomb": "W", "friction_power_viscous": "W",
-    "friction_power_differential": "W", "friction_power_joints": "W", "friction_torque": "N·m",
+    "friction_power_differential": "W", "friction_power_joints": "W",
+    "screw_friction_torque": "N·m",
     "overall_efficiency": "-",
 }
 

@@ -358,7 +358,7 @@ def steady_state(params: MechanismParams, screw_speed: float, load_force: float,
         and ``friction_power_joints`` [W], the same power from each term's own law at the
         solution (screw–roller µ_SR F_k u_k·s_k, µ_1 n_t |s_k|² and µ_3 F_k ω sgñ(ω r_k) per
         roller; splines and thrust bearings), whose sum equals ``friction_power`` when the
-        balances hold; ``friction_torque`` M_S1 − F ΣL/2π [N·m] (seed 003's M_f at steady
+        balances hold; ``screw_friction_torque`` M_S1 − F ΣL/2π [N·m] (seed 003's M_f at steady
         state); ``residual_norm``, the 2-norm of the dimensionless residual vector [-].
 
     Raises
@@ -455,6 +455,6 @@ def steady_state(params: MechanismParams, screw_speed: float, load_force: float,
                                 - prob.bearing_torque(k, bearing[k - 2]) * omega)
     for term, value in terms.items():
         out[f"friction_power_{term}"] = value
-    out["friction_torque"] = m_s1 - load * c_n
+    out["screw_friction_torque"] = m_s1 - load * c_n
     out["residual_norm"] = res_norm
     return out

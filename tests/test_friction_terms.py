@@ -102,7 +102,7 @@ def test_all_three_terms_together_and_each_terms_power_match_the_closed_form(cha
     y = model.outputs(0.0, x, (0.0, load))
     total = ref["viscous"] + ref["coulomb"] + ref["differential"]
     assert abs(y["screw_torque"] - (ref["ell"] * load + total)) <= 1e-9 * total
-    assert abs(y["friction_torque"] - total) <= 1e-9 * total
+    assert abs(y["screw_friction_torque"] - total) <= 1e-9 * total
     for term in ("viscous", "coulomb", "differential"):
         assert abs(y[f"friction_power_{term}"] / omega - ref[term]) <= 1e-9 * ref[term], term
     assert y["friction_power_joints"] == 0.0
@@ -256,4 +256,4 @@ def test_the_loop_carries_the_terms_into_its_prsm_block():
     y = block.model.outputs(0.0, [0.0, 1.0, 0.0, 0.0, 0.0],
                             (ref["ell"] * 1000.0 + total, 1000.0))
     assert abs(y["screw_acceleration"]) * 5e-5 <= 1e-9 * total
-    assert abs(y["friction_torque"] - total) <= 1e-9 * total
+    assert abs(y["screw_friction_torque"] - total) <= 1e-9 * total

@@ -82,8 +82,8 @@ class Model(ABC):
             + ["efficiency", "friction_power", "input_power", "output_power", "input_work",
                "output_work", "friction_work", "kinetic_energy"]
             + [f"friction_power_{term}" for term in FRICTION_TERMS]
-            + ["friction_torque", "overall_efficiency"])
-        #: inertia reflected to screw 1 of everything slaved to it [kg·m²] (friction_torque)
+            + ["screw_friction_torque", "overall_efficiency"])
+        #: inertia reflected to screw 1 of everything slaved to it [kg·m²] (screw_friction_torque)
         self._j_eq = self.mechanism.equivalent_inertia()
 
     # ---- hooks for levels with extra losses (kinematic efficiency) ------------------------
@@ -210,7 +210,7 @@ class Model(ABC):
             y[f"friction_power_{term}"] = terms[term]
         # seed 003's M_f: the friction's generalized force on the screw angle, i.e. what the
         # motor torque spends beyond the load's torque and the slaved parts' inertial torque
-        y["friction_torque"] = motor - load * c_out - self._j_eq * sol.screw_acceleration
+        y["screw_friction_torque"] = motor - load * c_out - self._j_eq * sol.screw_acceleration
         y["input_power"] = p_in
         y["output_power"] = p_out
         ie = self._i_energy

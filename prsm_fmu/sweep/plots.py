@@ -32,6 +32,10 @@ PANELS: dict[str, tuple[str, str, bool, int]] = {
     "friction_torque": ("friction torque at the screw M_f = P_f / ω", "M_f [N·m]", False, 0),
     "screw_torque": ("motor torque M_S1", "M_S1 [N·m]", False, 0),
     "screw_speed": ("screw speed ω", "ω [rad/s]", False, 0),
+    "screw_friction_torque": ("friction torque on the screw M_f (seed 003; model backend)",
+                              "M_f [N·m]", False, 0),
+    "friction_power_viscous": ("viscous friction power (model backend)", "P_f,visc [W]",
+                               False, 0),
 }
 
 #: seed 000 Figs. 4 and 5: (a) ζ_PSk, (b) F_Srzk, (c) η, (d) f_S2
