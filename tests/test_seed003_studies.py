@@ -21,22 +21,22 @@ STUDIES = Path(__file__).resolve().parents[1] / "studies"
 SEED_MU1, FIT_MU1 = 0.001, 580.0
 
 
-@pytest.fixture(scope="module")
-def load_table(tmp_path_factory):
-    study = load_study(STUDIES / "seed003_load.toml")
-    res = run_study(study, str(tmp_path_factory.mktemp("seed003_load")), executor="loop",
-                    figures=False, progress=None)
+def run_table(name: str, tmp_path_factory) -> list[dict]:
+    """The result table of the shipped study ``name``, run in a plain loop."""
+    res = run_study(load_study(STUDIES / f"{name}.toml"), str(tmp_path_factory.mktemp(name)),
+                    executor="loop", figures=False, progress=None)
     assert not res.failed
     return res.rows
+
+
+@pytest.fixture(scope="module")
+def load_table(tmp_path_factory):
+    return run_table("seed003_load", tmp_path_factory)
 
 
 @pytest.fixture(scope="module")
 def accel_table(tmp_path_factory):
-    study = load_study(STUDIES / "seed003_accel_time.toml")
-    res = run_study(study, str(tmp_path_factory.mktemp("seed003_accel")), executor="loop",
-                    figures=False, progress=None)
-    assert not res.failed
-    return res.rows
+    return run_table("seed003_accel_time", tmp_path_factory)
 
 
 def line(rows, mu1, along):
