@@ -49,7 +49,7 @@ from .arguments import (ArgumentParser, existing_dir, existing_file, finite_floa
                         int_in, nonzero_float, one_line, positive_float, writable_dir)
 from .fmu_variables import Variable, fmu_variables
 from .models import FIDELITIES
-from .params import MechanismParams
+from .params import MECHANISM_FIELD_NAMES, MechanismParams
 from .results import energy_balance_residual, is_settled, settling_time
 from .simulate import simulate
 from .steady_state import steady_state
@@ -413,9 +413,9 @@ def _set_value(text: str) -> tuple[str, object]:
         kind = ""
     if kind not in ("mechanism", "stage"):
         raise argparse.ArgumentTypeError(
-            f"{name!r} is not a mechanism or stage parameter: must be one of mu_screw_roller, "
-            "mu_spline, mu_nut_screw, slip_velocity_scale, stage[k].<field>, stage[k].pitch")
-    integer = name.endswith((".screw_starts", ".n_rollers", ".carriers"))
+            f"{name!r} is not a mechanism or stage parameter: must be one of "
+            f"{', '.join(MECHANISM_FIELD_NAMES)}, stage[k].<field>, stage[k].pitch")
+    integer = name.endswith((".screw_starts", ".n_rollers", ".carriers", ".threads_per_roller"))
     try:
         v: object = int(value) if integer else finite_float(value)
     except ValueError:

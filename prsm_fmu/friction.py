@@ -12,6 +12,15 @@ first derivative at v = v_ε, viscous (coefficient 2µ|N|/v_ε) at v → 0. Outs
 is exactly Coulomb, so a contact whose slip direction is fixed transmits a force independent of
 the slip speed (the quasi-static level then has exactly piecewise-constant accelerations).
 Stiction is not modelled. The dissipated power µ|N| v² φ(v) is never negative.
+
+Two more terms act at the screw–roller contacts (seed ``003_e265d1d1167b0d4b.txt``):
+
+* viscous (lubricant shear): f = −µ_1 n_t s per roller, µ_1 [N·s/m] per engaged thread and n_t
+  engaged threads (:func:`viscous_coefficient`); linear through zero slip, so it needs no
+  regularisation, and its power µ_1 n_t |s|² is never negative;
+* differential sliding: a torque µ_3 F_N on the screw against its rotation, µ_3 [m], F_N the
+  normal force; its sign is sgñ(ω r) with r the contact radius (:func:`regularised_sign`), so its
+  power µ_3 F_N ω sgñ(ω r) is never negative either.
 """
 
 from __future__ import annotations
@@ -56,3 +65,23 @@ def regularised_sign(v: float, v_scale: float) -> float:
     """
     return v * regularised_factor(abs(v), v_scale)
 
+
+
+def viscous_coefficient(mu_viscous: float, n_rollers: int, threads_per_roller: int) -> float:
+    """Viscous coefficient of a stage's rollers together, N_R µ_1 n_t [N·s/m].
+
+    Seed 003's lubricant term F_fs1 = µ_1 n_R n_t v_sr: each engaged thread contributes µ_1.
+
+    Parameters
+    ----------
+    mu_viscous : float
+        µ_1 [N·s/m] per engaged thread, ≥ 0.
+    n_rollers, threads_per_roller : int
+        N_R and n_t [-].
+
+    Returns
+    -------
+    float
+        N_R µ_1 n_t [N·s/m]: the force of all rollers is this times the slip velocity.
+    """
+    return float(mu_viscous) * n_rollers * threads_per_roller

@@ -19,7 +19,13 @@ iteration starting from α = 0, so the result is a pure function of its argument
 
 The contact coefficients per unit of transmitted axial force (κ: torque on the screw, γ:
 generalized force on the carrier, π: friction power) follow from the contact geometry
-(:mod:`prsm_fmu.geometry`) and the regularised Coulomb law (:mod:`prsm_fmu.friction`).
+(:mod:`prsm_fmu.geometry`) and the friction laws (:mod:`prsm_fmu.friction`): the regularised
+Coulomb force µF_N along the slip, the lubricant's viscous force µ_1 n_t s per roller and the
+differential-sliding torque µ_3 F_N on the screw (seed ``003_e265d1d1167b0d4b.txt``;
+docs/model.md §3).  The viscous force does not scale with the normal force: its axial part
+V_z = N_R µ_1 n_t ω ℓ adds to the axial force the threads carry, so every per-unit quantity is
+taken per unit of the *effective* axial force Ã = A + V_z (N_R F_N = Ã q), and the viscous
+torque, carrier force and power are added on their own.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .friction import regularised_factor, regularised_sign
+from .friction import regularised_factor, regularised_sign, viscous_coefficient
 from .geometry import contact_geometry
 from .kinematics import ideal_carrier_speed_ratio
 from .params import MechanismParams
@@ -41,7 +47,7 @@ MAX_SIGN_ITERATIONS = 8
 class _Flank:
     """Per-flank constants of one stage's screw–roller contact (plain floats for speed)."""
 
-    __slots__ = ("px", "py", "nx", "ny", "nz", "ax", "ay", "az", "bx", "by", "consts")
+    __slots__ = ("px", "py", "nx", "ny", "nz", "ax", "ay", "az", "bx", "by", "consts", "radius")
 
     def __init__(self, geo) -> None:
         (self.px, self.py, _), (self.nx, self.ny, self.nz) = geo.point, geo.normal
@@ -49,10 +55,14 @@ class _Flank:
         if abs(bz) > 1e-15:
             raise ValueError("carrier slip Jacobian has an axial part; geometry inconsistent")
         self.ax, self.ay, self.az, self.bx, self.by = ax, ay, az, bx, by
-        #: what :meth:`Mechanism._coefficients` needs, in one tuple: the slip Jacobians, the
-        #: contact point, the axial normal and [P × n]_z (the normal force's torque per unit)
+        #: the slip Jacobians, the contact point, the axial normal and [P × n]_z (the normal
+        #: force's torque per unit); :class:`Mechanism` appends the stage's friction constants
+        #: to make what :meth:`Mechanism._coefficients` reads
         self.consts = (ax, ay, az, bx, by, self.px, self.py, self.nz,
                        self.px * self.ny - self.py * self.nx)
+        #: contact radius |P_xy| [m]: the screw's surface speed there, ω r, is the sliding speed
+        #: that regularises the differential-sliding torque's sign
+        self.radius = math.hypot(self.px, self.py)
 
     def steady_ratio(self) -> float:
         """Carrier/screw speed ratio at which the slip has no component along b [-]."""
@@ -64,7 +74,8 @@ class _Stage:
 
     __slots__ = ("n_rollers", "ell", "c", "c_prev", "m_assembly", "m_screw", "j_screw",
                  "j_carrier", "flanks", "e_spline", "g_bearing", "spline_speed_factor",
-                 "bearing_speed_factor", "zeta_geometric", "zeta_ideal", "min_normal_z")
+                 "bearing_speed_factor", "zeta_geometric", "zeta_ideal", "min_normal_z",
+                 "c_viscous")
 
     def __init__(self, params: MechanismParams, k: int) -> None:
         st = params.stages[k]
@@ -92,6 +103,9 @@ class _Stage:
         self.bearing_speed_factor = below.bearing_radius if below is not None else 0.0
         self.zeta_geometric = self.flanks[0].steady_ratio()
         self.zeta_ideal = ideal_carrier_speed_ratio(st)
+        #: viscous coefficient of all the stage's rollers together, N_R µ_1 n_t [N·s/m]
+        self.c_viscous = viscous_coefficient(params.mu_viscous, st.n_rollers,
+                                             st.threads_per_roller)
 
 
 @dataclass
@@ -108,6 +122,11 @@ class Solution:
         M_S1, torque on screw 1 [N·m].
     friction_power : float
         Total power dissipated by friction [W] (≥ 0).
+    friction_power_terms : dict of str to float
+        ``friction_power`` split by term [W]: ``coulomb`` (screw–roller spin sliding),
+        ``viscous`` (screw–roller lubricant), ``differential`` (differential sliding) and
+        ``joints`` (spline and thrust-bearing Coulomb friction); they sum to
+        ``friction_power``.
     stage_axial_force : list of float
         A_k, axial force the rollers of stage k take from screw k [N] (all rollers).
     contact_force : list of float
@@ -141,6 +160,7 @@ class Solution:
     spline_friction: list | None = None
     bearing_force: list | None = None
     stage_friction_power: list | None = None
+    friction_power_terms: dict | None = None
     consistent: bool = True
 
 
@@ -166,10 +186,16 @@ class Mechanism:
         self.stages = [_Stage(params, k) for k in range(params.n_stages)]
         frictionless = carriers == "ideal"
         self.mu = 0.0 if frictionless else params.mu_screw_roller
+        #: differential-sliding coefficient µ_3 [m] (0 in the frictionless ideal mode)
+        self.mu3 = 0.0 if frictionless else params.mu_differential
         if frictionless:
             for s in self.stages:
                 s.e_spline = 0.0
                 s.g_bearing = 0.0
+                s.c_viscous = 0.0
+        #: whether any contact has a viscous term (the slaved levels' closed-form step is then
+        #: not exact, models/slaved.py)
+        self.viscous = any(s.c_viscous > 0.0 for s in self.stages)
         limit = min(s.min_normal_z for s in self.stages)
         if self.mu >= limit:
             raise ValueError(
@@ -188,13 +214,17 @@ class Mechanism:
         # the hot path's constants, now final, as tuples: per stage in sweep order (last
         # first) what _sweep reads -- the screw inertia, screw k's mass term m_Sk c_(k−1),
         # spline and bearing friction with their sliding speeds per unit ω, the mass term
-        # m_A c of the stage below and both flanks' _Flank.consts -- and what _rates reads
+        # m_A c of the stage below, the viscous axial force per unit ω (N_R µ_1 n_t ℓ) and
+        # both flanks' _Flank.consts with the stage's friction constants (N_R µ_1 n_t, µ_3 and
+        # the contact radius) appended -- and what _rates reads
         plan = []
         for k, s in enumerate(self.stages):
             below = self.stages[k - 1].m_assembly * self.stages[k - 1].c if k > 0 else 0.0
+            flank_consts = tuple(fl.consts + (s.c_viscous, self.mu3, fl.radius)
+                                 for fl in s.flanks)
             plan.append((k, (s.j_screw, s.m_screw * s.c_prev, s.e_spline, s.spline_speed_factor,
                              s.g_bearing, s.bearing_speed_factor, below,
-                             (s.flanks[0].consts, s.flanks[1].consts))))
+                             s.c_viscous * s.flanks[0].az, flank_consts)))
         self._plan = tuple(reversed(plan))
         self._last_mass = self.stages[-1].m_assembly * self.stages[-1].c
         self._n_cache = 2 * len(self.stages)
@@ -225,14 +255,20 @@ class Mechanism:
 
     # ------------------------------------------------------------------------------------
     def _coefficients(self, flank: tuple, omega: float, wp: float) -> tuple:
-        """Per unit axial force A of a stage's contact with the constants ``flank``
-        (:attr:`_Flank.consts`): torque on the screw κ, generalized force on the carrier γ,
-        friction power π, and q = 1/(n_z − µ u_z) (the normal force per roller is A q / N_R).
+        """The contact of a stage with the constants ``flank`` (:attr:`_Flank.consts` plus
+        N_R µ_1 n_t, µ_3 and the contact radius r), at screw speed ω and carrier speed ω_P.
 
-        With u = s φ(|s|) the regularised slip direction: κ = [P × (n − µ u)]_z q,
-        γ = −µ (u·b) q and π = µ (u·s) q.
+        Returns the tuple (κ, γ, π, q, τ_v, γ_v, p_v, π_c, π_d): per unit effective axial
+        force Ã = A + V_z (module docstring) the torque on the screw κ, the generalized force
+        on the carrier γ, the friction power π = π_c + π_d (Coulomb, differential sliding) and
+        q = 1/(n_z − µ u_z) (the normal force of all rollers is Ã q); then the viscous force's
+        own torque on the screw τ_v = −N_R µ_1 n_t [P × s]_z, generalized force on the carrier
+        γ_v = −N_R µ_1 n_t (s·b) and power p_v = N_R µ_1 n_t |s|².
+
+        With u = s φ(|s|) the regularised slip direction and σ = sgñ(ω r):
+        κ = ([P × (n − µ u)]_z − µ_3 σ) q, γ = −µ (u·b) q, π_c = µ (u·s) q, π_d = µ_3 σ ω q.
         """
-        ax, ay, az, bx, by, px, py, nz, pn = flank
+        ax, ay, az, bx, by, px, py, nz, pn, cv, mu3, radius = flank
         sx = omega * ax + wp * bx
         sy = omega * ay + wp * by
         sz = omega * az
@@ -241,8 +277,18 @@ class Mechanism:
         # φ(v) = 1/v outside the band (friction.py), written out on the hot path
         mphi = self.mu * (1.0 / v if v >= self.v_eps else regularised_factor(v, self.v_eps))
         q = 1.0 / (nz - mphi * sz)
-        return ((pn - mphi * (px * sy - py * sx)) * q, -mphi * (sx * bx + sy * by) * q,
-                mphi * v2 * q, q)
+        kappa = pn - mphi * (px * sy - py * sx)
+        p_c = mphi * v2 * q
+        p_d = 0.0
+        if mu3:
+            w = omega * radius   # sgñ(w) = ±1 outside the band (friction.py)
+            sg = 1.0 if w >= self.v_eps else -1.0 if w <= -self.v_eps else regularised_sign(
+                w, self.v_eps)
+            kappa -= mu3 * sg
+            p_d = mu3 * sg * omega * q
+        sb = sx * bx + sy * by
+        return (kappa * q, -mphi * sb * q, p_c + p_d, q, -cv * (px * sy - py * sx), -cv * sb,
+                cv * v2, p_c, p_d)
 
     def solve(self, omega: float, carrier_state, load: float, *, torque: float | None = None,
               acceleration: float | None = None, detail: bool = False) -> Solution:
@@ -388,24 +434,27 @@ class Mechanism:
 
     def _sweep(self, omega, wps, load, ag, cache):
         """One pass from the last stage down with signs chosen at α = ag; returns the record
-        ((M_S1 at α = 0, dM_S1/dα), per-stage tuples (flank, A, coefficients, M_Sk, h_k,
-        B_(k−1) as (value, d/dα) pairs, spline and bearing factors, signs of M_Sk and B_(k−1)))."""
+        ((M_S1 at α = 0, dM_S1/dα), per-stage tuples (flank, the effective axial force
+        Ã = A + V_z, coefficients, M_Sk, h_k, B_(k−1) as (value, d/dα) pairs, spline and bearing
+        factors, signs of M_Sk and B_(k−1)))."""
         v_eps = self.v_eps
         coefficients = self._coefficients
         a0, a1 = load, self._last_mass
         mn0 = mn1 = hn0 = hn1 = 0.0
         per_stage = [None] * len(self.stages)
         for k, (j_screw, m_sc, e_spline, spline_f, g_bearing, bearing_f, mass_below,
-                flanks) in self._plan:
-            fi = 0 if a0 + a1 * ag >= 0.0 else 1
+                vz_factor, flanks) in self._plan:
+            # the threads carry the effective axial force Ã = A + V_z (module docstring)
+            ae0 = a0 + vz_factor * omega
+            fi = 0 if ae0 + a1 * ag >= 0.0 else 1
             co = cache[2 * k + fi]
             if co is None:
                 co = cache[2 * k + fi] = coefficients(flanks[fi], omega, wps[k])
             kappa = co[0]
-            x0 = mn0 - kappa * a0
+            x0 = mn0 - kappa * ae0 - co[4]
             x1 = j_screw + mn1 - kappa * a1
             if k == 0:
-                per_stage[0] = (fi, a0, a1, co, x0, x1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1, 1)
+                per_stage[0] = (fi, ae0, a1, co, x0, x1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1, 1)
                 return (x0, x1), per_stage
             y0 = a0 - hn0
             y1 = a1 - hn1 + m_sc
@@ -437,7 +486,7 @@ class Mechanism:
                 b0 = y0 + e * sm * m0
                 b1 = y1 + e * sm * m1
             h0, h1 = e * sm * m0, e * sm * m1
-            per_stage[k] = (fi, a0, a1, co, m0, m1, h0, h1, b0, b1, e, g, sm, sb)
+            per_stage[k] = (fi, ae0, a1, co, m0, m1, h0, h1, b0, b1, e, g, sm, sb)
             a0, a1 = b0, b1 + mass_below
             mn0, mn1, hn0, hn1 = m0, m1, h0, h1
         raise AssertionError("unreachable: the sweep returns at stage 1")
@@ -468,26 +517,31 @@ class Mechanism:
         acc = [0.0] * n
         p_fric = 0.0
         axial, contact, normal, torque, spline, bearing, stage_p = ([0.0] * n for _ in range(7))
+        terms = {"coulomb": 0.0, "viscous": 0.0, "differential": 0.0, "joints": 0.0}
         for k in range(n):
             fi, a0, a1, co, x0, x1, h0, h1, b0, b1, e, g, sm, sb = per_stage[k]
             s = stages[k]
-            a = a0 + a1 * alpha
-            kappa, gamma, pw, q = co
+            a = a0 + a1 * alpha                  # effective axial force Ã = A + V_z
+            kappa, gamma, pw, q, _, gamma_v, p_v, p_c, p_d = co
             if dyn:
-                acc[k] = gamma * a / s.j_carrier
-            pk = pw * a
+                acc[k] = (gamma * a + gamma_v) / s.j_carrier
+            pk = pw * a + p_v
+            terms["coulomb"] += p_c * a
+            terms["differential"] += p_d * a
+            terms["viscous"] += p_v
             if k > 0:
                 h = h0 + h1 * alpha
                 b = b0 + b1 * alpha
                 # spline: screw k slides at −ω ℓ_(k−1) relative to screw k−1; bearing: at ω r_NS
-                pk += h * omega * s.spline_speed_factor
                 # g = µ_NS r_NS sgñ(ω r_NS); |B| = σ_B B with the sweep's sign (equal at the
                 # solution; keeps one record one affine law in α)
-                pk += g * sb * b * omega
+                p_joint = h * omega * s.spline_speed_factor + g * sb * b * omega
+                pk += p_joint
+                terms["joints"] += p_joint
             p_fric += pk
             fl = s.flanks[fi]
             f_normal = a * q / s.n_rollers
-            axial[k] = a
+            axial[k] = a - s.c_viscous * fl.az * omega
             normal[k] = f_normal
             contact[k] = f_normal * fl.nz
             torque[k] = motor if k == 0 else x0 + x1 * alpha
@@ -500,6 +554,7 @@ class Mechanism:
         sol.stage_axial_force, sol.contact_force, sol.normal_force = axial, contact, normal
         sol.driven_torque, sol.spline_friction, sol.bearing_force = torque, spline, bearing
         sol.stage_friction_power = stage_p
+        sol.friction_power_terms = terms
         return sol
 
     def _rates(self, omega, alpha, per_stage) -> tuple:
@@ -509,8 +564,8 @@ class Mechanism:
         for (j_carrier, spline_f), (_, a0, a1, co, _, _, h0, h1, b0, b1, e, g, _, sb) in zip(
                 self._rate_consts, per_stage):
             a = a0 + a1 * alpha
-            acc.append(co[1] * a / j_carrier)
-            p_fric += co[2] * a
+            acc.append((co[1] * a + co[5]) / j_carrier)
+            p_fric += co[2] * a + co[6]
             if e:
                 p_fric += (h0 + h1 * alpha) * omega * spline_f
             if g:
@@ -520,7 +575,8 @@ class Mechanism:
         return acc, p_fric
 
     def fastest_time_constant(self, omega: float, carrier_state, load: float) -> float:
-        """Smallest carrier time constant J_Pk / |∂G_Pk/∂ω_Pk| at this point [s] (inf if none).
+        """Smallest carrier time constant J_Pk / |∂G_Pk/∂ω_Pk| at this point [s] (inf if none;
+        Coulomb and viscous friction both damp the carriers).
 
         Used for step selection, stability predictions and the ``auto`` fidelity choice.
         """
@@ -528,7 +584,8 @@ class Mechanism:
             return math.inf
         sol = self.solve(omega, carrier_state, load, acceleration=0.0, detail=True)
         tau = math.inf
-        for s, wp, a in zip(self.stages, carrier_state, sol.stage_axial_force):
+        for s, wp, a_axial in zip(self.stages, carrier_state, sol.stage_axial_force):
+            a = a_axial + s.c_viscous * s.flanks[0].az * omega     # effective: Ã = A + V_z
             fl = s.flanks[0 if a >= 0 else 1]
             sx = omega * fl.ax + wp * fl.bx
             sy = omega * fl.ay + wp * fl.by
@@ -543,6 +600,8 @@ class Mechanism:
             d = abs(nr * (fl.nz - self.mu * sz * phi))
             # ∂(u·b)/∂ω_P with u = s φ(|s|): |b|² φ + φ'(v) (s·b)²/v
             rate = nr * self.mu * abs(a) / d * (bb * phi + (dphi * sb * sb / v if v > 0.0 else 0.0))
+            # the viscous force's generalized force −N_R µ_1 n_t (s·b) adds N_R µ_1 n_t |b|²
+            rate += s.c_viscous * bb
             if rate > 0.0:
                 tau = min(tau, s.j_carrier / rate)
         return tau

@@ -22,6 +22,10 @@ from typing import Any
 #: relative tolerance of the geometric consistency checks (radii, leads)
 GEOMETRY_RTOL = 1e-6
 
+#: largest differential-sliding coefficient µ_3 [m]: a moment arm of rolling resistance is at most
+#: a contact half-width, well below a millimetre for thread contacts (seed 003: ~1e-6 m)
+MAX_MU_DIFFERENTIAL = 1e-3
+
 
 def _check_positive(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
@@ -76,6 +80,10 @@ class StageParams:
         next stage's screw [m]; unused for the last stage.
     carriers : int
         Carriers per stage (one at each roller end in seed 000), default 2.
+    threads_per_roller : int
+        Engaged thread turns per roller at the screw–roller mesh, n_t [-] (seed
+        ``003_e265d1d1167b0d4b.txt``'s "thread pitches per roller"), default 1.  Enters only the
+        viscous friction (``MechanismParams.mu_viscous`` acts per engaged thread).
     """
 
     screw_radius: float
@@ -95,6 +103,7 @@ class StageParams:
     spline_radius: float = 0.0
     bearing_radius: float = 0.0
     carriers: int = 2
+    threads_per_roller: int = 1
 
     # ---- derived quantities -------------------------------------------------------------
     @property
@@ -143,6 +152,7 @@ class StageParams:
         _check_int_at_least(f"{name}.screw_starts", self.screw_starts, 1)
         _check_int_at_least(f"{name}.n_rollers", self.n_rollers, 1)
         _check_int_at_least(f"{name}.carriers", self.carriers, 1)
+        _check_int_at_least(f"{name}.threads_per_roller", self.threads_per_roller, 1)
         beta = self.flank_angle
         if not (isinstance(beta, (int, float)) and math.isfinite(beta) and 0.0 < beta < math.pi / 2):
             raise ValueError(
@@ -183,7 +193,15 @@ class MechanismParams:
         (seed ``002_dfce4e5c6f831e77.txt``), in [0, 1).
     slip_velocity_scale : float
         Velocity v_ε [m/s] below which Coulomb friction is regularised (it becomes viscous
-        with coefficient µ·F/v_ε), so that the friction force is continuous through zero slip.
+        with coefficient 2µ·F/v_ε), so that the friction force is continuous through zero slip.
+    mu_viscous : float
+        Lubricant viscous coefficient µ_1 at the screw–roller contacts [N·s/m] per engaged
+        thread, in [0, inf): each roller feels µ_1 n_t |s| against its slip s (seed
+        ``003_e265d1d1167b0d4b.txt``, F_fs1 = µ_1 n_R n_t v_sr).  0 (default): no viscous term.
+    mu_differential : float
+        Differential-sliding coefficient µ_3 [m], in [0, 1e-3]: a torque µ_3·F_N on each screw
+        against its rotation, F_N the stage's total screw–roller normal force (seed 003,
+        M_fs3 = −µ_3 F_nf, µ_3 ~ 1e-6 m).  0 (default): no differential-sliding term.
     name, source : str
         Registry key and citation (seed file and section) of the data.
     """
@@ -193,6 +211,8 @@ class MechanismParams:
     mu_spline: float = 0.1
     mu_nut_screw: float = 0.0
     slip_velocity_scale: float = 1e-4
+    mu_viscous: float = 0.0
+    mu_differential: float = 0.0
     name: str = "custom"
     source: str = ""
     notes: str = field(default="", compare=False)
@@ -240,6 +260,14 @@ class MechanismParams:
         _check_friction("mu_spline", self.mu_spline)
         _check_friction("mu_nut_screw", self.mu_nut_screw)
         _check_positive("slip_velocity_scale", self.slip_velocity_scale)
+        _check_non_negative("mu_viscous", self.mu_viscous)
+        m3 = self.mu_differential
+        if not (isinstance(m3, (int, float)) and math.isfinite(m3)
+                and 0.0 <= m3 <= MAX_MU_DIFFERENTIAL):
+            raise ValueError(
+                f"mu_differential = {m3!r} m is out of range: must be in [0, "
+                f"{MAX_MU_DIFFERENTIAL:g}] m (a moment arm, ~1e-6 m in seed 003; at most a contact "
+                "half-width)")
         return self
 
     def with_changes(self, **changes: Any) -> "MechanismParams":
@@ -253,6 +281,12 @@ class MechanismParams:
         stages = list(self.stages)
         stages[k - 1] = replace(stages[k - 1], **changes)
         return replace(self, stages=tuple(stages))
+
+
+#: fields of MechanismParams that are physical parameters (every one an FMU parameter, a sweep
+#: name and a loop parameter; the rest are the stages and labels)
+MECHANISM_FIELD_NAMES = ("mu_screw_roller", "mu_spline", "mu_nut_screw", "slip_velocity_scale",
+                         "mu_viscous", "mu_differential")
 
 
 def stage_field_names() -> tuple[str, ...]:

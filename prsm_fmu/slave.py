@@ -49,7 +49,7 @@ from pythonfmu.enums import Fmi2Status
 from . import __version__
 from .configure import (ATOL_FACTOR, AUTO_FIDELITY, FIDELITY_CHOICES, STEPPER_CHOICES,
                         LEVEL_CODES, active_level, configure)
-from .params import MechanismParams, StageParams, stage_field_names
+from .params import MAX_MU_DIFFERENTIAL, MechanismParams, StageParams, stage_field_names
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
 
@@ -124,6 +124,9 @@ STAGE_FIELDS: dict[str, tuple] = {
     "bearing_radius": ("Real", "m", "friction radius of the thrust bearing between this nut and the "
                        "next screw (last stage: unused; > 0 if mu_nut_screw > 0)", 0.0, None),
     "carriers": ("Integer", None, "carriers per stage", 1, None),
+    # seed 003's friction terms (003_e265d1d1167b0d4b.txt): engaged threads per roller
+    "threads_per_roller": ("Integer", None, "engaged thread turns per roller n_t (the viscous "
+                           "friction acts per engaged thread)", 1, None),
 }
 
 #: mechanism-level parameters (fields of MechanismParams)
@@ -136,6 +139,13 @@ MECHANISM_FIELDS: dict[str, tuple] = {
                      "nut k and screw k+1, in [0, 1)", 0.0, 1.0),
     "slip_velocity_scale": ("Real", "m/s", "sliding speed below which Coulomb friction is "
                             "regularised (viscous)", 0.0, None),
+    # seed 003's friction terms (003_e265d1d1167b0d4b.txt)
+    "mu_viscous": ("Real", "N.s/m", "lubricant viscous coefficient at the screw-roller contacts "
+                   "per engaged thread (force mu_viscous * threads_per_roller * slip per roller), "
+                   ">= 0", 0.0, None),
+    "mu_differential": ("Real", "m", "differential-sliding coefficient: torque mu_differential * "
+                        "normal force on the screw against its rotation, in [0, 0.001] m",
+                        0.0, MAX_MU_DIFFERENTIAL),
 }
 
 #: the FMU's own parameters: name -> (type, unit, description, min, max, default)

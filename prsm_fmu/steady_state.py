@@ -14,23 +14,28 @@ Unknowns for an n-stage mechanism at screw speed ω ≠ 0 and load F (4n − 1 o
 * B_k, the axial force of the thrust bearing between nut k and screw k+1 (k = 1..n−1).
 
 Residuals (4n − 1), with s_k = ω a_k + ζ_k ω b_k, u_k = s_k φ(|s_k|) (friction.py),
-f_k = −µ_SR F_k u_k, ℓ_k = L_Sk / 2π, A_n = F and A_k = B_k (k < n):
+f_k = −µ_SR F_k u_k − µ_1 n_tk s_k (Coulomb spin sliding and the lubricant's viscous force per
+roller, seed 003), ℓ_k = L_Sk / 2π, A_n = F and A_k = B_k (k < n):
 
 * carrier k:           G_Pk = N_Rk f_k · b_k = 0;
 * rollers of stage k:  N_Rk (F_k n_z + f_k,z) − A_k = 0;
 * screw k ≥ 2, axial:  B_(k−1) − A_k − h_k + h_(k+1) = 0,
   h_k = µ_SS |M_Sk| / r_SSk · sgñ(ω ℓ_(k−1)), h_1 = h_(n+1) = 0;
-* screw k, torque:     M_Sk − M_S(k+1) + N_Rk [P_k × (F_k n_k + f_k)]_z + T_b,k = 0,
-  T_b,k = −µ_NS |B_(k−1)| r_NS,(k−1) sgñ(ω r_NS,(k−1)) (k ≥ 2), M_S(n+1) = 0;
+* screw k, torque:     M_Sk − M_S(k+1) + N_Rk [P_k × (F_k n_k + f_k)]_z + T_b,k + T_d,k = 0,
+  T_b,k = −µ_NS |B_(k−1)| r_NS,(k−1) sgñ(ω r_NS,(k−1)) (k ≥ 2), M_S(n+1) = 0, and seed 003's
+  differential-sliding torque T_d,k = −µ_3 N_Rk F_k sgñ(ω r_k), r_k = |P_k,xy| the contact
+  radius;
 
 sgñ is :func:`prsm_fmu.friction.regularised_sign` with v_ε = ``slip_velocity_scale``.  The
 contact of stage k is the "+" flank of :func:`prsm_fmu.geometry.contact_geometry` when the
 stage's axial force A_k ≥ 0 and its mirror image otherwise.
 
-Degenerate carriers.  If µ_SR = 0 or F = 0, G_Pk vanishes for every ζ_k: the carriers are in
-neutral equilibrium and the steady state does not fix their speed.  The carrier residual is
-then replaced by its µ_SR·F_k → 0⁺ limit, u_k · b_k = 0, so the ratio returned is the one the
-mechanism approaches with vanishing friction (:func:`carrier_equilibrium_ratio`).
+Degenerate carriers.  If (µ_SR = 0 or F = 0) and µ_1 = 0, G_Pk vanishes for every ζ_k: the
+carriers are in neutral equilibrium and the steady state does not fix their speed.  The carrier
+residual is then replaced by its µ_SR·F_k → 0⁺ limit, u_k · b_k = 0, so the ratio returned is
+the one the mechanism approaches with vanishing friction (:func:`carrier_equilibrium_ratio`).
+With a viscous term (µ_1 > 0) the carriers are never neutral: the lubricant's force along the
+slip holds them at the same ratio, s_k · b_k = 0, at any load including zero.
 
 All quantities are SI: m, N, N·m, rad/s, m/s, W.
 """
@@ -203,7 +208,10 @@ class _Problem:
         # scales of the unknowns and residuals: force, torque
         self.f_scale = abs(load) if load != 0.0 else 1.0
         self.m_scale = self.f_scale * self.c_n
-        self.degenerate = params.mu_screw_roller == 0.0 or load == 0.0
+        self.degenerate = ((params.mu_screw_roller == 0.0 or load == 0.0)
+                           and params.mu_viscous == 0.0)
+        # viscous coefficient per roller µ_1 n_t [N·s/m]
+        self.visc = [params.mu_viscous * st.threads_per_roller for st in params.stages]
         n = self.n
         self.x_scale = np.array([1.0] * n
                                 + [self.f_scale / st.n_rollers for st in params.stages]
@@ -216,6 +224,11 @@ class _Problem:
         s = self.omega * c.a + zeta * self.omega * c.b
         phi = regularised_factor(math.sqrt(float(np.dot(s, s))), self.v_eps)
         return s, s * phi, phi
+
+    def differential_sign(self, k: int) -> float:
+        """sgñ(ω r_k) of stage k's differential-sliding torque (r_k the contact radius)."""
+        c = self.contacts[k - 1]
+        return regularised_sign(self.omega * math.hypot(c.point[0], c.point[1]), self.v_eps)
 
     def spline_friction(self, k: int, torque: float) -> float:
         """h_k [N] on screw k from screw k−1 (0 for k = 1)."""
@@ -258,20 +271,23 @@ class _Problem:
             st = self.p.stages[k - 1]
             c = self.contacts[k - 1]
             n_r = st.n_rollers
-            _s, u, _q = self.slip(k, zeta[k - 1])
-            f = -mu * normal[k - 1] * u
+            s, u, _q = self.slip(k, zeta[k - 1])
+            f = -mu * normal[k - 1] * u - self.visc[k - 1] * s
             b_norm = float(np.linalg.norm(c.b))
             if self.degenerate:
                 r_carrier[k - 1] = float(np.dot(u, c.b)) / b_norm
             else:
                 g_p = n_r * float(np.dot(f, c.b))
-                r_carrier[k - 1] = g_p / (mu * self.f_scale * b_norm)
+                # force scale of the carrier's friction: Coulomb µF, viscous µ_1 n_t |ω| |b|
+                g_scale = (mu * self.f_scale + n_r * self.visc[k - 1] * abs(self.omega) * b_norm)
+                r_carrier[k - 1] = g_p / (g_scale * b_norm)
             r_roller[k - 1] = (n_r * (normal[k - 1] * c.normal[2] + f[2]) - axial[k - 1]) \
                 / self.f_scale
             contact_torque = n_r * _cross_z(c.point, normal[k - 1] * c.normal + f)
+            t_d = -self.p.mu_differential * n_r * normal[k - 1] * self.differential_sign(k)
             m_next = torque[k] if k < n else 0.0
             t_b = self.bearing_torque(k, bearing[k - 2]) if k >= 2 else 0.0
-            r_torque[k - 1] = (torque[k - 1] - m_next + contact_torque + t_b) / self.m_scale
+            r_torque[k - 1] = (torque[k - 1] - m_next + contact_torque + t_b + t_d) / self.m_scale
             if k >= 2:
                 r_screw[k - 2] = (bearing[k - 2] - axial[k - 1] - h[k - 1] + h[k]) / self.f_scale
         return np.concatenate((r_carrier, r_roller, r_torque, r_screw))
@@ -338,7 +354,12 @@ def steady_state(params: MechanismParams, screw_speed: float, load_force: float,
         the power delivered to the power supplied: F v_rod / (M_S1 ω) in forward drive
         (seed 000 Eq. 28), M_S1 ω / (F v_rod) when the load drives the motor (back-driving),
         NaN when no power flows (F = 0); ``friction_power`` M_S1 ω − F v_rod [W] (≥ 0);
-        ``residual_norm``, the 2-norm of the dimensionless residual vector [-].
+        ``friction_power_coulomb``, ``friction_power_viscous``, ``friction_power_differential``
+        and ``friction_power_joints`` [W], the same power from each term's own law at the
+        solution (screw–roller µ_SR F_k u_k·s_k, µ_1 n_t |s_k|² and µ_3 F_k ω sgñ(ω r_k) per
+        roller; splines and thrust bearings), whose sum equals ``friction_power`` when the
+        balances hold; ``screw_friction_torque`` M_S1 − F ΣL/2π [N·m] (seed 003's M_f at steady
+        state); ``residual_norm``, the 2-norm of the dimensionless residual vector [-].
 
     Raises
     ------
@@ -417,5 +438,23 @@ def steady_state(params: MechanismParams, screw_speed: float, load_force: float,
         out[f"stage[{k}].spline_friction"] = float(prob.spline_friction(k, torque[k - 1]))
     out["efficiency"] = efficiency
     out["friction_power"] = p_in - p_out
+    terms = {"coulomb": 0.0, "viscous": 0.0, "differential": 0.0, "joints": 0.0}
+    mu = params.mu_screw_roller
+    for k in range(1, n + 1):
+        n_r = params.stages[k - 1].n_rollers
+        s, u, _q = prob.slip(k, zeta[k - 1])
+        terms["coulomb"] += n_r * mu * float(normal[k - 1]) * float(np.dot(u, s))
+        terms["viscous"] += n_r * prob.visc[k - 1] * float(np.dot(s, s))
+        terms["differential"] += (n_r * params.mu_differential * float(normal[k - 1])
+                                  * prob.differential_sign(k) * omega)
+        if k >= 2:
+            # spline: screw k slides at −ω ℓ_(k−1) along screw k−1 (h opposes it); bearing:
+            # its torque T_b on screw k turning at ω
+            terms["joints"] += (float(prob.spline_friction(k, torque[k - 1])) * omega
+                                * prob.ells[k - 2]
+                                - prob.bearing_torque(k, bearing[k - 2]) * omega)
+    for term, value in terms.items():
+        out[f"friction_power_{term}"] = value
+    out["screw_friction_torque"] = m_s1 - load * c_n
     out["residual_norm"] = res_norm
     return out

@@ -15,7 +15,7 @@ from __future__ import annotations
 __all__ = ["SECOND", "MILLISECOND", "METRE", "MILLIMETRE", "MICROMETRE", "METRE_PER_SECOND",
            "MILLIMETRE_PER_SECOND", "AMPERE", "VOLT", "RADIAN",
            "RADIAN_PER_SECOND", "RADIAN_PER_SECOND2", "NEWTON", "KILONEWTON", "NEWTON_METRE",
-           "WATT", "JOULE", "KILOGRAM", "KILOGRAM_METRE2", "DIMENSIONLESS", "OUTPUT_UNITS",
+           "WATT", "JOULE", "KILOGRAM", "KILOGRAM_METRE2", "NEWTON_SECOND_PER_METRE", "DIMENSIONLESS", "OUTPUT_UNITS",
            "unit_of", "label"]
 
 SECOND = "s"
@@ -37,6 +37,7 @@ WATT = "W"
 JOULE = "J"
 KILOGRAM = "kg"
 KILOGRAM_METRE2 = "kg.m2"
+NEWTON_SECOND_PER_METRE = "N.s/m"
 #: a dimensionless quantity (a ratio, an efficiency, a friction coefficient)
 DIMENSIONLESS = "1"
 
@@ -53,6 +54,9 @@ OUTPUT_UNITS: dict[str, str] = {
     "input_work": JOULE, "output_work": JOULE, "friction_work": JOULE, "kinetic_energy": JOULE,
     "rod_force": NEWTON, "bearing_force": NEWTON, "residual_norm": DIMENSIONLESS,
     "friction_torque": NEWTON_METRE, "speed_reference": RADIAN_PER_SECOND,
+    "friction_power_coulomb": WATT, "friction_power_viscous": WATT,
+    "friction_power_differential": WATT, "friction_power_joints": WATT,
+    "screw_friction_torque": NEWTON_METRE, "overall_efficiency": DIMENSIONLESS,
 }
 
 

@@ -20,7 +20,7 @@ from typing import Any
 
 from prsm_fmu import presets
 from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, active_level, configure
-from prsm_fmu.params import MechanismParams, stage_field_names
+from prsm_fmu.params import MECHANISM_FIELD_NAMES, MechanismParams, stage_field_names
 from prsm_fmu.simulate import DEFAULT_STEPPER
 from prsm_fmu.steppers import StepFailure
 from prsm_fmu.units import DIMENSIONLESS, NEWTON, NEWTON_METRE, unit_of
@@ -92,7 +92,7 @@ class PRSMConfig:
         """The mechanism with the physical parameter overrides applied, validated."""
         p = mechanism_params(self.mechanism)
         fields = set(stage_field_names())
-        mech = {"mu_screw_roller", "mu_spline", "mu_nut_screw", "slip_velocity_scale"}
+        mech = set(MECHANISM_FIELD_NAMES)
         for name, value in self.parameters.items():
             if name.startswith("stage["):
                 k = int(name[6:name.index("]")])
@@ -113,8 +113,7 @@ class PRSMConfig:
         for name, value in self.parameters.items():
             if name in s:
                 s[name] = type(s[name])(value)
-            elif not (name.startswith("stage[") or name in {
-                    "mu_screw_roller", "mu_spline", "mu_nut_screw", "slip_velocity_scale"}):
+            elif not (name.startswith("stage[") or name in MECHANISM_FIELD_NAMES):
                 raise ValueError(f"{name!r} is not a parameter of the PRSM FMU")
         return s
 

@@ -12,14 +12,18 @@ solution has the signs assumed are the solutions of the rigid Coulomb problem.  
 mechanics.py is used: only the contact point and normal of geometry.py (tested on their own
 in test_geometry.py) and the parameters.
 
-The bodies (forces on the body named; Φ_k = F_k (n − µ u) is the force one roller puts on
-screw k, u the regularised slip direction of docs/model.md §5, s = ω a + ω_P b the slip of the
-screw's material point relative to the roller's, a = ẑ × P + ℓ ẑ, b = −ẑ × P + n_S ẑ × (P − c)):
+The bodies (forces on the body named; Φ_k = F_k (n − µ u) − µ_1 n_t s is the force one roller
+puts on screw k, u the regularised slip direction of docs/model.md §5, s = ω a + ω_P b the slip
+of the screw's material point relative to the roller's, a = ẑ × P + ℓ ẑ,
+b = −ẑ × P + n_S ẑ × (P − c); seed 003's viscous force µ_1 n_t s per roller (µ_1 per engaged
+thread, n_t threads) and differential-sliding torque µ_3 F on the screw per roller, against its
+rotation: −µ_3 F sgñ(ω r) with r = |P_xy| the contact radius):
 
 * nut assembly k (nut, rollers, carriers) moving at ż = −c_k ω:  −N_R Φ_z + B_k = −m_A c_k α
 * screw k ≥ 2 moving at ż = −c_(k−1) ω:  N_R Φ_z − B_(k−1) + h_k − h_(k+1) = −m_S c_(k−1) α
-* screw k, about z:  J_S α = M_k − M_(k+1) + N_R [P × Φ]_z − µ_NS r_NS |B_(k−1)| sgñ(ω)
-* carrier k (generalized force of the friction on θ_Pk):  J_P ω̇_P = N_R (−µ F u)·b
+* screw k, about z:  J_S α = M_k − M_(k+1) + N_R [P × Φ]_z − N_R µ_3 F sgñ(ω r)
+  − µ_NS r_NS |B_(k−1)| sgñ(ω)
+* carrier k (generalized force of the friction on θ_Pk):  J_P ω̇_P = N_R (−µ F u − µ_1 n_t s)·b
 * spline: h_k = µ_SS |M_k| / r_SS sgñ(ω ℓ_(k−1)) opposing screw k's sliding along screw k−1
 
 with J_P = n_c J_carrier + N_R J_R (n_S − 1)² + N_R m_R (r_S + r_R)² from the kinetic energy of
@@ -54,10 +58,22 @@ def _three_stage_with_bearings() -> MechanismParams:
     return p.with_changes(stages=stages, mu_nut_screw=0.02, name="three_stage_test").validate()
 
 
+def _three_stage_all_terms() -> MechanismParams:
+    """The three-stage mechanism with seed 003's viscous and differential terms as well, strong
+    enough (µ_1 = 5 N·s/m per thread, 8 threads, µ_3 = 50 µm) that the viscous axial force
+    N_R µ_1 n_t ℓ ω reaches the loads drawn (up to ~2 kN at 300 rad/s) and so decides flanks."""
+    p = _three_stage_with_bearings()
+    for k in range(1, p.n_stages + 1):
+        p = p.with_stage(k, threads_per_roller=8)
+    return p.with_changes(mu_viscous=5.0, mu_differential=5e-5).validate()
+
+
 MECHANISMS = {
     "seed000": lambda: presets.load("seed000_two_stage"),
     "seed002": lambda: presets.load("seed002_two_stage"),      # thrust-bearing friction
     "three_stage": _three_stage_with_bearings,
+    "three_stage_all_terms": _three_stage_all_terms,           # + viscous, differential
+    "seed003": lambda: presets.load("seed003_single_stage"),   # seed 003's own µ_1, µ_3
 }
 
 
@@ -104,6 +120,7 @@ def plain_solutions(params: MechanismParams, omega: float, wp: list[float], load
     n = params.n_stages
     stages = [PlainStage(params, k) for k in range(n)]
     mu, v_eps = params.mu_screw_roller, params.slip_velocity_scale
+    mu1, mu3 = params.mu_viscous, params.mu_differential
     # unknown vector: F_1..F_n, ω̇_P1..ω̇_Pn, M_2..M_n, B_1..B_(n−1), X (α or M_1)
     i_f, i_p, i_m, i_b, i_x = 0, n, 2 * n, 3 * n - 1, 4 * n - 2
     size = 4 * n - 1
@@ -134,12 +151,15 @@ def plain_solutions(params: MechanismParams, omega: float, wp: list[float], load
                     p, nrm, a, b = stg.flanks[flanks[k]]
                     s = omega * a + wp[k] * b
                     u = s * phi(float(np.linalg.norm(s)), v_eps)
-                    force = nrm - mu * u                     # Φ per unit F
-                    per_unit.append((force, u, s, b, p, nrm))
+                    force = nrm - mu * u                     # Φ per unit F (the F part)
+                    visc = -mu1 * stg.st.threads_per_roller * s  # Φ's viscous part, per roller
+                    sg = sgn_reg(omega * math.hypot(p[0], p[1]), v_eps)
+                    per_unit.append((force, u, s, b, p, nrm, visc, sg))
                 # nut assembly k: N_R Φ_z − B_k − m_A c_k α = 0
                 for k, stg in enumerate(stages):
                     force = per_unit[k][0]
                     A[row, i_f + k] = stg.n_r * force[2]
+                    rhs[row] -= stg.n_r * per_unit[k][6][2]
                     if k < n - 1:
                         A[row, col_b(k)] = -1.0
                     else:
@@ -153,6 +173,7 @@ def plain_solutions(params: MechanismParams, omega: float, wp: list[float], load
                 for k in range(1, n):
                     stg = stages[k]
                     A[row, i_f + k] = stg.n_r * per_unit[k][0][2]
+                    rhs[row] -= stg.n_r * per_unit[k][6][2]
                     A[row, col_b(k - 1)] = -1.0
                     A[row, col_m(k)] += spline[k] * sm[k - 1]
                     if k + 1 < n:
@@ -165,8 +186,9 @@ def plain_solutions(params: MechanismParams, omega: float, wp: list[float], load
                     row += 1
                 # screw k torque: M_k − M_(k+1) + N_R [P × Φ]_z − bearing − J_S α = 0
                 for k, stg in enumerate(stages):
-                    force, p = per_unit[k][0], per_unit[k][4]
-                    A[row, i_f + k] = stg.n_r * (p[0] * force[1] - p[1] * force[0])
+                    force, p, visc, sg = per_unit[k][0], per_unit[k][4], per_unit[k][6], per_unit[k][7]
+                    A[row, i_f + k] = stg.n_r * (p[0] * force[1] - p[1] * force[0] - mu3 * sg)
+                    rhs[row] -= stg.n_r * (p[0] * visc[1] - p[1] * visc[0])
                     if k == 0:
                         if torque is not None:
                             rhs[row] -= torque
@@ -183,11 +205,12 @@ def plain_solutions(params: MechanismParams, omega: float, wp: list[float], load
                     else:
                         rhs[row] += j_s * acceleration
                     row += 1
-                # carrier k: J_P ω̇_P − N_R F (−µ u·b) = 0
+                # carrier k: J_P ω̇_P − N_R F (−µ u·b) = N_R (viscous force)·b
                 for k, stg in enumerate(stages):
                     u, b = per_unit[k][1], per_unit[k][3]
                     A[row, i_p + k] = stg.j_carrier
                     A[row, i_f + k] = stg.n_r * mu * float(u @ b)
+                    rhs[row] = stg.n_r * float(per_unit[k][6] @ b)
                     row += 1
                 assert row == size
                 try:
@@ -209,8 +232,10 @@ def plain_solutions(params: MechanismParams, omega: float, wp: list[float], load
                 h = [0.0] + [spline[k] * sm[k - 1] * torques[k] for k in range(1, n)]
                 p_fric = 0.0
                 for k, stg in enumerate(stages):
-                    u, s = per_unit[k][1], per_unit[k][2]
+                    u, s, visc, sg = per_unit[k][1], per_unit[k][2], per_unit[k][6], per_unit[k][7]
                     p_fric += stg.n_r * mu * forces[k] * float(u @ s)
+                    p_fric -= stg.n_r * float(visc @ s)                   # viscous: µ_1 n_t |s|²
+                    p_fric += stg.n_r * mu3 * forces[k] * sg * omega      # differential sliding
                     if k > 0:
                         p_fric += h[k] * omega * stages[k - 1].ell
                         p_fric += bearing[k] * abs(bearings[k - 1]) * omega

@@ -86,7 +86,8 @@ def dissipation(params, r) -> float:
 def test_keys_and_convergence(p000):
     r = steady_state(p000, OMEGA, LOAD)
     expected = {"screw_speed", "screw_torque", "rod_velocity", "load_force", "efficiency",
-                "friction_power", "residual_norm"}
+                "friction_power", "residual_norm", "screw_friction_torque"}
+    expected |= {f"friction_power_{t}" for t in ("coulomb", "viscous", "differential", "joints")}
     for k in (1, 2):
         expected |= {f"stage[{k}].{q}" for q in ("carrier_speed_ratio", "normal_force",
                                                  "contact_force", "driven_torque",

@@ -421,10 +421,13 @@ def test_shipped_studies_load_and_cover_the_seeds():
     assert [p.values for p in s.points()] == [
         {"mu_screw_roller": 0.1, "mu_spline": 0.2}, {"mu_screw_roller": 0.1, "mu_spline": 0.3},
         {"mu_screw_roller": 0.2, "mu_spline": 0.2}, {"mu_screw_roller": 0.2, "mu_spline": 0.3}]
+    # seed 003: its own µ_1 and the one its load table's intercept needs, × its table's axis
     s = load_study(STUDIES / "seed003_accel_time.toml")
-    assert [p.values["accel_time"] for p in s.points()] == [0.01, 0.03, 0.06, 0.09]
+    assert [(p.values["mu_viscous"], p.values["accel_time"]) for p in s.points()] == [
+        (mu1, ta) for mu1 in (0.001, 580.0) for ta in (0.01, 0.03, 0.06, 0.09)]
     s = load_study(STUDIES / "seed003_load.toml")
-    assert [p.values["load_force"] for p in s.points()] == [500.0, 1000.0, 3000.0, 5000.0]
+    assert [(p.values["mu_viscous"], p.values["load_force"]) for p in s.points()] == [
+        (mu1, f) for mu1 in (0.001, 580.0) for f in (500.0, 1000.0, 3000.0, 5000.0)]
     assert s.stage_counts() == {1}
 
 

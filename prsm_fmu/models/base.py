@@ -27,6 +27,11 @@ from ..params import MechanismParams
 
 DRIVES = ("torque", "speed")
 
+#: friction terms with a power output ``friction_power_<term>`` each [W]; they sum to
+#: ``friction_power``: screw–roller Coulomb (spin sliding), viscous (lubricant) and
+#: differential sliding, and the Coulomb friction of the joints (splines, thrust bearings)
+FRICTION_TERMS = ("coulomb", "viscous", "differential", "joints")
+
 
 class Model(ABC):
     """One fidelity level of the mechanism (see module docstring for inputs and states).
@@ -75,12 +80,20 @@ class Model(ABC):
             ["screw_speed", "screw_angle", "screw_acceleration", "screw_torque", "rod_position",
              "rod_velocity", "load_force"] + stage_outputs
             + ["efficiency", "friction_power", "input_power", "output_power", "input_work",
-               "output_work", "friction_work", "kinetic_energy"])
+               "output_work", "friction_work", "kinetic_energy"]
+            + [f"friction_power_{term}" for term in FRICTION_TERMS]
+            + ["screw_friction_torque", "overall_efficiency"])
+        #: inertia reflected to screw 1 of everything slaved to it [kg·m²] (screw_friction_torque)
+        self._j_eq = self.mechanism.equivalent_inertia()
 
     # ---- hooks for levels with extra losses (kinematic efficiency) ------------------------
     def _extra_loss_torque(self, omega: float, load: float) -> float:
         """Torque on screw 1 opposing rotation from losses outside the mechanism model [N·m]."""
         return 0.0
+
+    def _extra_loss_terms(self, omega: float, load: float) -> dict[str, float]:
+        """:meth:`_extra_loss_torque`'s power split over :data:`FRICTION_TERMS` [W]."""
+        return {"coulomb": self._extra_loss_torque(omega, load) * omega}
 
     # ---- interface -------------------------------------------------------------------------
     def initial_state(self, u: tuple, screw_speed: float = 0.0, screw_angle: float = 0.0,
@@ -189,11 +202,21 @@ class Model(ABC):
             y[pre + "carrier_speed_ratio"] = wps[k] / omega if omega != 0.0 else 0.0
         y["efficiency"] = efficiency(p_in, p_out)
         y["friction_power"] = sol.friction_power + loss * omega
+        terms = dict(sol.friction_power_terms)
+        if loss:
+            for term, p in self._extra_loss_terms(omega, load).items():
+                terms[term] += p
+        for term in FRICTION_TERMS:
+            y[f"friction_power_{term}"] = terms[term]
+        # seed 003's M_f: the friction's generalized force on the screw angle, i.e. what the
+        # motor torque spends beyond the load's torque and the slaved parts' inertial torque
+        y["screw_friction_torque"] = motor - load * c_out - self._j_eq * sol.screw_acceleration
         y["input_power"] = p_in
         y["output_power"] = p_out
         ie = self._i_energy
         y["input_work"], y["output_work"], y["friction_work"] = x[ie], x[ie + 1], x[ie + 2]
         y["kinetic_energy"] = self.kinetic_energy(x, u)
+        y["overall_efficiency"] = overall_efficiency(x[ie], x[ie + 1])
         return y
 
     def contact_diagnosis(self, x: list[float], u: tuple) -> str | None:
@@ -231,6 +254,24 @@ def efficiency(p_in: float, p_out: float) -> float:
     if p_in < 0.0 and p_out < 0.0:
         return p_in / p_out
     return 0.0
+
+
+def overall_efficiency(input_work: float, output_work: float) -> float:
+    """Overall efficiency over an interval [-]: seed 003's work ratio ∫P_out dt / ∫P_in dt.
+
+    Parameters
+    ----------
+    input_work, output_work : float
+        Work of the motor torque and work done on the load over the interval [J] (differences
+        of the ``input_work`` and ``output_work`` outputs between its ends).
+
+    Returns
+    -------
+    float
+        W_out / W_in when the motor has put work in (W_in > 0), else 0 (no work in: nothing
+        to rate, as :func:`efficiency` at standstill).
+    """
+    return output_work / input_work if input_work > 0.0 else 0.0
 
 
 def is_finite_state(x) -> bool:

@@ -14,6 +14,10 @@ their power per unit speed times the angle travelled. The coefficients are taken
 general solver the first time a (sign ω, sign F) pair is met and re-validated against the sign
 pattern at every use; whenever the step would enter the band, change the sign of ω, or leave the
 pattern, :meth:`SlavedAdvance.advance` returns None and the caller integrates numerically.
+A viscous friction term (seed 003's µ_1) makes the forces depend on the speed itself, so the
+acceleration is no longer constant under held inputs: with it the step is always declined
+(except at a constant prescribed speed, where the derivative is constant and one Euler step is
+exact).  The differential-sliding torque is Coulomb-like (∝ load, sign of ω) and keeps it exact.
 
 The coefficients of a (sign ω, sign F) pair are computed at a canonical point (|ω| = 100 band
 speeds, |F| = 1 kN, α = 0), never at the point where the pair is first met: mathematically they
@@ -48,12 +52,16 @@ class SlavedAdvance:
             for fl in s.flanks:
                 dx, dy, dz = fl.ax + z * fl.bx, fl.ay + z * fl.by, fl.az
                 factors.append(math.sqrt(dx * dx + dy * dy + dz * dz))
+                if mech.mu3:
+                    factors.append(fl.radius)     # differential sliding: sgñ(ω r)
             if s.e_spline:
                 factors.append(s.spline_speed_factor)
             if s.g_bearing:
                 factors.append(s.bearing_speed_factor)
-        if getattr(model, "_loss_factor", 0.0):
+        if getattr(model, "coulomb_loss", False):
             factors.append(mech.c_out)
+        #: a viscous term makes the forces depend on the speed: no closed-form step then
+        self.viscous = mech.viscous or getattr(model, "viscous", False)
         #: screw speed [rad/s] above which every law is exactly Coulomb
         self.band_speed = mech.v_eps / min(factors)
         self._cache: dict = {}
@@ -102,7 +110,7 @@ class SlavedAdvance:
         w0 = x[1]
         load = u[1]
         band = self.band_speed
-        if abs(w0) < band or load == 0.0:
+        if abs(w0) < band or load == 0.0 or self.viscous:
             return None
         sign_w = 1.0 if w0 > 0.0 else -1.0
         law = self._law(sign_w, 1.0 if load > 0.0 else -1.0)

@@ -22,9 +22,10 @@ Assumptions, because seed 003 does not give the numbers:
 
 * Moments of inertia: the screw and each roller as solid cylinders of their nominal radius,
   J = m r² / 2; the one carrier as a thin ring at the orbit radius, J = m_c (r_s0 + r_r0)².
-* Friction: µ_2 = 0.05 (sliding) is the screw–roller Coulomb coefficient; a single stage has no
-  spline and no thrust bearing to a next stage.  The viscous µ_1 and the differential-sliding
-  µ_3 stay in :data:`PUBLISHED` for the friction models.
+* Friction: seed 003's three terms with its values: µ_2 = 0.05 (spin sliding) is the
+  screw–roller Coulomb coefficient, µ_1 = 0.001 N·s/m the viscous coefficient per engaged
+  thread with n_t = 10 threads per roller, µ_3 = 1e-6 m the differential-sliding coefficient; a
+  single stage has no spline and no thrust bearing to a next stage.
 """
 
 from __future__ import annotations
@@ -72,6 +73,7 @@ def _stage(nut_radius: float, screw_starts: int) -> StageParams:
         roller_inertia=0.5 * p["roller_mass"] * r_r**2,
         carrier_inertia=p["carrier_mass"] * (r_s + r_r) ** 2,
         carriers=1,
+        threads_per_roller=p["thread_pitches_per_roller"],
     )
 
 
@@ -99,6 +101,7 @@ def single_stage() -> MechanismParams:
     return MechanismParams(
         stages=(_stage(nut_radius, starts),),
         mu_screw_roller=PUBLISHED["mu_sliding"], mu_spline=0.0, mu_nut_screw=0.0,
+        mu_viscous=PUBLISHED["mu_viscous"], mu_differential=PUBLISHED["mu_differential"],
         name="seed003_single_stage",
         source="003_e265d1d1167b0d4b.txt (case-study parameter table), made standard: "
                "n_S = 4, r_N = 20 mm",

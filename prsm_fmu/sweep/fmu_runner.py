@@ -36,10 +36,10 @@ from typing import Callable
 import numpy as np
 
 from ..fmu_log import FmuLog
-from ..params import MechanismParams, StageParams
+from ..params import MECHANISM_FIELD_NAMES, MechanismParams, StageParams
 
 #: mechanism-level parameters of the FMU (fields of MechanismParams that are FMU parameters)
-MECHANISM_PARAMETERS = ("mu_screw_roller", "mu_spline", "mu_nut_screw", "slip_velocity_scale")
+MECHANISM_PARAMETERS = MECHANISM_FIELD_NAMES
 
 #: relative tolerance of the tracked torque: the secant iteration stops when its correction is
 #: below torque_rtol·(|T| + torque scale)

@@ -5,7 +5,11 @@ A metric is named ``<signal>@<reduction>``:
 * signals: ``efficiency`` (NaN at standstill, where it is undefined), ``friction_torque`` (friction power / screw speed: the torque the
   friction costs at the input shaft, N·m; NaN at standstill), ``screw_torque`` (the motor's),
   and per stage ``stage[k].carrier_speed_ratio``, ``stage[k].contact_force``,
-  ``stage[k].driven_torque``, ``stage[k].spline_friction``;
+  ``stage[k].driven_torque``, ``stage[k].spline_friction``; on the model backend also
+  ``screw_friction_torque`` (seed 003's M_f, the friction's generalized force on the screw
+  angle: the motor torque less the load's and the slaved parts' inertial torque, N·m; it also
+  carries the torque that drives the carriers through friction) and
+  ``friction_power_<term>`` (coulomb, viscous, differential, joints, W);
 * reductions: ``start`` (t = 0), ``end`` (t = t_end), ``min``, ``max``, ``settle`` (the first
   time after which the signal stays within 1 % of its final value, NaN if it has not settled
   within the run, see :func:`settle`), and a time in seconds (the sample nearest to it).
@@ -36,7 +40,9 @@ STAGE_SIGNALS = ("carrier_speed_ratio", "contact_force", "driven_torque", "splin
 #: series kept per point (for the figures); per-stage names use "stage[k]."
 SERIES_KEEP = ("time", "screw_speed", "speed_reference", "screw_torque", "efficiency",
                "friction_power", "friction_torque", "input_work", "output_work",
-               "friction_work", "kinetic_energy")
+               "friction_work", "kinetic_energy", "screw_friction_torque",
+               "friction_power_coulomb", "friction_power_viscous",
+               "friction_power_differential", "friction_power_joints")
 
 #: below this fraction of the largest screw speed the friction torque is not defined (NaN)
 STANDSTILL = 1e-6

@@ -19,7 +19,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..units import (DIMENSIONLESS, METRE, METRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
-                     RADIAN_PER_SECOND, SECOND, label, unit_of)
+                     NEWTON_SECOND_PER_METRE, RADIAN_PER_SECOND, SECOND, WATT, label, unit_of)
 
 __all__ = ["plot_time_panels", "plot_steady", "PANELS", "DEFAULT_PANELS", "label_of",
            "short_label"]
@@ -38,6 +38,10 @@ PANELS: dict[str, tuple[str, str, bool, int]] = {
                         False, 0),
     "screw_torque": ("motor torque M_S1", label("M_S1", NEWTON_METRE), False, 0),
     "screw_speed": ("screw speed ω", label("ω", RADIAN_PER_SECOND), False, 0),
+    "screw_friction_torque": ("friction torque on the screw M_f (model backend)",
+                              label("M_f", NEWTON_METRE), False, 0),
+    "friction_power_viscous": ("viscous friction power (model backend)", label("P_f,visc", WATT),
+                               False, 0),
 }
 
 #: seed 000 Figs. 4 and 5: (a) ζ_PSk, (b) F_Srzk, (c) η, (d) f_S2
@@ -48,6 +52,7 @@ _LABELS = {
     "load_force": label("load F", NEWTON), "screw_speed": label("screw speed", RADIAN_PER_SECOND),
     "accel_time": label("acceleration time t_a", SECOND), "n_stages": "stages",
     "slip_velocity_scale": label("v_ε", METRE_PER_SECOND),
+    "mu_viscous": label("µ_1", NEWTON_SECOND_PER_METRE), "mu_differential": label("µ_3", METRE),
 }
 
 
@@ -55,6 +60,7 @@ _SHORT = {
     "mu_screw_roller": ("µ_SR", ""), "mu_spline": ("µ_SS", ""), "mu_nut_screw": ("µ_NS", ""),
     "load_force": ("F", " N"), "screw_speed": ("ω", " rad/s"), "accel_time": ("t_a", " s"),
     "n_stages": ("stages", ""), "slip_velocity_scale": ("v_ε", " m/s"), "preset": ("", ""),
+    "mu_viscous": ("µ_1", " N·s/m"), "mu_differential": ("µ_3", " m"),
 }
 
 

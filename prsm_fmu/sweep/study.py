@@ -56,7 +56,8 @@ A study file (``studies/*.toml``; every value SI)::
 The points are the Cartesian product of the axes: each ``[grid]`` key, each ``[[zip]]`` block
 and the ``[random]`` block is one axis.  Swept (and fixed) names:
 
-* mechanism: ``mu_screw_roller``, ``mu_spline``, ``mu_nut_screw``, ``slip_velocity_scale``;
+* mechanism: ``mu_screw_roller``, ``mu_spline``, ``mu_nut_screw``, ``slip_velocity_scale``,
+  ``mu_viscous``, ``mu_differential``;
 * stage k: ``stage[k].<field>`` for every field of :class:`~prsm_fmu.params.StageParams`, and
   ``stage[k].pitch`` (sets ``screw_lead = screw_starts × pitch``);
 * structure: ``preset`` (another preset per point), ``n_stages`` (the first n stages of the
@@ -83,7 +84,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..params import MechanismParams, StageParams
+from ..params import MECHANISM_FIELD_NAMES, MechanismParams, StageParams
 
 __all__ = ["Study", "Axis", "Point", "Trend", "load_study", "apply_overrides", "resolve_preset",
            "SCENARIO_DEFAULTS", "MECHANISM_NAMES", "BACKENDS", "parameter_kind"]
@@ -92,7 +93,7 @@ __all__ = ["Study", "Axis", "Point", "Trend", "load_study", "apply_overrides", "
 BACKENDS = ("fmu", "model")
 
 #: mechanism-level parameters a study may set
-MECHANISM_NAMES = ("mu_screw_roller", "mu_spline", "mu_nut_screw", "slip_velocity_scale")
+MECHANISM_NAMES = MECHANISM_FIELD_NAMES
 
 #: scenario keys and their defaults (None: required)
 SCENARIO_DEFAULTS: dict[str, Any] = {
@@ -107,7 +108,7 @@ SCENARIO_DEFAULTS: dict[str, Any] = {
 
 _STAGE_RE = re.compile(r"^stage\[(\d+)\]\.([a-z_]+)$")
 _STAGE_FIELDS = tuple(f.name for f in fields(StageParams))
-_INT_STAGE_FIELDS = ("screw_starts", "n_rollers", "carriers")
+_INT_STAGE_FIELDS = ("screw_starts", "n_rollers", "carriers", "threads_per_roller")
 _FIDELITIES = ("kinematic", "quasi-static", "dynamic")
 _EXPECT = ("rises", "falls", "constant", "positive", "negative")
 
