@@ -38,6 +38,27 @@ def _check_friction(name: str, value: float) -> None:
         raise ValueError(f"{name} = {value!r} is out of range: friction coefficient must be in [0, 1)")
 
 
+#: the smallest spline radius relative to the screw's pitch radius (see _check_spline_radius)
+SPLINE_RADIUS_MIN_FRACTION = 0.01
+
+
+def _check_spline_radius(k: int, stage: "StageParams") -> None:
+    """Bounds of the spline radius r_SSk of stage k > 1 (seed ``000_a07c98907360be8b.txt``, eq. 12).
+
+    The internal spline teeth are cut in the bore of screw #k, so r_SSk lies inside its pitch
+    radius r_Sk.  The spline friction f_Sk = µ_SS |M_Sk| / r_SSk grows without bound as
+    r_SSk -> 0 (at 1e-30 m no step can succeed); below 1/100 of r_Sk the bore would leave a
+    wall of 99 % of the screw's radius, which no design has.
+    """
+    r, r_s = stage.spline_radius, stage.screw_radius
+    lo = SPLINE_RADIUS_MIN_FRACTION * r_s
+    if not (isinstance(r, (int, float)) and lo <= r <= r_s):
+        raise ValueError(
+            f"stage[{k}].spline_radius = {r!r} m is out of range: must be in [{lo!r}, {r_s!r}] m "
+            f"(from {SPLINE_RADIUS_MIN_FRACTION:g} x to 1 x stage[{k}].screw_radius: the internal "
+            "spline teeth lie in the bore of the screw)")
+
+
 def _check_int_at_least(name: str, value: Any, minimum: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
         raise ValueError(f"{name} = {value!r} is out of range: must be an integer >= {minimum}")
@@ -217,18 +238,19 @@ class MechanismParams:
         if not isinstance(self.stages, tuple) or len(self.stages) < 1:
             raise ValueError(
                 f"stages = {self.stages!r} is out of range: need a tuple of at least 1 StageParams")
+        # the coefficients first: the radii's checks below depend on them
+        _check_friction("mu_screw_roller", self.mu_screw_roller)
+        _check_friction("mu_spline", self.mu_spline)
+        _check_friction("mu_nut_screw", self.mu_nut_screw)
+        _check_positive("slip_velocity_scale", self.slip_velocity_scale)
         for k, st in enumerate(self.stages, start=1):
             if not isinstance(st, StageParams):
                 raise ValueError(f"stage[{k}] = {st!r} is not a StageParams")
             st.validate(f"stage[{k}]")
             if k > 1 and self.mu_spline > 0.0:
-                _check_positive(f"stage[{k}].spline_radius", st.spline_radius)
+                _check_spline_radius(k, st)
             if k < len(self.stages) and self.mu_nut_screw > 0.0:
                 _check_positive(f"stage[{k}].bearing_radius", st.bearing_radius)
-        _check_friction("mu_screw_roller", self.mu_screw_roller)
-        _check_friction("mu_spline", self.mu_spline)
-        _check_friction("mu_nut_screw", self.mu_nut_screw)
-        _check_positive("slip_velocity_scale", self.slip_velocity_scale)
         return self
 
     def with_changes(self, **changes: Any) -> "MechanismParams":
