@@ -28,7 +28,7 @@ from pathlib import Path
 
 import prsm_fmu
 from prsm_fmu.params import MechanismParams
-from prsm_fmu.slave import parameter_defaults
+from prsm_fmu.slave import parameter_defaults, type_definitions
 
 from . import extra, model_description
 
@@ -140,7 +140,8 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
         with zipfile.ZipFile(built) as z:
             xml = z.read("modelDescription.xml")
         tool = f"prsm-fmu fmu_build {prsm_fmu.__version__} (PythonFMU {pythonfmu_version})"
-        _rewrite_model_description(built, model_description.complete(xml, tool))
+        _rewrite_model_description(built, model_description.complete(xml, tool,
+                                                                     type_definitions()))
         extra.add_baselines(built, name)         # extra/baselines (issue 6), PRSM2 only
         if check:
             problems = validate(built)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
+from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
 from .params import MechanismParams
@@ -174,6 +175,8 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         if not abs(solver[name]) <= bound:
             raise ValueError(f"{name} = {solver[name]!r} {unit} is out of range: must be in "
                              f"[-{bound:g}, {bound:g}] {unit}")
+    for k, stage in enumerate(params.stages, start=1):   # contact exists: errors name the stage
+        contact_geometry(stage, f"stage[{k}]")
     choice = None
     if fidelity == "auto":
         eff0 = solver["kinematic_efficiency"]

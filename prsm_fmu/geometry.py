@@ -351,9 +351,13 @@ def contact_geometry(stage: StageParams, name: str = "stage") -> ContactGeometry
     r_s, r_r = float(stage.screw_radius), float(stage.roller_radius)
     lead, n_s, beta = float(stage.screw_lead), int(stage.screw_starts), float(stage.flank_angle)
     a = r_s + r_r
-    point, normal, (rho, psi, rho_r, psi_r, _z_r), res = _solve_contact(r_s, r_r, lead, n_s,
-                                                                        beta)
-    big_r = r_r / math.sin(beta)
+    try:
+        point, normal, (rho, psi, rho_r, psi_r, _z_r), res = _solve_contact(r_s, r_r, lead, n_s,
+                                                                            beta)
+        big_r = r_r / math.sin(beta)
+    except ArithmeticError:      # e.g. a flank angle of 1e-300 rad: no contact to be found
+        point, res, big_r = np.full(3, np.nan), math.inf, math.nan
+        rho = psi = rho_r = psi_r = math.nan
     near = (np.all(np.isfinite(point)) and res < _RESIDUAL_TOL
             and 0.0 < rho_r < big_r * (1.0 - 1e-9) and rho > 0.0
             and abs(psi) < math.pi / 2 and abs(psi_r - math.pi) < math.pi / 2

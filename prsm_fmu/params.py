@@ -28,6 +28,23 @@ def _check_positive(name: str, value: float) -> None:
         raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
 
 
+#: upper bounds of a stage's sizes: no PRSM has a radius or a lead of a metre, a part of ten
+#: tonnes or a moment of inertia of 1000 kg.m2 (the seeds' largest: 27.5 mm, 18 kg,
+#: 1.7e-4 kg.m2); beyond them the model's numbers lose their meaning before they overflow
+MAX_SIZE = {"m": 1.0, "kg": 1e4, "kg.m2": 1e3}
+#: unit of each bounded StageParams field
+FIELD_UNITS = {"screw_radius": "m", "roller_radius": "m", "nut_radius": "m", "screw_lead": "m",
+               "spline_radius": "m", "bearing_radius": "m", "screw_mass": "kg", "nut_mass": "kg",
+               "roller_mass": "kg", "carrier_mass": "kg", "screw_inertia": "kg.m2",
+               "roller_inertia": "kg.m2", "carrier_inertia": "kg.m2"}
+
+
+def _check_at_most(name: str, value: float, unit: str) -> None:
+    if value > MAX_SIZE[unit]:
+        raise ValueError(f"{name} = {value!r} {unit} is out of range: must be at most "
+                         f"{MAX_SIZE[unit]:g} {unit}")
+
+
 def _check_non_negative(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
         raise ValueError(f"{name} = {value!r} is out of range: must be a finite number >= 0")
@@ -55,8 +72,8 @@ def _check_spline_radius(k: int, stage: "StageParams") -> None:
     if not (isinstance(r, (int, float)) and lo <= r <= r_s):
         raise ValueError(
             f"stage[{k}].spline_radius = {r!r} m is out of range: must be in [{lo!r}, {r_s!r}] m "
-            f"(from {SPLINE_RADIUS_MIN_FRACTION:g} x to 1 x stage[{k}].screw_radius: the internal "
-            "spline teeth lie in the bore of the screw)")
+            f"while mu_spline > 0 (from {SPLINE_RADIUS_MIN_FRACTION:g} x to 1 x "
+            f"stage[{k}].screw_radius: the internal spline teeth lie in the bore of the screw)")
 
 
 def _check_int_at_least(name: str, value: Any, minimum: int) -> None:
@@ -157,9 +174,14 @@ class StageParams:
             _check_positive(f"{name}.{f}", getattr(self, f))
         for f in ("spline_radius", "bearing_radius"):
             _check_non_negative(f"{name}.{f}", getattr(self, f))
+        for f, unit in FIELD_UNITS.items():
+            _check_at_most(f"{name}.{f}", getattr(self, f), unit)
         _check_int_at_least(f"{name}.screw_starts", self.screw_starts, 1)
         _check_int_at_least(f"{name}.n_rollers", self.n_rollers, 1)
         _check_int_at_least(f"{name}.carriers", self.carriers, 1)
+        if self.carriers > 2:
+            raise ValueError(f"{name}.carriers = {self.carriers!r} is out of range: must be 1 or 2 "
+                             "(a carrier at one or at both ends of the rollers)")
         beta = self.flank_angle
         if not (isinstance(beta, (int, float)) and math.isfinite(beta) and 0.0 < beta < math.pi / 2):
             raise ValueError(
@@ -171,6 +193,15 @@ class StageParams:
                 f"{name}.nut_radius = {self.nut_radius!r} m is inconsistent with "
                 f"screw_radius + 2*roller_radius = {fit!r} m: must equal it "
                 f"(relative tolerance {GEOMETRY_RTOL:g})")
+        # the rollers' axes lie on a circle of radius r_S + r_R; N_R rollers of radius r_R fit
+        # around it without overlapping while N_R * 2 asin(r_R / (r_S + r_R)) <= 2 pi
+        most = int(math.pi / math.asin(self.roller_radius / (self.screw_radius + self.roller_radius))
+                   + 1e-9)
+        if self.n_rollers > most:
+            raise ValueError(
+                f"{name}.n_rollers = {self.n_rollers!r} is out of range: must be in [1, {most}] "
+                f"(rollers of radius {self.roller_radius!r} m fit around the screw without "
+                "overlapping only up to that number)")
         engaged = self.screw_starts * self.roller_radius
         if abs(self.nut_radius - engaged) > GEOMETRY_RTOL * engaged:
             raise ValueError(
@@ -249,8 +280,11 @@ class MechanismParams:
             st.validate(f"stage[{k}]")
             if k > 1 and self.mu_spline > 0.0:
                 _check_spline_radius(k, st)
-            if k < len(self.stages) and self.mu_nut_screw > 0.0:
-                _check_positive(f"stage[{k}].bearing_radius", st.bearing_radius)
+            if k < len(self.stages) and self.mu_nut_screw > 0.0 and not st.bearing_radius > 0.0:
+                raise ValueError(
+                    f"stage[{k}].bearing_radius = {st.bearing_radius!r} is out of range: must be "
+                    f"a finite number > 0 while mu_nut_screw = {self.mu_nut_screw!r} > 0 (the "
+                    "thrust bearing's friction acts at that radius)")
         return self
 
     def with_changes(self, **changes: Any) -> "MechanismParams":

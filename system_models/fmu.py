@@ -27,6 +27,8 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from prsm_fmu.fmi_enum import enumeration_value
+
 from .blocks import Block, Port, StepRefused
 
 __all__ = ["FMUBlock", "FMUError", "ensure_fmu", "fmu_is_stale"]
@@ -205,7 +207,8 @@ class FMUBlock(Block):
         return (": " + "; ".join(msgs)) if msgs else " (the FMU logged no message)"
 
     def set_values(self, values: dict[str, Any]) -> None:
-        """Set variables by name with the setter of their type."""
+        """Set variables by name with the setter of their type; an Enumeration takes an item
+        name (from the modelDescription's TypeDefinitions) or its integer value."""
         for n, value in values.items():
             if n not in self.vars:
                 raise FMUError(f"{self.path}: no variable {n!r} (parameter {n} = {value!r})")
@@ -213,8 +216,12 @@ class FMUBlock(Block):
             setter = {"Real": "setReal", "Integer": "setInteger", "Boolean": "setBoolean",
                       "String": "setString", "Enumeration": "setInteger"}[v.type]
             conv = {"Real": float, "Integer": int, "Boolean": bool, "String": str,
-                    "Enumeration": int}[v.type]
-            self._call(setter, [v.valueReference], [conv(value)])
+                    "Enumeration": lambda x, v=v: enumeration_value(v, x)}[v.type]
+            try:
+                converted = conv(value)
+            except ValueError as exc:
+                raise FMUError(f"{self.path}: {exc}") from None
+            self._call(setter, [v.valueReference], [converted])
 
     def get_values(self, names: Sequence[str]) -> list[Any]:
         """Read variables by name (any type)."""

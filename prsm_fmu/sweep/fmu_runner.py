@@ -34,6 +34,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..fmi_enum import enumeration_value
 from ..params import MechanismParams, StageParams
 
 #: mechanism-level parameters of the FMU (fields of MechanismParams that are FMU parameters)
@@ -127,7 +128,9 @@ class FmuRunner:
             var = self.vars.get(name)
             if var is None:
                 raise ValueError(f"parameter {name!r} is not a variable of {self.fmu_path}")
-            bucket = {"Real": reals, "Integer": ints, "Boolean": bools,
+            if var.type == "Enumeration":          # fidelity, stepper: item name -> value
+                value = enumeration_value(var, value)
+            bucket = {"Real": reals, "Integer": ints, "Enumeration": ints, "Boolean": bools,
                       "String": strings}[var.type]
             bucket[0].append(var.valueReference)
             bucket[1].append(value)
