@@ -21,10 +21,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--preset", help="build from this preset of prsm_fmu.presets instead")
     ap.add_argument("--name", help="FMU name (modelIdentifier) for --preset, e.g. PRSM2_seed002")
     ap.add_argument("--dest", default="dist", help="output directory (default: dist)")
+    ap.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
+                    help="a parameter start value other than the preset's, e.g. "
+                         "fidelity=dynamic (for hosts that cannot set it); repeatable")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
     args = ap.parse_args(argv)
     check = not args.no_validate
+    try:
+        start = dict(item.split("=", 1) for item in args.start)
+    except ValueError:
+        ap.error("--start takes NAME=VALUE")
     try:
         if args.preset:
             from prsm_fmu import presets
@@ -32,10 +39,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.names or args.all or not args.name:
                 ap.error("--preset needs --name and no FMU names")
             targets = [build_fmu(args.name, presets.load(args.preset), args.preset, args.dest,
-                                 check)]
+                                 check, start)]
         else:
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
-            targets = [build_named(n, args.dest, check) for n in names]
+            targets = [build_named(n, args.dest, check, start) for n in names]
     except (BuildError, ValueError) as exc:
         print(f"fmu_build: {exc}", file=sys.stderr)
         return 1

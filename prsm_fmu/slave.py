@@ -181,6 +181,10 @@ SOLVER_FIELDS: dict[str, tuple] = {
                                     False),
 }
 
+#: the Enumeration parameters and their declared types
+ENUM_PARAMETERS = {name: row[0].split(":", 1)[1] for name, row in SOLVER_FIELDS.items()
+                   if row[0].startswith("Enumeration:")}
+
 #: inputs: name -> (unit, description)
 INPUTS: dict[str, tuple] = {
     "screw_torque": ("N.m", "torque applied to screw 1 by the motor, positive extends the rod"),
