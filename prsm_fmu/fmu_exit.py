@@ -17,11 +17,13 @@ shuffles the layout.
 
 The fix, without rebuilding pythonfmu: call the library's exported
 ``finalizePythonInterpreter()`` once from an :mod:`atexit` handler, i.e. while the
-``shared_ptr`` is still alive.  It resets the pointer (joining pythonfmu's helper thread, which
-in a Python host has already ended); the two exit-time destructors that follow then find a null
-pointer and touch no heap memory.  In a non-Python host the handler runs inside ``Py_Finalize``,
-which pythonfmu calls from that same reset; a reset of the pointer it is already resetting is
-a no-op.
+``shared_ptr`` is still alive.  In a Python host (fmpy) the handler runs in ``Py_FinalizeEx``,
+before ``exit()``: it resets the pointer (joining pythonfmu's helper thread, which has already
+ended there), and the two exit-time destructors that follow find a null pointer and touch no
+heap memory.  In a non-Python host, Python's atexit handlers run only when pythonfmu finalizes
+its interpreter, from inside the first of those destructors; the handler then nulls the
+pointer while its block is still being released, so the second destructor finds it null (not
+tested: the C host of the tests leaves with ``_Exit(0)``; docs/fmu.md, "Non-Python hosts").
 """
 
 from __future__ import annotations

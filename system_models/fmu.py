@@ -11,7 +11,8 @@ How it reacts to the FMU (docs/fmu.md, "Errors"):
   log messages of that call as the reason.  The FMU's state is as before the call, so the
   master may retry (smaller step) or stop with an error naming the time and the reason.
 * any other failing call (fmi2Error, fmi2Fatal) → :class:`FMUError` with the messages; the
-  instance must not be used again.
+  instance must not be used again.  So does an error logged during ``exitInitializationMode``
+  (an FMU built with pythonfmu reports a failed initialization that way, with fmi2OK).
 
 :func:`ensure_fmu` builds ``dist/PRSM<n>.fmu`` with ``python -m fmu_build`` in a child process
 when it is missing or older than the sources (a process that loads an FMU must not be the one
@@ -175,7 +176,13 @@ class FMUBlock(Block):
             self._call("setupExperiment", startTime=float(start_time))
             self._call("enterInitializationMode")
             self.set_values(parameters or {})
+            n0 = len(self.messages)
             self._call("exitInitializationMode")
+            # an FMU that cannot return fmi2Error here (pythonfmu's) logs its failure instead
+            errors = [m for label, m in self.messages[n0:] if label in ("error", "fatal")]
+            if errors:
+                raise FMUError(f"{self.name}: exitInitializationMode logged an error: "
+                               + "; ".join(errors))
         except FMUError:
             self.terminate()
             raise
