@@ -35,6 +35,7 @@ from pathlib import Path
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from prsm_fmu.fmi_enum import enumeration_value
 
 ROOT = Path(__file__).resolve().parents[1]
 H = 1e-3
@@ -91,6 +92,7 @@ class Instance:
         md = read_model_description(str(fmu))
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         types = {v.name: v.type for v in md.modelVariables}
+        variables = {v.name: v for v in md.modelVariables}
         self.out = [v.valueReference for v in md.modelVariables
                     if v.causality == "output" and v.type == "Real"]
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu)),
@@ -99,8 +101,8 @@ class Instance:
         self.fmu.setupExperiment(startTime=0.0)
         self.fmu.enterInitializationMode()
         for name, value in (start or {}).items():
-            if types[name] == "String":
-                self.fmu.setString([self.vr[name]], [value])
+            if types[name] == "Enumeration":       # fidelity, stepper: by item name
+                self.fmu.setInteger([self.vr[name]], [enumeration_value(variables[name], value)])
             elif types[name] == "Boolean":
                 self.fmu.setBoolean([self.vr[name]], [value])
             else:

@@ -18,8 +18,9 @@ __all__ = ["build_fmu", "build_named", "validate", "BuildError", "FMUS", "three_
            "DEFAULT_EXPERIMENT"]
 
 
-def build_named(name: str, dest="dist", check: bool = True):
-    """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``.
+def build_named(name: str, dest="dist", check: bool = True, start: dict | None = None):
+    """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
+    (``start``: parameter start values other than the preset's, see ``builder.start_values``).
 
     Returns
     -------
@@ -31,4 +32,4 @@ def build_named(name: str, dest="dist", check: bool = True):
     except KeyError:
         raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
                          "(or use --preset)") from None
-    return build_fmu(name, make(), source, dest, check)
+    return build_fmu(name, make(), source, dest, check, start)

@@ -35,6 +35,9 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--name", help="FMU name (modelIdentifier) for --preset, e.g. PRSM2_seed002")
     ap.add_argument("--dest", type=writable_dir, default="dist", metavar="DIR",
                     help="output directory (default: dist)")
+    ap.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
+                    help="a parameter start value other than the preset's, e.g. "
+                         "fidelity=dynamic (for hosts that cannot set it); repeatable")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
     return ap
@@ -55,6 +58,11 @@ def main(argv: list[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else 2
     check = not args.no_validate
     try:
+        start = dict(item.split("=", 1) for item in args.start)
+    except ValueError:
+        print("prsm-fmu-build: error: argument --start: must be NAME=VALUE", file=sys.stderr)
+        return 2
+    try:
         if args.preset:
             from prsm_fmu import presets
             from prsm_fmu.params import MechanismParams
@@ -73,14 +81,14 @@ def main(argv: list[str] | None = None) -> int:
                          "mechanism the FMU can run: must be one of "
                          + ", ".join(n for n in presets.names()
                                      if isinstance(presets.load(n), MechanismParams)))
-            targets = [build_fmu(args.name, params, args.preset, args.dest, check)]
+            targets = [build_fmu(args.name, params, args.preset, args.dest, check, start)]
         else:
             unknown = [n for n in args.names if n not in FMUS]
             if unknown:
                 ap.error(f"argument FMU: invalid choice(s) {', '.join(map(repr, unknown))}: "
                          f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
-            targets = [build_named(n, args.dest, check) for n in names]
+            targets = [build_named(n, args.dest, check, start) for n in names]
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2
     except (BuildError, ValueError, OSError) as exc:

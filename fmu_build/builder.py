@@ -28,7 +28,8 @@ from pathlib import Path
 
 import prsm_fmu
 from prsm_fmu.params import MechanismParams
-from prsm_fmu.slave import parameter_defaults
+from prsm_fmu.configure import ENUMERATIONS
+from prsm_fmu.slave import ENUM_PARAMETERS, parameter_defaults, type_definitions
 
 from . import extra, model_description
 
@@ -40,12 +41,47 @@ class BuildError(RuntimeError):
     """The FMU could not be built or its modelDescription is not valid."""
 
 
-def slave_source(name: str, params: MechanismParams, preset: str) -> str:
+def start_values(params: MechanismParams, start: dict | None = None) -> dict:
+    """The FMU's parameter start values: the preset's, with ``start`` (name -> value) applied.
+
+    An Enumeration (``fidelity``, ``stepper``) takes its item name or value; other values are
+    converted to the parameter's type.  For hosts that cannot set a parameter (libcosim cannot
+    set an Enumeration) the start value is the way to choose it.
+
+    Raises
+    ------
+    ValueError
+        Naming an unknown parameter or an Enumeration value that is not an item.
+    """
+    defaults = parameter_defaults(params)
+    for key, value in (start or {}).items():
+        if key not in defaults:
+            raise ValueError(f"--start {key}: no such parameter (parameters: "
+                             f"{', '.join(defaults)})")
+        if key in ENUM_PARAMETERS:
+            items = ENUMERATIONS[ENUM_PARAMETERS[key]]
+            if isinstance(value, str) and value in items:
+                value = items[value][0]
+            elif str(value).lstrip("-").isdigit():
+                value = int(value)
+            else:
+                raise ValueError(f"--start {key}={value}: must be one of "
+                                 f"{', '.join(f'{k} ({c})' for k, (c, _d) in items.items())}")
+        elif isinstance(defaults[key], bool):
+            value = str(value).lower() in ("1", "true") if isinstance(value, str) else bool(value)
+        else:
+            value = type(defaults[key])(value)
+        defaults[key] = value
+    return defaults
+
+
+def slave_source(name: str, params: MechanismParams, preset: str,
+                 start: dict | None = None) -> str:
     """Source of the generated slave module for FMU ``name`` (see module docstring)."""
     if not name.isidentifier():
         raise ValueError(f"name = {name!r} is not allowed: the FMU name is the FMI "
                          "modelIdentifier and must be a valid identifier (e.g. PRSM2)")
-    defaults = parameter_defaults(params)
+    defaults = start_values(params, start)
     lines = "".join(f"        {k!r}: {v!r},\n" for k, v in defaults.items())
     start, stop, step = DEFAULT_EXPERIMENT
     n = params.n_stages
@@ -98,7 +134,7 @@ def validate(fmu: Path) -> list[str]:
 
 
 def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",
-              check: bool = True) -> Path:
+              check: bool = True, start: dict | None = None) -> Path:
     """Build ``<dest>/<name>.fmu`` from ``params``.
 
     Parameters
@@ -114,6 +150,8 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
     check : bool
         Validate the result (fmpy's validate_fmu and the project's rules); raise
         :class:`BuildError` on any problem.
+    start : dict, optional
+        Parameter start values other than the preset's (:func:`start_values`).
 
     Returns
     -------
@@ -131,7 +169,7 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
         tmp = Path(tmp)
         script = tmp / "src" / f"{name.lower()}_slave.py"
         script.parent.mkdir()
-        script.write_text(slave_source(name, params, preset), encoding="utf-8")
+        script.write_text(slave_source(name, params, preset, start), encoding="utf-8")
         staged = tmp / "pkg" / "prsm_fmu"
         shutil.copytree(package, staged, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[staged],
@@ -140,7 +178,8 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
         with zipfile.ZipFile(built) as z:
             xml = z.read("modelDescription.xml")
         tool = f"prsm-fmu fmu_build {prsm_fmu.__version__} (PythonFMU {pythonfmu_version})"
-        _rewrite_model_description(built, model_description.complete(xml, tool))
+        _rewrite_model_description(built, model_description.complete(xml, tool,
+                                                                     type_definitions()))
         extra.add_baselines(built, name)         # extra/baselines (issue 6), PRSM2 only
         if check:
             problems = validate(built)

@@ -11,6 +11,10 @@ pythonfmu writes the variables (with the unit, min and max attributes that
   new input value does not reach them before the next ``doStep`` (no direct feedthrough);
 * ``ModelStructure/InitialUnknowns``: every output (their ``initial`` is ``calculated``),
   without a dependency list (they depend on every parameter and input start value);
+* ``TypeDefinitions``: the Enumerations (``Fidelity``, ``Stepper``) with item names, values
+  and descriptions; pythonfmu 0.7 has no Enumeration variable, so the slave registers them as
+  Integers (fmi2GetInteger/fmi2SetInteger reach them, as FMI 2.0 prescribes) that write
+  themselves as ``<Enumeration declaredType=...>``;
 * ``generationTool`` names fmu_build and pythonfmu.
 
 :func:`check` then asserts the project's own rules (DESIGN.md §4): every variable has a
@@ -50,7 +54,8 @@ def _typed(sv: ET.Element) -> ET.Element:
     raise ValueError(f"variable {sv.get('name')!r} has no type element")
 
 
-def complete(xml: bytes, generation_tool: str | None = None) -> bytes:
+def complete(xml: bytes, generation_tool: str | None = None,
+             enumerations: dict[str, list[tuple[str, int, str]]] | None = None) -> bytes:
     """Return the completed modelDescription.xml (see module docstring).
 
     Parameters
@@ -59,6 +64,9 @@ def complete(xml: bytes, generation_tool: str | None = None) -> bytes:
         modelDescription.xml as pythonfmu wrote it.
     generation_tool : str, optional
         Value of the ``generationTool`` attribute.
+    enumerations : dict, optional
+        ``TypeDefinitions`` to write: Enumeration name -> [(item name, value, description)]
+        (the variables that use them carry ``declaredType``).
 
     Returns
     -------
@@ -90,6 +98,16 @@ def complete(xml: bytes, generation_tool: str | None = None) -> bytes:
     children = list(root)
     after = max(i for i, c in enumerate(children) if c.tag in ("ModelExchange", "CoSimulation"))
     root.insert(after + 1, units)
+    old = root.find("TypeDefinitions")
+    if old is not None:
+        root.remove(old)
+    if enumerations:
+        types = ET.Element("TypeDefinitions")
+        for name, items in enumerations.items():
+            enum = ET.SubElement(ET.SubElement(types, "SimpleType", name=name), "Enumeration")
+            for item, value, desc in items:
+                ET.SubElement(enum, "Item", name=item, value=str(value), description=desc)
+        root.insert(after + 2, types)
 
     structure = root.find("ModelStructure")
     for child in list(structure):
@@ -117,6 +135,7 @@ def check(xml: bytes) -> list[str]:
     root = ET.fromstring(xml)
     problems = []
     defined = {u.get("name") for u in root.iterfind("UnitDefinitions/Unit")}
+    declared = {t.get("name") for t in root.iterfind("TypeDefinitions/SimpleType")}
     svs = list(root.find("ModelVariables"))
     for sv in svs:
         name = sv.get("name")
@@ -125,6 +144,8 @@ def check(xml: bytes) -> list[str]:
             problems.append(f"{name}: no description")
         if not sv.get("variability"):
             problems.append(f"{name}: no explicit variability")
+        if typed.tag == "Enumeration" and typed.get("declaredType") not in declared:
+            problems.append(f"{name}: Enumeration without a declared type in TypeDefinitions")
         if typed.tag == "Real":
             unit = typed.get("unit")
             if unit is None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
+from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
 from .params import MechanismParams
@@ -32,6 +33,77 @@ AUTO_FIDELITY = "quasi-static"
 #: ``auto`` explicit or linearly implicit per step (prsm_fmu/models/adaptive.py)
 STEPPER_CHOICES = ("default",) + STEPPER_NAMES
 
+#: the FMU's Enumeration ``Fidelity``: item name -> (value, description).  The values are part
+#: of the FMU's interface (hosts and SSP files store them): never renumber an item.
+FIDELITY_ITEMS: dict[str, tuple[int, str]] = {
+    "kinematic": (0, "ideal kinematics, constant efficiency kinematic_efficiency"),
+    "quasi-static": (1, "carriers at their force equilibrium: one mechanical degree of freedom"),
+    "dynamic": (2, "Lagrange model with the carriers' degrees of freedom (stiff)"),
+    "auto": (3, "the cheapest level whose estimated model error meets tolerance, chosen along "
+                "the run"),
+}
+
+#: the FMU's Enumeration ``Stepper``: item name -> (value, description) (values fixed as above)
+STEPPER_ITEMS: dict[str, tuple[int, str]] = {
+    "default": (0, "closed_form for kinematic and quasi-static, rosenbrock for dynamic, a choice "
+                   "per step for auto"),
+    "closed_form": (1, "exact constant-acceleration step, adaptive Dormand-Prince in the friction "
+                       "band (kinematic and quasi-static only)"),
+    "explicit_adaptive": (2, "Dormand-Prince 5(4) with error control"),
+    "rosenbrock": (3, "linearly implicit ROS34PW2 with error control (stiff)"),
+    "rk4": (4, "classical Runge-Kutta, substeps equal steps, no error control"),
+    "radau": (5, "scipy's Radau IIA (reference; slow)"),
+}
+
+#: Enumeration name -> its items, as the modelDescription's TypeDefinitions declare them
+ENUMERATIONS: dict[str, dict[str, tuple[int, str]]] = {"Fidelity": FIDELITY_ITEMS,
+                                                         "Stepper": STEPPER_ITEMS}
+
+#: allowed ranges of the solver parameters, checked by :func:`configure`:
+#: ``tolerance`` in [1e-12, 0.1]: below 1e-12 the error estimates of the embedded pairs are
+#: rounding noise for states of order 1..1e3 in double precision (eps = 2.2e-16), so a step
+#: can fail for every step size; above 0.1 the ``auto`` level may carry a 10 % model error.
+TOLERANCE_RANGE = (1e-12, 0.1)
+#: ``max_substeps`` in [10, 100000]: it bounds the work of one doStep (docs/fmu.md, "Work of
+#: one doStep"); fewer than 10 internal steps cannot take the adaptive steppers through their
+#: starting step and one rejection; ``substeps`` (fixed steps) must not exceed it either
+MAX_SUBSTEPS_RANGE = (10, 100_000)
+#: |initial_screw_speed| [rad/s] at most: 10^4 rad/s (95,000 rpm) is 20x beyond any PRSM
+#: (critical speeds of the seeds' screws are a few thousand rpm)
+MAX_INITIAL_SPEED = 1e4
+#: |initial_screw_angle| [rad] at most: beyond 10^6 rad a step's angle increment of 1 µrad
+#: loses its last digits to the magnitude of the angle (10^6 * 2.2e-16 = 2e-10 rad)
+MAX_INITIAL_ANGLE = 1e6
+
+
+def _choice(kind: str, items: dict[str, tuple[int, str]], value: Any) -> str:
+    """The item name of ``value``: an item name or its Enumeration value (int)."""
+    if isinstance(value, str) and value in items:
+        return value
+    if isinstance(value, int) and not isinstance(value, bool):
+        for name, (code, _desc) in items.items():
+            if code == value:
+                return name
+    allowed = ", ".join(f"{code} ({name})" for name, (code, _d) in items.items())
+    raise ValueError(f"{kind} = {value!r} is not allowed: must be one of {allowed}")
+
+
+def fidelity_name(value: Any) -> str:
+    """``fidelity`` as its item name, from the name or the FMU's Enumeration value.
+
+    Raises
+    ------
+    ValueError
+        Naming the value and the allowed items with their values.
+    """
+    return _choice("fidelity", FIDELITY_ITEMS, value)
+
+
+def stepper_name(value: Any) -> str:
+    """``stepper`` as its item name, from the name or the FMU's Enumeration value."""
+    return _choice("stepper", STEPPER_ITEMS, value)
+
+
 #: the FMU's ``step_fidelity`` output: the level the outputs at a communication point come from
 LEVEL_CODES = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
 
@@ -45,6 +117,16 @@ def active_level(model) -> int:
 #: absolute tolerance of the adaptive steppers relative to ``tolerance`` (states are in rad,
 #: rad/s and J, each with scale 1): atol = ATOL_FACTOR * tolerance
 ATOL_FACTOR = 1e-2
+
+
+#: rhs calls per internal step of scipy's Radau IIA that ``max_substeps`` allows (3 stages,
+#: at most 6 simplified-Newton iterations each, plus its finite-difference Jacobian of the
+#: 3-8 states): ``radau`` stops after RADAU_RHS_PER_STEP * max_substeps rhs calls
+RADAU_RHS_PER_STEP = 30
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[float, float]):
@@ -71,13 +153,30 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     ValueError
         Naming the parameter, its value and the allowed range.
     """
-    fidelity = solver["fidelity"]
-    if fidelity not in FIDELITY_CHOICES:
-        raise ValueError(f"fidelity = {fidelity!r} is not allowed: must be one of "
-                         f"{', '.join(FIDELITY_CHOICES)}")
+    fidelity = fidelity_name(solver["fidelity"])
     tol = solver["tolerance"]
-    if not (math.isfinite(tol) and 0.0 < tol < 1.0):
-        raise ValueError(f"tolerance = {tol!r} is out of range: must be in (0, 1)")
+    lo, hi = TOLERANCE_RANGE
+    if not (isinstance(tol, (int, float)) and lo <= tol <= hi):
+        raise ValueError(f"tolerance = {tol!r} is out of range: must be in [{lo:g}, {hi:g}]")
+    lo, hi = MAX_SUBSTEPS_RANGE
+    max_substeps = solver["max_substeps"]
+    if not (_is_int(max_substeps) and lo <= max_substeps <= hi):
+        raise ValueError(f"max_substeps = {max_substeps!r} is out of range: must be an integer "
+                         f"in [{lo}, {hi}]")
+    substeps = solver["substeps"]
+    if not (_is_int(substeps) and 0 <= substeps <= max_substeps):
+        raise ValueError(f"substeps = {substeps!r} is out of range: must be an integer in "
+                         f"[0, max_substeps = {max_substeps}] (0: adaptive)")
+    eff = solver["kinematic_efficiency"]
+    if not (math.isfinite(eff) and 0.0 < eff <= 1.0):
+        raise ValueError(f"kinematic_efficiency = {eff!r} is out of range: must be in (0, 1]")
+    for name, bound, unit in (("initial_screw_speed", MAX_INITIAL_SPEED, "rad/s"),
+                              ("initial_screw_angle", MAX_INITIAL_ANGLE, "rad")):
+        if not abs(solver[name]) <= bound:
+            raise ValueError(f"{name} = {solver[name]!r} {unit} is out of range: must be in "
+                             f"[-{bound:g}, {bound:g}] {unit}")
+    for k, stage in enumerate(params.stages, start=1):   # contact exists: errors name the stage
+        contact_geometry(stage, f"stage[{k}]")
     choice = None
     if fidelity == "auto":
         eff0 = solver["kinematic_efficiency"]
@@ -88,29 +187,14 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     # auto: the kinematic level, or the model that switches between dynamic and quasi-static
     level = fidelity if choice is None else ("kinematic" if choice.fidelity == "kinematic"
                                              else "auto")
-    substeps = solver["substeps"]
-    if substeps < 0:
-        raise ValueError(f"substeps = {substeps!r} is out of range: must be an integer >= 0 "
-                         "(0: adaptive)")
-    max_substeps = solver["max_substeps"]
-    if max_substeps < 1:
-        raise ValueError(f"max_substeps = {max_substeps!r} is out of range: must be an "
-                         "integer >= 1")
-    eff = solver["kinematic_efficiency"]
-    if not (math.isfinite(eff) and 0.0 < eff <= 1.0):
-        raise ValueError(f"kinematic_efficiency = {eff!r} is out of range: must be in (0, 1]")
-    for name in ("initial_screw_speed", "initial_screw_angle"):
-        if not math.isfinite(solver[name]):
-            raise ValueError(f"{name} = {solver[name]!r} is out of range: must be finite")
-    name = solver["stepper"]
-    if name not in STEPPER_CHOICES:
-        raise ValueError(f"stepper = {name!r} is not allowed: must be one of "
-                         f"{', '.join(STEPPER_CHOICES)}")
+    name = stepper_name(solver["stepper"])
     name = DEFAULT_STEPPER[level] if name == "default" else name
     if name == "closed_form" and level == "dynamic":
         raise ValueError("stepper = 'closed_form' is not allowed with fidelity = 'dynamic': "
                          "the closed form exists only for kinematic and quasi-static")
     opts: dict[str, Any] = {}
+    if name == "radau":      # scipy's solve_ivp has no step limit: bound its rhs calls instead
+        opts["max_rhs_calls"] = RADAU_RHS_PER_STEP * max_substeps
     if name == "rk4":
         if substeps < 1:
             raise ValueError("substeps = 0 is out of range for stepper = 'rk4': must be an "

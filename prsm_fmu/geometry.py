@@ -318,7 +318,7 @@ def _solve_contact(r_s: float, r_r: float, lead: float, n_s: int,
 
 
 @functools.lru_cache(maxsize=256)
-def contact_geometry(stage: StageParams) -> ContactGeometry:
+def contact_geometry(stage: StageParams, name: str = "stage") -> ContactGeometry:
     """Screw–roller contact point and normal of a stage, on the "+" flank.
 
     Solves the five equations "the screw flank and the roller flank share a point (3) and a
@@ -343,22 +343,28 @@ def contact_geometry(stage: StageParams) -> ContactGeometry:
     ValueError
         If a used field is out of range, or if no contact exists near the pitch point (the
         helix angle is too large for the flank angle: the message names
-        ``stage.screw_lead`` and ``stage.flank_angle``).
+        ``<name>.screw_lead`` and ``<name>.flank_angle``).
+    name : str, optional
+        How messages name the stage, e.g. ``"stage[2]"``.
     """
-    _check_stage(stage)
+    _check_stage(stage, name)
     r_s, r_r = float(stage.screw_radius), float(stage.roller_radius)
     lead, n_s, beta = float(stage.screw_lead), int(stage.screw_starts), float(stage.flank_angle)
     a = r_s + r_r
-    point, normal, (rho, psi, rho_r, psi_r, _z_r), res = _solve_contact(r_s, r_r, lead, n_s,
-                                                                        beta)
-    big_r = r_r / math.sin(beta)
+    try:
+        point, normal, (rho, psi, rho_r, psi_r, _z_r), res = _solve_contact(r_s, r_r, lead, n_s,
+                                                                            beta)
+        big_r = r_r / math.sin(beta)
+    except ArithmeticError:      # e.g. a flank angle of 1e-300 rad: no contact to be found
+        point, res, big_r = np.full(3, np.nan), math.inf, math.nan
+        rho = psi = rho_r = psi_r = math.nan
     near = (np.all(np.isfinite(point)) and res < _RESIDUAL_TOL
             and 0.0 < rho_r < big_r * (1.0 - 1e-9) and rho > 0.0
             and abs(psi) < math.pi / 2 and abs(psi_r - math.pi) < math.pi / 2
             and math.hypot(point[0] - r_s, point[1]) < r_r)
     if not near:
         raise ValueError(
-            f"stage.screw_lead = {stage.screw_lead!r} m with stage.flank_angle = "
+            f"{name}.screw_lead = {stage.screw_lead!r} m with {name}.flank_angle = "
             f"{stage.flank_angle!r} rad (screw_radius = {stage.screw_radius!r} m, "
             f"roller_radius = {stage.roller_radius!r} m, screw_starts = {stage.screw_starts!r}) "
             "gives no screw-roller contact near the pitch point: the helix angle is too large "

@@ -32,6 +32,23 @@ def _check_positive(name: str, value: float) -> None:
         raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
 
 
+#: upper bounds of a stage's sizes: no PRSM has a radius or a lead of a metre, a part of ten
+#: tonnes or a moment of inertia of 1000 kg.m2 (the seeds' largest: 27.5 mm, 18 kg,
+#: 1.7e-4 kg.m2); beyond them the model's numbers lose their meaning before they overflow
+MAX_SIZE = {"m": 1.0, "kg": 1e4, "kg.m2": 1e3}
+#: unit of each bounded StageParams field
+FIELD_UNITS = {"screw_radius": "m", "roller_radius": "m", "nut_radius": "m", "screw_lead": "m",
+               "spline_radius": "m", "bearing_radius": "m", "screw_mass": "kg", "nut_mass": "kg",
+               "roller_mass": "kg", "carrier_mass": "kg", "screw_inertia": "kg.m2",
+               "roller_inertia": "kg.m2", "carrier_inertia": "kg.m2"}
+
+
+def _check_at_most(name: str, value: float, unit: str) -> None:
+    if value > MAX_SIZE[unit]:
+        raise ValueError(f"{name} = {value!r} {unit} is out of range: must be at most "
+                         f"{MAX_SIZE[unit]:g} {unit}")
+
+
 def _check_non_negative(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
         raise ValueError(f"{name} = {value!r} is out of range: must be a finite number >= 0")
@@ -40,6 +57,27 @@ def _check_non_negative(name: str, value: float) -> None:
 def _check_friction(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and 0.0 <= value < 1.0):
         raise ValueError(f"{name} = {value!r} is out of range: friction coefficient must be in [0, 1)")
+
+
+#: the smallest spline radius relative to the screw's pitch radius (see _check_spline_radius)
+SPLINE_RADIUS_MIN_FRACTION = 0.01
+
+
+def _check_spline_radius(k: int, stage: "StageParams") -> None:
+    """Bounds of the spline radius r_SSk of stage k > 1 (seed ``000_a07c98907360be8b.txt``, eq. 12).
+
+    The internal spline teeth are cut in the bore of screw #k, so r_SSk lies inside its pitch
+    radius r_Sk.  The spline friction f_Sk = µ_SS |M_Sk| / r_SSk grows without bound as
+    r_SSk -> 0 (at 1e-30 m no step can succeed); below 1/100 of r_Sk the bore would leave a
+    wall of 99 % of the screw's radius, which no design has.
+    """
+    r, r_s = stage.spline_radius, stage.screw_radius
+    lo = SPLINE_RADIUS_MIN_FRACTION * r_s
+    if not (isinstance(r, (int, float)) and lo <= r <= r_s):
+        raise ValueError(
+            f"stage[{k}].spline_radius = {r!r} m is out of range: must be in [{lo!r}, {r_s!r}] m "
+            f"while mu_spline > 0 (from {SPLINE_RADIUS_MIN_FRACTION:g} x to 1 x "
+            f"stage[{k}].screw_radius: the internal spline teeth lie in the bore of the screw)")
 
 
 def _check_int_at_least(name: str, value: Any, minimum: int) -> None:
@@ -149,10 +187,15 @@ class StageParams:
             _check_positive(f"{name}.{f}", getattr(self, f))
         for f in ("spline_radius", "bearing_radius"):
             _check_non_negative(f"{name}.{f}", getattr(self, f))
+        for f, unit in FIELD_UNITS.items():
+            _check_at_most(f"{name}.{f}", getattr(self, f), unit)
         _check_int_at_least(f"{name}.screw_starts", self.screw_starts, 1)
         _check_int_at_least(f"{name}.n_rollers", self.n_rollers, 1)
         _check_int_at_least(f"{name}.carriers", self.carriers, 1)
         _check_int_at_least(f"{name}.threads_per_roller", self.threads_per_roller, 1)
+        if self.carriers > 2:
+            raise ValueError(f"{name}.carriers = {self.carriers!r} is out of range: must be 1 or 2 "
+                             "(a carrier at one or at both ends of the rollers)")
         beta = self.flank_angle
         if not (isinstance(beta, (int, float)) and math.isfinite(beta) and 0.0 < beta < math.pi / 2):
             raise ValueError(
@@ -166,6 +209,15 @@ class StageParams:
                 f"{name}.nut_radius = {self.nut_radius!r} m is inconsistent with "
                 f"screw_radius + 2*roller_radius = {fit!r} m: must equal it "
                 f"(relative tolerance {GEOMETRY_RTOL:g})")
+        # the rollers' axes lie on a circle of radius r_S + r_R; N_R rollers of radius r_R fit
+        # around it without overlapping while N_R * 2 asin(r_R / (r_S + r_R)) <= 2 pi
+        most = int(math.pi / math.asin(self.roller_radius / (self.screw_radius + self.roller_radius))
+                   + 1e-9)
+        if self.n_rollers > most:
+            raise ValueError(
+                f"{name}.n_rollers = {self.n_rollers!r} is out of range: must be in [1, {most}] "
+                f"(rollers of radius {self.roller_radius!r} m fit around the screw without "
+                "overlapping only up to that number)")
         engaged = self.screw_starts * self.roller_radius
         if abs(self.nut_radius - engaged) > GEOMETRY_RTOL * engaged:
             raise ValueError(
@@ -248,14 +300,12 @@ class MechanismParams:
         if not isinstance(self.stages, tuple) or len(self.stages) < 1:
             raise ValueError(
                 f"stages = {self.stages!r} is out of range: need a tuple of at least 1 StageParams")
-        for k, st in enumerate(self.stages, start=1):
-            if not isinstance(st, StageParams):
-                raise ValueError(f"stage[{k}] = {st!r} is not a StageParams")
-            st.validate(f"stage[{k}]", geometry)
-            if k > 1 and self.mu_spline > 0.0:
-                _check_positive(f"stage[{k}].spline_radius", st.spline_radius)
-            if k < len(self.stages) and self.mu_nut_screw > 0.0:
-                _check_positive(f"stage[{k}].bearing_radius", st.bearing_radius)
+        # the coefficients first: the radii's checks below depend on them
+        _check_friction("mu_screw_roller", self.mu_screw_roller)
+        _check_friction("mu_spline", self.mu_spline)
+        _check_friction("mu_nut_screw", self.mu_nut_screw)
+        _check_positive("slip_velocity_scale", self.slip_velocity_scale)
+        # the coefficients first: the radii's checks below depend on them
         _check_friction("mu_screw_roller", self.mu_screw_roller)
         _check_friction("mu_spline", self.mu_spline)
         _check_friction("mu_nut_screw", self.mu_nut_screw)
@@ -268,6 +318,17 @@ class MechanismParams:
                 f"mu_differential = {m3!r} m is out of range: must be in [0, "
                 f"{MAX_MU_DIFFERENTIAL:g}] m (a moment arm, ~1e-6 m in seed 003; at most a contact "
                 "half-width)")
+        for k, st in enumerate(self.stages, start=1):
+            if not isinstance(st, StageParams):
+                raise ValueError(f"stage[{k}] = {st!r} is not a StageParams")
+            st.validate(f"stage[{k}]", geometry)
+            if k > 1 and self.mu_spline > 0.0:
+                _check_spline_radius(k, st)
+            if k < len(self.stages) and self.mu_nut_screw > 0.0 and not st.bearing_radius > 0.0:
+                raise ValueError(
+                    f"stage[{k}].bearing_radius = {st.bearing_radius!r} is out of range: must be "
+                    f"a finite number > 0 while mu_nut_screw = {self.mu_nut_screw!r} > 0 (the "
+                    "thrust bearing's friction acts at that radius)")
         return self
 
     def with_changes(self, **changes: Any) -> "MechanismParams":

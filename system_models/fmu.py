@@ -11,7 +11,8 @@ How it reacts to the FMU (docs/fmu.md, "Errors"):
   log messages of that call as the reason.  The FMU's state is as before the call, so the
   master may retry (smaller step) or stop with an error naming the time and the reason.
 * any other failing call (fmi2Error, fmi2Fatal) → :class:`FMUError` with the messages; the
-  instance must not be used again.
+  instance must not be used again.  So does an error logged during ``exitInitializationMode``
+  (an FMU built with pythonfmu reports a failed initialization that way, with fmi2OK).
 
 :func:`ensure_fmu` builds ``dist/PRSM<n>.fmu`` with ``python -m fmu_build`` in a child process
 when it is missing or older than the sources (a process that loads an FMU must not be the one
@@ -27,6 +28,7 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from prsm_fmu.fmi_enum import enumeration_value
 from prsm_fmu.fmu_log import STATUS as _STATUS
 from prsm_fmu.fmu_log import FmuLog
 
@@ -180,7 +182,13 @@ class FMUBlock(Block):
             self._call("setupExperiment", startTime=float(start_time))
             self._call("enterInitializationMode")
             self.set_values(parameters or {})
+            n0 = len(self.messages)
             self._call("exitInitializationMode")
+            # an FMU that cannot return fmi2Error here (pythonfmu's) logs its failure instead
+            errors = [m for label, m in self.messages[n0:] if label in ("error", "fatal")]
+            if errors:
+                raise FMUError(f"{self.name}: exitInitializationMode logged an error: "
+                               + "; ".join(errors))
         except FMUError:
             self.terminate()
             raise
@@ -214,7 +222,8 @@ class FMUBlock(Block):
         return (": " + msgs) if msgs else " (the FMU logged no message)"
 
     def set_values(self, values: dict[str, Any]) -> None:
-        """Set variables by name with the setter of their type."""
+        """Set variables by name with the setter of their type; an Enumeration takes an item
+        name (from the modelDescription's TypeDefinitions) or its integer value."""
         for n, value in values.items():
             if n not in self.vars:
                 raise FMUError(f"{self.path}: no variable {n!r} (parameter {n} = {value!r})")
@@ -222,8 +231,12 @@ class FMUBlock(Block):
             setter = {"Real": "setReal", "Integer": "setInteger", "Boolean": "setBoolean",
                       "String": "setString", "Enumeration": "setInteger"}[v.type]
             conv = {"Real": float, "Integer": int, "Boolean": bool, "String": str,
-                    "Enumeration": int}[v.type]
-            self._call(setter, [v.valueReference], [conv(value)])
+                    "Enumeration": lambda x, v=v: enumeration_value(v, x)}[v.type]
+            try:
+                converted = conv(value)
+            except ValueError as exc:
+                raise FMUError(f"{self.path}: {exc}") from None
+            self._call(setter, [v.valueReference], [converted])
 
     def get_values(self, names: Sequence[str]) -> list[Any]:
         """Read variables by name (any type)."""

@@ -118,10 +118,15 @@ class Host:
         self.messages.append((status, message.decode("utf-8")))
 
     def set(self, values: dict) -> None:
+        """Set by name with the setter of each variable's type; an Enumeration takes an item
+        name (looked up in the modelDescription's TypeDefinitions) or its value."""
         for name, value in values.items():
             v = self.vars[name]
+            if v.type == "Enumeration" and isinstance(value, str):
+                value = {i.name: int(i.value) for i in v.declaredType.items}[value]
             setter = {"Real": self.fmu.setReal, "Integer": self.fmu.setInteger,
-                      "Boolean": self.fmu.setBoolean, "String": self.fmu.setString}[v.type]
+                      "Enumeration": self.fmu.setInteger, "Boolean": self.fmu.setBoolean,
+                      "String": self.fmu.setString}[v.type]
             setter([v.valueReference], [value])
 
     def get(self, names) -> list:
@@ -129,7 +134,8 @@ class Host:
         for name in names:
             v = self.vars[name]
             getter = {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger,
-                      "Boolean": self.fmu.getBoolean, "String": self.fmu.getString}[v.type]
+                      "Enumeration": self.fmu.getInteger, "Boolean": self.fmu.getBoolean,
+                      "String": self.fmu.getString}[v.type]
             value = getter([v.valueReference])[0]
             out.append(value.decode("utf-8") if isinstance(value, bytes) else value)
         return out
@@ -462,7 +468,7 @@ def test_a_state_taken_before_initialization_brings_the_instance_back_there():
         a.fmu.setFMUstate(state)             # back to before initialization
         a.fmu.freeFMUstate(state)
         assert a.step(0.0) == DISCARD         # no model until exitInitializationMode
-        assert "before a successful exitInitializationMode" in a.messages[-1][1]
+        assert "not allowed before fmi2ExitInitializationMode" in a.messages[-1][1]
         a.fmu.exitInitializationMode()
         assert run_fmu(a, 5, ["screw_speed"]) == run_python(
             presets.load("seed000_two_stage"), "dynamic", 5, ["screw_speed"])
@@ -470,34 +476,73 @@ def test_a_state_taken_before_initialization_brings_the_instance_back_there():
         a.free()
 
 
-def test_foreign_or_corrupt_state_bytes_fail_visibly():
-    """In a fresh process: bytes that are not a PRSM state, and a PRSM3 state offered to PRSM2,
-    make fmi2SetFMUstate fail (fmi2Fatal) with the reason logged; freeing is safe."""
-    res = run_child("""
-        import json
-        from fmpy.fmi1 import FMICallException
-        from test_fmu import Host
-        out = {}
-        three = Host("PRSM3", "three")
-        foreign = three.state_bytes()
-        three.free()
-        for case, data in (("junk", b"junk" * 10), ("truncated", foreign[:40]),
-                           ("PRSM3 into PRSM2", foreign)):
-            host = Host("PRSM2", case)
+def _bad_states(good: bytes) -> dict[str, bytes]:
+    """Corruptions of the serialized state ``good`` (b"PRSMFMU2" + a pickle of a 12-tuple):
+    foreign bytes, cut or extended bytes, and well-framed states whose fields are wrong."""
+    import pickle
+
+    magic, state = good[:8], pickle.loads(good[8:])
+    fields = dict(zip(("tag", "model", "n", "par", "u", "phase", "t", "x", "u_held", "memory",
+                       "counters", "init_error"), state))
+
+    def framed(**changes) -> bytes:
+        return magic + pickle.dumps(tuple({**fields, **changes}.values()), protocol=4)
+
+    x = fields["x"]
+    return {
+        "junk": b"junk" * 10, "empty": b"", "header only": magic, "truncated": good[:40],
+        "trailing junk": good + b"junk", "trailing zero byte": good + b"\0",
+        "a class reference": magic + pickle.dumps(ValueError("x")),
+        "tuple too short": magic + pickle.dumps(state[:-1]),
+        "x one value short": framed(x=x[:-1]), "x one value long": framed(x=x + (0.0,)),
+        "x with nan": framed(x=(math.nan,) + x[1:]), "x with inf": framed(x=x[:-1] + (math.inf,)),
+        "x with a string": framed(x=("1.0",) + x[1:]), "x a list": framed(x=list(x)),
+        "x None while stepping": framed(x=None),
+        "time nan": framed(t=math.nan), "time a string": framed(t="0.1"),
+        "phase unknown": framed(phase="running"),
+        "inputs held nan": framed(u_held=(math.nan, 0.0)),
+        "parameter of wrong type": framed(par=("0.01",) + fields["par"][1:]),
+        "parameters one short": framed(par=fields["par"][:-1]),
+        "parameter out of range": framed(par=(-1.0,) + fields["par"][1:]),
+        "memory with nan": framed(memory=(math.nan,) * 2),
+        "memory of another stepper": framed(memory=(1.0, 2.0, 3.0)),
+        "counters negative": framed(counters=(-1, 0, 1)),
+        "model PRSM3": framed(model="PRSM3", n=3),
+    }
+
+
+def test_every_corrupt_or_foreign_state_is_refused_and_nothing_is_restored():
+    """Each corruption of a valid state: fmi2SetFMUstate logs an error naming it (pythonfmu can
+    only return fmi2OK or fmi2Fatal there), restores nothing (the serialized state is the same
+    bytes after the call), the next doStep is refused (fmi2Discard) naming fmi2SetFMUstate, and
+    the one after it goes on as if the bad call had not happened."""
+    host = Host("PRSM2", "corrupt", start={"fidelity": "dynamic"})
+    twin = Host("PRSM2", "twin", start={"fidelity": "dynamic"})
+    tried = 0
+    try:
+        run_fmu(host, 20, ["screw_speed"])
+        run_fmu(twin, 20, ["screw_speed"])
+        cases = _bad_states(host.state_bytes())
+        for k, (case, data) in enumerate(cases.items()):
+            before = host.state_bytes()
+            n = len(host.messages)
             state = host.fmu.deSerializeFMUstate(data)
-            try:
-                host.fmu.setFMUstate(state)
-                status = 0
-            except FMICallException as exc:
-                status = exc.status
-            host.fmu.freeInstance()
-            out[case] = [status, [m for s, m in host.messages if s >= 3]]
-        print(json.dumps(out))
-    """)
-    for case, (status, messages) in res.items():
-        assert status >= 3, case
-        assert any("fmi2SetFMUstate" in m for m in messages), (case, messages)
-    assert "PRSM3" in " ".join(res["PRSM3 into PRSM2"][1])
+            host.fmu.setFMUstate(state)                     # fmi2OK, the refusal is logged
+            host.fmu.freeFMUstate(state)
+            logged = [m for st, m in host.messages[n:] if st == 3]
+            assert any(m.startswith("fmi2SetFMUstate: the state is refused") for m in logged), \
+                (case, host.messages[n:])
+            assert host.state_bytes() == before, case
+            assert host.step((20 + k) * H) == DISCARD, case
+            assert "fmi2SetFMUstate" in host.messages[-1][1], case
+            assert run_fmu(host, 1, ["screw_speed"], 20 + k, host.loop) == \
+                run_fmu(twin, 1, ["screw_speed"], 20 + k, twin.loop), case
+            tried += 1
+    finally:
+        host.free()
+        twin.free()
+    print(f"corrupt or foreign FMU states refused: {tried}")
+    assert tried == len(cases) == 26
 
 
 # ---- bad input: refused, logged, state unchanged ----------------------------------------------
@@ -542,9 +587,9 @@ def test_non_positive_or_non_finite_step_sizes_are_refused(h):
 
 
 def test_a_step_whose_integration_fails_is_refused_and_the_state_is_unchanged():
-    # dynamic level, explicit stepper, at most 5 internal steps: the stiff carriers need more
+    # dynamic level, explicit stepper, at most 10 internal steps: the stiff carriers need more
     host = Host("PRSM2", start={"fidelity": "dynamic", "stepper": "explicit_adaptive",
-                                "max_substeps": 5, "screw_torque": 20.0, "load_force": 3000.0})
+                                "max_substeps": 10, "screw_torque": 20.0, "load_force": 3000.0})
     try:
         _refused_unchanged(host, 0.0, H, "more than max_substeps")
         assert "integration failed" in host.messages[-1][1]
@@ -572,60 +617,152 @@ def test_a_parameter_cannot_change_after_initialization_nor_an_output_be_set():
     host = Host("PRSM2")
     try:
         host.set({"stage[1].nut_mass": 100.0, "fidelity": "dynamic"})
-        assert host.get(["stage[1].nut_mass", "fidelity"]) == [2.5, "quasi-static"]
+        assert host.get(["stage[1].nut_mass", "fidelity"]) == [2.5, 1]    # 1: quasi-static
         assert any("fixed parameter" in m and "stage[1].nut_mass" in m for _, m in host.messages)
+        host.set({"stage[1].nut_mass": 2.5})          # the same value again: not a change
         host.set({"screw_speed": 5.0, "step_substeps": 3})           # outputs: logged, ignored
         assert host.fmu.getInteger([host.vars["screw_speed"].valueReference]) == [0]  # wrong type
         errors = [m for s, m in host.messages if s == 3]
-        assert sum("cannot be set" in m for m in errors) == 2 and "not of type Integer" in errors[-1]
+        assert sum("cannot be set" in m for m in errors) == 2
+        assert "fmi2GetInteger" in errors[-1] and "'screw_speed', of type Real" in errors[-1]
+        assert host.step(0.0) == DISCARD               # the refused calls, reported once
+        assert "5 earlier call(s) since the last step were refused" in host.messages[-1][1]
         assert run_fmu(host, 5, ["screw_speed"]) == \
             run_python(presets.load("seed000_two_stage"), "quasi-static", 5, ["screw_speed"])
     finally:
         host.free()
 
 
-def test_out_of_range_parameters_fail_initialization_with_the_message_logged():
-    """Each case in one fresh process: exitInitializationMode fails (pythonfmu reports a Python
-    exception as fmi2Fatal), the logger receives the ValueError naming the parameter and its
-    range, the failed instance can be freed, and a good instance still works afterwards."""
-    res = run_child("""
-        import json, math
-        from fmpy.fmi1 import FMICallException
-        from test_fmu import Host, run_fmu
-        cases = {
-            "stage[1].screw_radius": -1.0,
-            "stage[2].nut_radius": 0.03,
-            "mu_screw_roller": 1.5,
-            "stage[2].flank_angle": math.nan,
-            "stage[1].screw_starts": 0,
-            "stage[2].carriers": -2,
-            "fidelity": "bogus",
-            "stepper": "euler",
-            "tolerance": 0.0,
-            "substeps": -1,
-            "max_substeps": 0,
-        }
-        out = {}
-        for name, value in cases.items():
-            host = Host("PRSM2", name, start={name: value}, initialize=False)
-            try:
-                host.fmu.exitInitializationMode()
-                status = 0
-            except FMICallException as exc:
-                status = exc.status
-            host.fmu.freeInstance()
-            out[name] = [status, [m for s, m in host.messages if s >= 3]]
-        good = Host("PRSM2", "good")
-        out["good"] = run_fmu(good, 3, ["screw_speed"])
-        good.free()
-        print(json.dumps(out))
-    """)
-    assert len(res.pop("good")) == 3
-    for name, (status, messages) in res.items():
-        assert status >= 3, name                                      # error or fatal
-        text = " ".join(messages)
-        assert "initialization failed" in text and name in text, (name, messages)
-        assert "out of range" in text or "not allowed" in text or "inconsistent" in text
+#: values tried for every parameter of its type: non-finite, zero, negative, extreme
+BAD_VALUES = {
+    "Real": [math.nan, math.inf, -math.inf, 0.0, -1.0, -1e308, 1e308, 1e-300],
+    "Integer": [0, -1, -(2**31), 2**31 - 1],
+    "Enumeration": [-1, 4, 6, -(2**31), 2**31 - 1],
+    "Boolean": [],
+}
+
+
+def test_every_parameter_value_is_refused_at_initialization_or_steps():
+    """Every parameter of PRSM2 set to each value of BAD_VALUES (in a loaded run: 15 N.m,
+    1 kN).  Either initialization refuses it -- exitInitializationMode returns fmi2OK (a Python
+    exception would be fmi2Fatal), logs the reason, and every doStep is then refused with
+    fmi2Discard naming the parameter and its range, until fmi2Reset -- or the value is
+    accepted and then 1 ms steps succeed: no accepted value makes a step fail.  Non-finite
+    values and every Enumeration value outside its items are always refused."""
+    md = read_model_description(str(built_fmus()["PRSM2"]))
+    params = [v for v in md.modelVariables if v.causality == "parameter"]
+    tried = refused = ran = 0
+    accepted = []
+    host = Host("PRSM2", "bad", initialize=False)
+    try:
+        for v in params:
+            for value in BAD_VALUES[v.type]:
+                host.fmu.reset()
+                host.fmu.setupExperiment(startTime=0.0)
+                host.fmu.enterInitializationMode()
+                host.set({v.name: value, "screw_torque": 15.0, "load_force": 1000.0})
+                n = len(host.messages)
+                host.fmu.exitInitializationMode()           # fmi2OK: an exception would be fatal
+                status = [host.step(k * H) for k in range(3)]
+                text = " ".join(m for _, m in host.messages[n:])
+                tried += 1
+                if status == [OK] * 3:
+                    assert not (isinstance(value, float) and not math.isfinite(value)), v.name
+                    assert v.type != "Enumeration", (v.name, value)
+                    accepted.append(f"{v.name}={value!r}")
+                    ran += 1
+                    continue
+                assert status == [DISCARD] * 3, (v.name, value, status, text)
+                # the parameter is named, or (a consistency condition between the fields of
+                # one stage, e.g. r_N = r_S + 2 r_R) a field of the same stage, with its index
+                named = v.name if v.name in text else v.name.split(".")[0] + "."
+                assert "initialization failed" in text and named in text, (v.name, value, text)
+                assert "out of range" in text or "not allowed" in text or \
+                    "inconsistent" in text or "no screw-roller contact" in text, (v.name, text)
+                refused += 1
+        host.fmu.reset()                                  # a good configuration runs again
+        host.fmu.setupExperiment(startTime=0.0)
+        host.fmu.enterInitializationMode()
+        host.fmu.exitInitializationMode()
+        assert host.step(0.0) == OK
+    finally:
+        host.free()
+    print(f"parameter values tried: {tried}, refused at initialization: {refused}, "
+          f"accepted and stepped: {ran} ({', '.join(accepted)})")
+    assert tried == refused + ran == sum(len(BAD_VALUES[v.type]) for v in params)
+
+
+def test_the_state_machine_is_enforced():
+    """Calls out of FMI 2.0's order are refused with a message naming the call: logged as
+    errors (the status is fmi2OK, pythonfmu cannot return fmi2Error), the FMU's state and time
+    unchanged, the next doStep refused naming them; doStep itself is refused (fmi2Discard)."""
+    cases = 0
+    host = Host("PRSM2", "order", initialize=False)
+    try:
+        assert host.step(0.0) == DISCARD                  # before exitInitializationMode
+        assert "before fmi2ExitInitializationMode" in host.messages[-1][1]
+        cases += 1
+        host.fmu.exitInitializationMode()
+        run_fmu(host, 10, ["screw_speed"])
+        before = host.state_bytes()
+        for call, fragment in ((lambda: host.fmu.enterInitializationMode(),
+                                "fmi2EnterInitializationMode is not allowed in phase stepping"),
+                               (lambda: host.fmu.exitInitializationMode(),
+                                "fmi2ExitInitializationMode is not allowed in phase stepping"),
+                               (lambda: host.fmu.setupExperiment(startTime=5.0),
+                                "fmi2SetupExperiment is not allowed in phase stepping")):
+            n = len(host.messages)
+            call()
+            assert any(fragment in m for s, m in host.messages[n:] if s == 3), host.messages[n:]
+            assert host.state_bytes() == before
+            assert host.step(10 * H) == DISCARD and fragment in host.messages[-1][1]
+            cases += 1
+        for t in (9 * H, 11 * H, 10 * H + 1e-9, 0.0, math.nan):   # not the FMU's time 0.01 s
+            assert host.step(t) == DISCARD, t
+            assert "is not the FMU's time 0.0100" in host.messages[-1][1]
+            assert host.state_bytes() == before
+            cases += 1
+        # a host that counts in integer nanoseconds: 10_000_000 ns -> 0.01 in the last bits
+        assert host.step(10_000_000 * 1e-9) == OK
+        host.fmu.terminate()
+        assert host.step(11 * H) == DISCARD and "after fmi2Terminate" in host.messages[-1][1]
+        n = len(host.messages)
+        host.set({"screw_torque": 1.0})
+        assert "cannot be set after fmi2Terminate" in host.messages[n][1]
+        cases += 2
+    finally:
+        host.fmu.freeInstance()
+    print(f"out-of-order calls refused: {cases}")
+    assert cases == 11
+
+
+def test_access_through_the_wrong_type_is_refused_naming_the_call_and_the_variable():
+    """Every variable of PRSM2 read and written through each accessor of another type."""
+    host = Host("PRSM2", "types")
+    tried = 0
+    access = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer",
+              "Boolean": "Boolean"}
+    try:
+        for v in host.md.modelVariables:
+            for typ in ("Real", "Integer", "Boolean", "String"):
+                if typ == access[v.type]:
+                    continue
+                n = len(host.messages)
+                value = getattr(host.fmu, f"get{typ}")([v.valueReference])[0]
+                assert value in (0, False, b"", "") or math.isnan(value)
+                getattr(host.fmu, f"set{typ}")([v.valueReference],
+                                               [{"Real": 1.0, "Integer": 1, "Boolean": True,
+                                                 "String": "x"}[typ]])
+                msgs = [m for s, m in host.messages[n:] if s == 3]
+                assert len(msgs) == 2 and f"fmi2Get{typ}" in msgs[0] and \
+                    f"fmi2Set{typ}" in msgs[1] and all(repr(v.name) in m for m in msgs), msgs
+                tried += 2
+        assert host.step(0.0) == DISCARD and "earlier call(s)" in host.messages[-1][1]
+        assert host.step(0.0) == OK                        # reported once, then it goes on
+    finally:
+        host.free()
+    print(f"wrong-type accesses refused: {tried}")
+    assert tried == 6 * len(host.md.modelVariables)
 
 
 def test_auto_fidelity_runs_the_documented_level():
@@ -644,3 +781,50 @@ def test_auto_fidelity_runs_the_documented_level():
     # the level reported after each step is the Python model's, and this run switches
     assert [r[2] for r in got] == [codes[r[2]] for r in want]
     assert {r[2] for r in got} == {1, 2}
+
+
+# ---- process exit (pythonfmu 0.7's exit-time use-after-free, prsm_fmu/fmu_exit.py) ------------
+
+
+def test_the_fmu_library_in_this_process_is_guarded_for_exit():
+    """Instantiating an FMU registers its library for the exit-time reset (fmu_exit)."""
+    from prsm_fmu import fmu_exit
+
+    host = Host("PRSM2", "exit")
+    host.free()
+    lib = unzipped("PRSM2") / "binaries" / "linux64" / "PRSM2.so"
+    if sys.platform.startswith("linux"):
+        assert str(lib) in fmu_exit.guarded()
+
+
+def test_fmpy_simulate_cli_50_runs_under_cpu_load_all_exit_cleanly(fmus, tmp_path):
+    """The command that aborted with ``corrupted double-linked list`` (exit 134), run 50 times
+    through fmpy's console script, 2 at a time next to a busy loop that loads a core.
+    Whether pythonfmu's exit-time write into freed memory hits a heap list depended on the
+    layout (hash seed, argv, what the run allocated): each run gets its own PYTHONHASHSEED."""
+    import concurrent.futures
+    import time
+
+    script = Path(sys.executable).parent / "fmpy"
+    args = [str(script), "simulate", str(fmus["PRSM2"]), "--stop-time", "0.01",
+            "--start-values", "fidelity", "3", "screw_torque", "15", "load_force", "1000"]
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])]
+
+    def run(seed: int) -> tuple[int, int, str]:
+        env = dict(os.environ, PYTHONHASHSEED=str(seed))
+        proc = subprocess.run(args, env=env, capture_output=True, text=True, timeout=300,
+                              cwd=tmp_path)
+        return seed, proc.returncode, proc.stderr[-300:]
+
+    start = time.monotonic()
+    try:
+        with concurrent.futures.ThreadPoolExecutor(2) as pool:
+            results = list(pool.map(run, range(50)))
+    finally:
+        for b in burners:
+            b.kill()
+            b.wait()
+    bad = [r for r in results if r[1] != 0]
+    print(f"fmpy simulate CLI runs under load: {len(results)}, failed: {len(bad)}, "
+          f"{time.monotonic() - start:.0f} s")
+    assert len(results) == 50 and bad == [], bad

@@ -1,8 +1,8 @@
 """A non-Python host: a small C program runs the FMU the way any FMI 2.0 tool would.
 
 The program (written below, compiled with gcc against the FMI 2.0 headers that fmpy ships)
-loads the FMU's shared library with dlopen, instantiates it, sets ``fidelity`` with
-fmi2SetString, and closes the torque-speed loop of ``test_fmu.controller`` for 1,000 steps.
+loads the FMU's shared library with dlopen, instantiates it, sets the Enumeration ``fidelity``
+with fmi2SetInteger, and closes the torque-speed loop of ``test_fmu.controller`` for 1,000 steps.
 The pythonfmu binary has no Python of its own: the process gets libpython through
 ``LD_PRELOAD``, the interpreter's home through ``PYTHONHOME`` and numpy/scipy through
 ``PYTHONPATH`` (docs/fmu.md, "Non-Python hosts").  Its outputs must equal fmpy's run of the
@@ -26,6 +26,8 @@ pytest.importorskip("pythonfmu")
 from test_fmu import Host, built_fmus, max_relative_difference, run_fmu, unzipped  # noqa: E402
 
 STEPS = 1000
+#: the Fidelity Enumeration's item values (docs/fmu.md's table)
+ENUM_VALUE = {"kinematic": 0, "quasi-static": 1, "dynamic": 2, "auto": 3}
 OUTPUTS = ["screw_speed", "screw_angle", "rod_position", "rod_velocity", "stage[1].contact_force",
            "stage[2].contact_force", "stage[2].driven_torque", "stage[2].spline_friction",
            "stage[1].carrier_speed_ratio", "efficiency", "friction_power", "friction_work"]
@@ -66,7 +68,7 @@ int main(int argc, char **argv) {
         (fmi2ExitInitializationModeTYPE *)sym(lib, "fmi2ExitInitializationMode");
     fmi2SetRealTYPE *set_real = (fmi2SetRealTYPE *)sym(lib, "fmi2SetReal");
     fmi2GetRealTYPE *get_real = (fmi2GetRealTYPE *)sym(lib, "fmi2GetReal");
-    fmi2SetStringTYPE *set_string = (fmi2SetStringTYPE *)sym(lib, "fmi2SetString");
+    fmi2SetIntegerTYPE *set_integer = (fmi2SetIntegerTYPE *)sym(lib, "fmi2SetInteger");
     fmi2DoStepTYPE *do_step = (fmi2DoStepTYPE *)sym(lib, "fmi2DoStep");
     fmi2TerminateTYPE *terminate = (fmi2TerminateTYPE *)sym(lib, "fmi2Terminate");
     fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)sym(lib, "fmi2FreeInstance");
@@ -83,11 +85,11 @@ int main(int argc, char **argv) {
     fmi2ValueReference *vr_out = malloc(n_out * sizeof *vr_out);
     fmi2Real *y = malloc(n_out * sizeof *y);
     for (int i = 0; i < n_out; i++) vr_out[i] = (fmi2ValueReference)atol(argv[10 + i]);
-    fmi2String fidelity = argv[4];
+    fmi2Integer fidelity = (fmi2Integer)atol(argv[4]);   /* the Enumeration's value */
 
     CHECK(setup(c, fmi2False, 0.0, 0.0, fmi2False, 0.0));
     CHECK(enter(c));
-    CHECK(set_string(c, &vr_fidelity, 1, &fidelity));
+    CHECK(set_integer(c, &vr_fidelity, 1, &fidelity));
     CHECK(exit_init(c));
 
     const double h = 1e-3;
@@ -166,7 +168,7 @@ def test_c_host_closed_loop_equals_fmpy_to_1e_12(c_host, fidelity):
     env["PYTHONHOME"] = f"{sys.base_prefix}:{sys.base_exec_prefix}"
     env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p and Path(p).is_dir())
     args = [str(c_host), str(unzip / "binaries" / "linux64" / "PRSM2.so"),
-            (unzip / "resources").as_uri(), guid, fidelity, str(STEPS),
+            (unzip / "resources").as_uri(), guid, str(ENUM_VALUE[fidelity]), str(STEPS),
             str(vr["screw_torque"]), str(vr["load_force"]), str(vr["fidelity"]),
             str(vr["screw_speed"])] + [str(vr[n]) for n in OUTPUTS]
     proc = subprocess.run(args, env=env, capture_output=True, text=True, timeout=300)

@@ -76,8 +76,14 @@ CASES = [
                  "screw_radius + 2*roller_radius", id="nut_radius_does_not_fit"),
     pytest.param(_bad_stage(2, screw_starts=4, screw_lead=8.0e-3), "stage[2].nut_radius",
                  "screw_starts*roller_radius", id="nut_radius_not_starts_times_roller"),
-    pytest.param(_bad_stage(2, spline_radius=0.0), "stage[2].spline_radius", "> 0",
-                 id="spline_radius_missing"),
+    # stage 2's screw pitch radius is 16.5 mm: the spline radius must lie in
+    # [16.5 mm / 100, 16.5 mm] = [0.000165, 0.0165] m (internal teeth in the screw's bore)
+    *[pytest.param(_bad_stage(2, spline_radius=v), "stage[2].spline_radius",
+                   "in [0.000165, 0.0165] m", id=f"spline_radius={v}")
+      for v in (0.0, 1e-30, 0.000164, 0.0166)],
+    # a friction coefficient is reported as itself, not as the radius its check depends on
+    pytest.param(_bad_mechanism(mu_nut_screw=math.inf), "mu_nut_screw", "[0, 1)",
+                 id="mu_nut_screw=inf"),
     pytest.param(_bad_stage(1, bearing_radius=0.0), "stage[1].bearing_radius", "> 0",
                  id="bearing_radius_missing"),
     pytest.param(_bad_mechanism(stages=()), "stages", "at least 1", id="zero_stages"),

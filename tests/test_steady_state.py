@@ -49,7 +49,8 @@ def three_stage():
     """Seed 002 plus a third stage (a copy of stage 2) so that two bearings and splines act."""
     p = seed002.two_stage("high_mu_ns")
     s2 = dataclasses.replace(p.stages[1], bearing_radius=27.5e-3)
-    s3 = dataclasses.replace(p.stages[1], spline_radius=20e-3, bearing_radius=0.0)
+    # spline radius 13 mm as stage 2's: inside the screw's 16.5 mm pitch radius (params.py)
+    s3 = dataclasses.replace(p.stages[1], spline_radius=13e-3, bearing_radius=0.0)
     return p.with_changes(stages=(p.stages[0], s2, s3)).validate()
 
 

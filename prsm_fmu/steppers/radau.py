@@ -4,9 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from .base import Stepper, StepStats, _check_tol, _is_finite_sum, _model_scale
+from .base import Stepper, StepStats, _check_count, _check_tol, _is_finite_sum, _model_scale
 
 __all__ = ["ScipyRadau"]
+
+
+class _WorkLimit(Exception):
+    """Raised inside scipy's solve_ivp to end an advance that exceeds its rhs-call budget."""
 
 
 class ScipyRadau(Stepper):
@@ -27,12 +31,19 @@ class ScipyRadau(Stepper):
         Relative tolerance.
     atol : float, optional
         Absolute tolerance relative to ``state_scale``; per state ``atol * state_scale[i]``.
+    max_rhs_calls : int or None, optional
+        Most rhs calls of one advance (scipy's ``solve_ivp`` has no step limit of its own, so
+        this bounds the work of an advance); an advance that needs more fails
+        (:class:`StepFailure`).  None: no limit.
     """
 
     name = "radau"
 
-    def __init__(self, model: Any, rtol: float = 1e-6, atol: float = 1e-9) -> None:
+    def __init__(self, model: Any, rtol: float = 1e-6, atol: float = 1e-9,
+                 max_rhs_calls: int | None = None) -> None:
         super().__init__(model)
+        self.max_rhs_calls = (None if max_rhs_calls is None
+                              else _check_count("max_rhs_calls", max_rhs_calls, 1))
         self.rtol = _check_tol("rtol", rtol, strictly_positive=True)
         self.atol = _check_tol("atol", atol, strictly_positive=True)
         self.state_scale = _model_scale(model, self.n_states)
@@ -50,9 +61,12 @@ class ScipyRadau(Stepper):
         solve_ivp = self._solve_ivp
         model = self.model
         calls = [0]
+        limit = self.max_rhs_calls
 
         def fun(tt, yy):
             calls[0] += 1
+            if limit is not None and calls[0] > limit:
+                raise _WorkLimit(f"more than max_rhs_calls = {limit} rhs calls")
             return model.rhs(float(tt), yy.tolist(), u)
 
         jac = None
@@ -74,6 +88,8 @@ class ScipyRadau(Stepper):
             sol = solve_ivp(
                 fun, (t, t + h), y0, method="Radau", rtol=self.rtol, atol=np.array(self._atol_vec), jac=jac
             )
+        except _WorkLimit as exc:
+            raise self._fail(str(exc), t, h, t, h) from None
         except (ArithmeticError, ValueError) as exc:
             raise self._fail(f"solve_ivp raised {exc!r}", t, h, t, h) from exc
         n_steps = max(len(sol.t) - 1, 0)

@@ -35,6 +35,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..fmi_enum import enumeration_value
 from ..fmu_log import FmuLog
 from ..params import MECHANISM_FIELD_NAMES, MechanismParams, StageParams
 
@@ -130,7 +131,9 @@ class FmuRunner:
             var = self.vars.get(name)
             if var is None:
                 raise ValueError(f"parameter {name!r} is not a variable of {self.fmu_path}")
-            bucket = {"Real": reals, "Integer": ints, "Boolean": bools,
+            if var.type == "Enumeration":          # fidelity, stepper: item name -> value
+                value = enumeration_value(var, value)
+            bucket = {"Real": reals, "Integer": ints, "Enumeration": ints, "Boolean": bools,
                       "String": strings}[var.type]
             bucket[0].append(var.valueReference)
             bucket[1].append(value)
