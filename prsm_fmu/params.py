@@ -26,6 +26,14 @@ GEOMETRY_RTOL = 1e-6
 #: a contact half-width, well below a millimetre for thread contacts (seed 003: ~1e-6 m)
 MAX_MU_DIFFERENTIAL = 1e-3
 
+#: largest viscous coefficient µ_1 per engaged thread [N·s/m]: 1e5 N·s/m puts 1e4 N on one thread
+#: at 0.1 m/s of slip, the order of the largest normal force a thread carries; a lubricant film
+#: that resists more than that is no film (seed 003: 0.001 N·s/m; its own load table needs ~580)
+MAX_MU_VISCOUS = 1e5
+
+#: most engaged thread turns per roller [-]: a roller 1 m long (the length bound) at 1 mm pitch
+MAX_THREADS_PER_ROLLER = 1000
+
 
 def _check_positive(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
@@ -193,6 +201,10 @@ class StageParams:
         _check_int_at_least(f"{name}.n_rollers", self.n_rollers, 1)
         _check_int_at_least(f"{name}.carriers", self.carriers, 1)
         _check_int_at_least(f"{name}.threads_per_roller", self.threads_per_roller, 1)
+        if self.threads_per_roller > MAX_THREADS_PER_ROLLER:
+            raise ValueError(f"{name}.threads_per_roller = {self.threads_per_roller!r} is out of "
+                             f"range: must be in [1, {MAX_THREADS_PER_ROLLER}] (a roller at most "
+                             "1 m long at 1 mm pitch)")
         if self.carriers > 2:
             raise ValueError(f"{name}.carriers = {self.carriers!r} is out of range: must be 1 or 2 "
                              "(a carrier at one or at both ends of the rollers)")
@@ -310,7 +322,12 @@ class MechanismParams:
         _check_friction("mu_spline", self.mu_spline)
         _check_friction("mu_nut_screw", self.mu_nut_screw)
         _check_positive("slip_velocity_scale", self.slip_velocity_scale)
-        _check_non_negative("mu_viscous", self.mu_viscous)
+        mv = self.mu_viscous
+        if not (isinstance(mv, (int, float)) and math.isfinite(mv) and 0.0 <= mv <= MAX_MU_VISCOUS):
+            raise ValueError(
+                f"mu_viscous = {mv!r} N·s/m is out of range: must be in [0, {MAX_MU_VISCOUS:g}] "
+                "N·s/m (per engaged thread; beyond it a lubricant film would carry more than a "
+                "thread's normal force)")
         m3 = self.mu_differential
         if not (isinstance(m3, (int, float)) and math.isfinite(m3)
                 and 0.0 <= m3 <= MAX_MU_DIFFERENTIAL):

@@ -60,7 +60,8 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
                         FIDELITY_ITEMS, LEVEL_CODES, MAX_INITIAL_ANGLE, MAX_INITIAL_SPEED,
                         MAX_SUBSTEPS_RANGE, STEPPER_CHOICES, STEPPER_ITEMS, TOLERANCE_RANGE,
                         active_level, configure, fidelity_name)
-from .params import MAX_MU_DIFFERENTIAL, MechanismParams, StageParams, stage_field_names
+from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
+                     MechanismParams, StageParams, stage_field_names)
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
 
@@ -139,7 +140,8 @@ STAGE_FIELDS: dict[str, tuple] = {
     "carriers": ("Integer", None, "carriers per stage: 1 or 2 (one at each end of the rollers)", 1, 2),
     # seed 003's friction terms (003_e265d1d1167b0d4b.txt): engaged threads per roller
     "threads_per_roller": ("Integer", None, "engaged thread turns per roller n_t (the viscous "
-                           "friction acts per engaged thread)", 1, None),
+                           "friction acts per engaged thread), in [1, 1000]", 1,
+                           MAX_THREADS_PER_ROLLER),
 }
 
 #: mechanism-level parameters (fields of MechanismParams)
@@ -155,7 +157,7 @@ MECHANISM_FIELDS: dict[str, tuple] = {
     # seed 003's friction terms (003_e265d1d1167b0d4b.txt)
     "mu_viscous": ("Real", "N.s/m", "lubricant viscous coefficient at the screw-roller contacts "
                    "per engaged thread (force mu_viscous * threads_per_roller * slip per roller), "
-                   ">= 0", 0.0, None),
+                   "in [0, 1e5] N.s/m", 0.0, MAX_MU_VISCOUS),
     "mu_differential": ("Real", "m", "differential-sliding coefficient: torque mu_differential * "
                         "normal force on the screw against its rotation, in [0, 0.001] m",
                         0.0, MAX_MU_DIFFERENTIAL),
@@ -227,12 +229,24 @@ OUTPUTS_TAIL: dict[str, tuple] = {
     "efficiency": ("1", "instantaneous efficiency: output power / input power when driving, "
                    "input / output power when back-driven, 0 otherwise", None),
     "friction_power": ("W", "power lost to friction", None),
+    "friction_power_coulomb": ("W", "part of friction_power lost to Coulomb sliding at the "
+                               "screw-roller contacts", None),
+    "friction_power_viscous": ("W", "part of friction_power lost to the lubricant's viscous "
+                               "force at the screw-roller contacts", None),
+    "friction_power_differential": ("W", "part of friction_power lost to differential sliding "
+                                    "(rolling resistance) at the screw-roller contacts", None),
+    "friction_power_joints": ("W", "part of friction_power lost in the splines and thrust "
+                              "bearings between stages", None),
+    "screw_friction_torque": ("N.m", "friction torque on the screw: motor torque minus the "
+                              "ideal load torque and the inertial torque", None),
     "input_power": ("W", "power delivered by the motor torque", None),
     "output_power": ("W", "power delivered to the load force", None),
     "input_work": ("J", "work done by the motor torque since the start", None),
     "output_work": ("J", "work done on the load force since the start", None),
     "friction_work": ("J", "energy lost to friction since the start", None),
     "kinetic_energy": ("J", "kinetic energy of all moving parts", 0.0),
+    "overall_efficiency": ("1", "overall efficiency since the start: output_work / input_work "
+                           "(0 before any input work)", None),
 }
 
 #: Integer diagnostics of the last step: name -> description

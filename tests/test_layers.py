@@ -15,10 +15,12 @@ Layers, lowest first (a module may import its own layer or lower ones, never a h
    ``steppers`` never imports ``models``) and ``presets`` (parameter sets built from the types
    below);
 3. ``simulate``, ``steady_state`` and the package's ``__init__`` that re-exports them;
-4. ``slave`` and ``configure`` — what the FMU needs;
+4. ``slave`` and ``configure`` — what the FMU needs, with ``fmu_state`` (its serialized state)
+   and ``fmu_exit`` (its exit-time guard);
 5. the tools that use the package: ``cli``, ``report``, ``results`` (what they read off a run),
    ``design_checks``, ``sweep``, ``regress``, ``arguments`` (their argument checks),
-   ``fmu_log``, ``fmu_variables`` and ``result_plot`` (what a host reads off an FMU).
+   ``fmu_log``, ``fmu_variables``, ``fmi_enum`` and ``result_plot`` (what a host reads off an
+   FMU).
 
 Layers 0–3 (the physics and its time stepping) import neither an FMI library nor the tools
 outside the package (``system_models``, ``fmu_build``).
@@ -39,9 +41,9 @@ LAYERS = {
     "mechanics": 1, "kinematics": 1,
     "models": 2, "steppers": 2, "presets": 2,
     "simulate": 3, "steady_state": 3, "": 3,
-    "slave": 4, "configure": 4,
+    "slave": 4, "configure": 4, "fmu_state": 4, "fmu_exit": 4,
     "cli": 5, "report": 5, "results": 5, "design_checks": 5, "sweep": 5, "regress": 5,
-    "arguments": 5, "fmu_log": 5, "fmu_variables": 5, "result_plot": 5,
+    "arguments": 5, "fmu_log": 5, "fmu_variables": 5, "result_plot": 5, "fmi_enum": 5,
 }
 
 #: top-level names the physics layers (0-3) must not import
