@@ -255,6 +255,9 @@ STEP_COUNTERS: dict[str, str] = {
     "step_substeps": "accepted internal steps of the last communication step",
     "step_fidelity": "level the outputs come from (kinematic, quasi-static or dynamic; with "
                      "fidelity = auto, the level of the last communication step)",
+    "contact_status": "1 where the rigid contact has no solution at the current state and inputs "
+                      "(Painleve: no acceleration balances the torque; a doStep from here is "
+                      "refused naming the cause), else 0",
 }
 
 
@@ -551,6 +554,15 @@ class PRSMSlave(Fmi2Slave):
                     return 0
                 return LEVEL_CODES[AUTO_FIDELITY if name == "auto" else name]
             return level
+        if i == 3:          # contact_status: at the current state and inputs
+            def contact():
+                if self._model is None or self._x is None:
+                    return 0
+                u = (self._u[0], self._u[1])
+                if not (math.isfinite(u[0]) and math.isfinite(u[1])):
+                    return 0
+                return 0 if self._model.contact_diagnosis(self._x, u) is None else 1
+            return contact
         return lambda: self._stats[i]
 
     # Value access by reference.  The base class raises on a wrong type or a variable without
@@ -652,7 +664,9 @@ class PRSMSlave(Fmi2Slave):
         built = configure(params, par, tuple(self._u))
         model, _stepper, x0, _level, _name = built
         u0 = (self._u[0], self._u[1])
-        if all(map(math.isfinite, u0)):      # non-finite inputs are refused by doStep
+        # non-finite inputs are refused by doStep, and so is a start where the rigid contact has
+        # no solution under the start inputs (the host may still change them): contact_status
+        if all(map(math.isfinite, u0)) and model.contact_diagnosis(list(x0), u0) is None:
             bad = [v for v in model.rhs(self._t, list(x0), u0) if not math.isfinite(v)] or [
                 name for name, v in model.outputs(self._t, list(x0), u0).items()
                 if isinstance(v, float) and not math.isfinite(v)]
@@ -778,8 +792,16 @@ class PRSMSlave(Fmi2Slave):
             x, stats = stepper.advance(current_time, self._x, u, h)
         except Exception as exc:  # noqa: BLE001 - StepFailure; anything else would be fmi2Fatal
             stepper.set_memory(memory)
+            cause = self._model.contact_diagnosis(self._x, u)
+            if cause is not None:         # contact_status reads 1 here
+                return self._refuse(cause)
             what = str(exc) if isinstance(exc, StepFailure) else f"{type(exc).__name__}: {exc}"
             return self._refuse(f"integration failed: {what}")
+        if not all(math.isfinite(v) for v in x):
+            stepper.set_memory(memory)
+            cause = self._model.contact_diagnosis(self._x, u)
+            return self._refuse(cause or "integration failed: the stepper returned a non-finite "
+                                "state")
         self._x = x
         self._t = current_time + h
         self._u_held = u

@@ -828,3 +828,32 @@ def test_fmpy_simulate_cli_50_runs_under_cpu_load_all_exit_cleanly(fmus, tmp_pat
     print(f"fmpy simulate CLI runs under load: {len(results)}, failed: {len(bad)}, "
           f"{time.monotonic() - start:.0f} s")
     assert len(results) == 50 and bad == [], bad
+
+
+def test_a_state_without_rigid_contact_solution_is_refused_and_flagged():
+    """Seed 000 with every inertia 1000x too small (kg·mm² taken as 1e-9 kg·m²: J_S = 55e-9 and
+    170e-9, J_R = 0.08e-9 and 0.48e-9, J_P = 3e-9 and 12e-9 kg·m²), torque-driven from −1 rad/s
+    with the carriers at rest, +20 N·m against 500 N: no acceleration balances the torque
+    (Painlevé).  The FMU refuses the step with the cause named, its state unchanged, and
+    contact_status reads 1; with the preset's inertias the same start steps and reads 0."""
+    light = {"stage[1].screw_inertia": 55e-9, "stage[1].roller_inertia": 0.08e-9,
+             "stage[1].carrier_inertia": 3e-9, "stage[2].screw_inertia": 170e-9,
+             "stage[2].roller_inertia": 0.48e-9, "stage[2].carrier_inertia": 12e-9}
+    start = {"fidelity": 2, "initial_screw_speed": -1.0, "screw_torque": 20.0, "load_force": 500.0}
+    host = Host("PRSM2", "painleve", start={**start, **light})
+    try:
+        before = host.get_real(["screw_speed", "screw_angle"])
+        assert host.get(["contact_status"]) == [1]
+        assert host.step(0.0) == DISCARD
+        text = host.messages[-1][1]
+        assert "state unchanged" in text and "no solution" in text
+        assert "effective inertia dM_S1/dα" in text and "<= 0" in text
+        assert host.get_real(["screw_speed", "screw_angle"]) == before
+    finally:
+        host.free()
+    host = Host("PRSM2", "consistent", start=start)
+    try:
+        assert host.get(["contact_status"]) == [0]
+        assert host.step(0.0) == OK
+    finally:
+        host.free()
