@@ -297,7 +297,8 @@ class MechanismParams:
         Parameters
         ----------
         geometry : bool
-            Also require every stage's radii to mesh (see :meth:`StageParams.validate`).
+            Also require every stage's radii to mesh (see :meth:`StageParams.validate`) and the
+            spline radii to lie within their screws' radii.
 
         Returns
         -------
@@ -340,7 +341,10 @@ class MechanismParams:
                 raise ValueError(f"stage[{k}] = {st!r} is not a StageParams")
             st.validate(f"stage[{k}]", geometry)
             if k > 1 and self.mu_spline > 0.0:
-                _check_spline_radius(k, st)
+                if geometry:
+                    _check_spline_radius(k, st)
+                else:        # its bound relative to the screw radius is geometry (a design check)
+                    _check_positive(f"stage[{k}].spline_radius", st.spline_radius)
             if k < len(self.stages) and self.mu_nut_screw > 0.0 and not st.bearing_radius > 0.0:
                 raise ValueError(
                     f"stage[{k}].bearing_radius = {st.bearing_radius!r} is out of range: must be "
