@@ -39,8 +39,10 @@ MECHANISMS = {"PRSM1": "seed003_single_stage", "PRSM2": "seed000_two_stage",
 _HEAD = ("screw_speed", "screw_angle", "screw_acceleration", "rod_position", "rod_velocity")
 _STAGE = ("contact_force", "normal_force", "driven_torque", "spline_friction", "carrier_speed",
           "carrier_speed_ratio")
-_TAIL = ("efficiency", "friction_power", "input_power", "output_power", "input_work",
-         "output_work", "friction_work", "kinetic_energy")
+_TAIL = ("efficiency", "friction_power", "friction_power_coulomb", "friction_power_viscous",
+         "friction_power_differential", "friction_power_joints", "screw_friction_torque",
+         "input_power", "output_power", "input_work", "output_work", "friction_work",
+         "kinetic_energy", "overall_efficiency")
 COUNTERS = ("step_rhs_calls", "step_substeps", "step_fidelity")
 
 
