@@ -9,7 +9,7 @@ of that price.  Target (issue 3): ≤ 5 for the quasi-static level at a 1 ms ste
 Scenario: seed 000's two-stage PRSM (``PRSM2``), 1 ms communication steps, the inputs of
 ``benchmarks/step_cost.py``'s "moving" scenario (load F(t) = 5000 + 1000 sin(2π·25 t) N, motor
 torque 19.75 F(t)/5000 + sin(2π·40 t) N·m, new values every step; start at 100 rad/s, carriers
-at equilibrium): the screw keeps turning at ≈ 60…140 rad/s.  Each FMU is stepped in rounds of
+at equilibrium): the screw keeps turning at ≈ 100…116 rad/s.  Each FMU is stepped in rounds of
 ``N_STEPS`` steps; the inputs are set before each step and all Real outputs read after it,
 outside the timed call; every ``doStep`` is timed on its own (perf_counter_ns).  The cost per
 step is the median over ``ROUNDS`` interleaved rounds of the mean over a round.

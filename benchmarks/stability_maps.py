@@ -25,7 +25,7 @@ carrier ratio without any warning).
 
 2. Friction at zero speed (``friction``).  The torque-driven reversal of tests/test_dynamics.py
    (motor torque 5 N·m against 5 kN from 30 rad/s, carriers at equilibrium, 1.5 ms,
-   communication step 10 µs): the screw stops at ~0.54 ms and the load back-drives it, and
+   communication step 10 µs): the screw stops at ~1.04 ms and the load back-drives it, and
    the carriers' time constants collapse to nanoseconds as the slip passes the friction band.
    For each regularisation scale v_ε (``slip_velocity_scale``) and each stepper
    configuration: *diverged* on StepFailure or NaN; *bounded-but-wrong* if it chatters (total

@@ -108,6 +108,13 @@ class _Stage:
                                              st.threads_per_roller)
 
 
+def _sign_slope(v: float, v_scale: float) -> float:
+    """d/dv of :func:`~prsm_fmu.friction.regularised_sign`: (2 − 2|v|/v_ε)/v_ε inside the band,
+    0 outside [1/(m/s)]."""
+    av = abs(v)
+    return 0.0 if av >= v_scale else (2.0 - 2.0 * av / v_scale) / v_scale
+
+
 @dataclass
 class Solution:
     """Everything the balances determine at one instant (SI units).
@@ -229,6 +236,8 @@ class Mechanism:
         self._last_mass = self.stages[-1].m_assembly * self.stages[-1].c
         self._n_cache = 2 * len(self.stages)
         self._rate_consts = tuple((s.j_carrier, s.spline_speed_factor) for s in self.stages)
+        #: :meth:`equivalent_inertia`, final now (the outputs read it at every step)
+        self._j_eq = self.equivalent_inertia()
 
     # ------------------------------------------------------------------------------------
     def equivalent_inertia(self) -> float:
@@ -241,7 +250,7 @@ class Mechanism:
 
     def kinetic_energy(self, omega: float, carrier_speeds) -> float:
         """Kinetic energy of the whole mechanism [J] (seed 000 Eq. 11)."""
-        t = 0.5 * self.equivalent_inertia() * omega * omega
+        t = 0.5 * self._j_eq * omega * omega
         if self.zeta is None:
             for s, wp in zip(self.stages, carrier_speeds):
                 t += 0.5 * s.j_carrier * wp * wp
@@ -342,6 +351,179 @@ class Mechanism:
             return nan, nan, [nan] * len(per_stage), nan
         acc, p_fric = self._rates(omega, alpha, per_stage)
         return alpha, m0 + m1 * alpha, acc, p_fric
+
+    def rates_jacobian(self, omega: float, carrier_state, load: float,
+                       torque: float | None = None, acceleration: float | None = None) -> tuple:
+        """Derivatives of :meth:`rates` with respect to the screw speed and the carrier speeds.
+
+        Differentiates the recursion itself (docs/model.md §3): with the sign pattern of the
+        solution held, every quantity of the sweep is affine in α with coefficients that are
+        smooth functions of (ω, ω_Pk); the contact coefficients κ, γ, π, q and the viscous
+        terms depend on them through the slip s = ω a + ω_P b and the regularised factor
+        φ(|s|) (friction.py), the spline and bearing signs through ω alone, and these
+        derivatives are carried down the sweep beside the values.  Dynamic carriers only.
+
+        Parameters are those of :meth:`rates`.
+
+        Returns
+        -------
+        tuple
+            (the values of :meth:`rates`, dα, dM_S1, [d carrier acceleration_k], dP_f), each
+            derivative a list over (ω, ω_P1, …, ω_Pn) [SI units per rad/s].  All NaN where
+            :meth:`rates` is NaN.
+        """
+        if self.zeta is not None:
+            raise ValueError("rates_jacobian needs dynamic carriers (carriers = 'dynamic')")
+        wps = carrier_state
+        alpha, rec, consistent = self._balance(omega, wps, load, torque, acceleration)
+        (m0, m1), per_stage = rec
+        n = len(per_stage)
+        m = n + 1
+        if not consistent:
+            nan = math.nan
+            row = [nan] * m
+            return ((nan, nan, [nan] * n, nan), row, list(row), [list(row) for _ in range(n)],
+                    list(row))
+        acc, p_fric = self._rates(omega, alpha, per_stage)
+        v_eps = self.v_eps
+        zero = [0.0] * m
+        # d(quantity)/d(ω, ω_P1 … ω_Pn) of the sweep's pairs, carried from the last stage down
+        da0, da1 = zero, zero
+        dmn0 = dmn1 = dhn0 = dhn1 = zero
+        drec = [None] * n
+        for k, (j_screw, m_sc, e_spline, spline_f, g_bearing, bearing_f, mass_below,
+                vz_factor, flanks) in self._plan:
+            fi, ae0, a1, co, mk0, mk1, h0, h1, b0, b1, e, g, sm, sb = per_stage[k]
+            dco = self._coefficient_derivatives(flanks[fi], omega, wps[k], k + 1, m)
+            dkappa, dtv = dco[0], dco[4]
+            kappa = co[0]
+            dae0 = list(da0)
+            dae0[0] += vz_factor
+            dx0 = [p - dk * ae0 - kappa * q - dt for p, dk, q, dt in zip(dmn0, dkappa, dae0, dtv)]
+            dx1 = [p - dk * a1 - kappa * q for p, dk, q in zip(dmn1, dkappa, da1)]
+            if k == 0:
+                drec[0] = (dae0, da1, dco, zero, zero, zero, zero)
+                dm0, dm1 = dx0, dx1
+                break
+            dy0 = [p - q for p, q in zip(da0, dhn0)]
+            dy1 = [p - q for p, q in zip(da1, dhn1)]
+            # the spline's and the bearing's regularised signs depend on ω inside their bands
+            de = _sign_slope(omega * spline_f, v_eps) * e_spline * spline_f if e_spline else 0.0
+            dg = _sign_slope(omega * bearing_f, v_eps) * g_bearing * bearing_f if g_bearing else 0.0
+            if g:
+                den = 1.0 - g * sb * e * sm
+                # m = (x + g σ_B y)/den, den = 1 − g σ_B e σ_M: recover x, y from the record
+                y0 = b0 - e * sm * mk0
+                y1 = b1 - e * sm * mk1
+                dden = [0.0] * m
+                dden[0] = -sb * sm * (dg * e + g * de)
+                dm0 = [(p + g * sb * q - mk0 * r) / den for p, q, r in zip(dx0, dy0, dden)]
+                dm1 = [(p + g * sb * q - mk1 * r) / den for p, q, r in zip(dx1, dy1, dden)]
+                dm0[0] += dg * sb * y0 / den
+                dm1[0] += dg * sb * y1 / den
+            else:
+                dm0, dm1 = dx0, dx1
+            dh0 = [e * sm * p for p in dm0]
+            dh1 = [e * sm * p for p in dm1]
+            dh0[0] += de * sm * mk0
+            dh1[0] += de * sm * mk1
+            db0 = [p + q for p, q in zip(dy0, dh0)]
+            db1 = [p + q for p, q in zip(dy1, dh1)]
+            drec[k] = (dae0, da1, dco, dh0, dh1, db0, db1, dg)
+            da0, da1 = db0, db1
+            dmn0, dmn1, dhn0, dhn1 = dm0, dm1, dh0, dh1
+        if acceleration is None:
+            dalpha = [-(p + alpha * q) / m1 for p, q in zip(dm0, dm1)]
+        else:
+            dalpha = zero
+        dmotor = [p + alpha * q + m1 * r for p, q, r in zip(dm0, dm1, dalpha)]
+        dacc = []
+        dpf = [0.0] * m
+        for k in range(n):
+            fi, ae0, a1, co, mk0, mk1, h0, h1, b0, b1, e, g, sm, sb = per_stage[k]
+            dae0, da1k, dco = drec[k][0], drec[k][1], drec[k][2]
+            a = ae0 + a1 * alpha
+            da = [p + alpha * q + a1 * r for p, q, r in zip(dae0, da1k, dalpha)]
+            j_carrier, spline_f = self._rate_consts[k]
+            dgam, dpi, dgv, dpv = dco[1], dco[2], dco[5], dco[6]
+            dacc.append([(p * a + co[1] * q + r) / j_carrier
+                         for p, q, r in zip(dgam, da, dgv)])
+            dpf = [f + p * a + co[2] * q + r for f, p, q, r in zip(dpf, dpi, da, dpv)]
+            if k > 0:
+                dh0, dh1, db0, db1, dg = drec[k][3:]
+                if e:
+                    h = h0 + h1 * alpha
+                    dpf = [f + (p + alpha * q + h1 * r) * omega * spline_f
+                           for f, p, q, r in zip(dpf, dh0, dh1, dalpha)]
+                    dpf[0] += h * spline_f
+                if g:
+                    b = b0 + b1 * alpha
+                    dpf = [f + g * sb * (p + alpha * q + b1 * r) * omega
+                           for f, p, q, r in zip(dpf, db0, db1, dalpha)]
+                    dpf[0] += g * sb * b + dg * sb * b * omega
+        return (alpha, m0 + m1 * alpha, acc, p_fric), dalpha, dmotor, dacc, dpf
+
+    def _coefficient_derivatives(self, flank: tuple, omega: float, wp: float, j: int,
+                                 m: int) -> tuple:
+        """Derivatives of :meth:`_coefficients` with respect to (ω, ω_P1, …): lists of length
+        ``m`` for (κ, γ, π, q, τ_v, γ_v, p_v), non-zero at ω (index 0) and at this stage's
+        carrier speed (index ``j``)."""
+        ax, ay, az, bx, by, px, py, nz, pn, cv, mu3, radius = flank
+        sx = omega * ax + wp * bx
+        sy = omega * ay + wp * by
+        sz = omega * az
+        v2 = sx * sx + sy * sy + sz * sz
+        v = math.sqrt(v2)
+        v_eps = self.v_eps
+        mu = self.mu
+        if v >= v_eps:
+            phi, dphi = 1.0 / v, -1.0 / v2
+        else:
+            phi, dphi = (2.0 - v / v_eps) / v_eps, -1.0 / (v_eps * v_eps)
+        mphi = mu * phi
+        sa = sx * ax + sy * ay + sz * az
+        sbv = sx * bx + sy * by
+        # d(µφ)/dω = µ φ'(v) (s·a)/v, d(µφ)/dω_P = µ φ'(v) (s·b)/v (0 at s = 0: φ s is C¹)
+        dm_w = mu * dphi * sa / v if v > 0.0 else 0.0
+        dm_p = mu * dphi * sbv / v if v > 0.0 else 0.0
+        q = 1.0 / (nz - mphi * sz)
+        dq_w = q * q * (dm_w * sz + mphi * az)
+        dq_p = q * q * dm_p * sz
+        cross = px * sy - py * sx
+        dc_w = px * ay - py * ax
+        dc_p = px * by - py * bx
+        kr = pn - mphi * cross
+        dkr_w = -dm_w * cross - mphi * dc_w
+        dkr_p = -dm_p * cross - mphi * dc_p
+        dpd_w = dpd_p = 0.0
+        if mu3:
+            # differential sliding: κ ⊃ −µ_3 σ q, π_d = µ_3 σ ω q with σ = sgñ(ω r)
+            w = omega * radius
+            sg = 1.0 if w >= v_eps else -1.0 if w <= -v_eps else regularised_sign(w, v_eps)
+            dsg = _sign_slope(w, v_eps) * radius
+            kr -= mu3 * sg
+            dkr_w -= mu3 * dsg
+            dpd_w = mu3 * (dsg * omega * q + sg * q + sg * omega * dq_w)
+            dpd_p = mu3 * sg * omega * dq_p
+        # κ = kr q, γ = −µφ (s·b) q, π = µφ v² q + π_d
+        ab = ax * bx + ay * by
+        bb = bx * bx + by * by
+
+        def col(dw: float, dp: float) -> list:
+            c = [0.0] * m
+            c[0] = dw
+            c[j] = dp
+            return c
+
+        return (col(dkr_w * q + kr * dq_w, dkr_p * q + kr * dq_p),
+                col(-(dm_w * sbv * q + mphi * ab * q + mphi * sbv * dq_w),
+                    -(dm_p * sbv * q + mphi * bb * q + mphi * sbv * dq_p)),
+                col(dm_w * v2 * q + mphi * 2.0 * sa * q + mphi * v2 * dq_w + dpd_w,
+                    dm_p * v2 * q + mphi * 2.0 * sbv * q + mphi * v2 * dq_p + dpd_p),
+                col(dq_w, dq_p),
+                col(-cv * dc_w, -cv * dc_p),
+                col(-cv * ab, -cv * bb),
+                col(cv * 2.0 * sa, cv * 2.0 * sbv))
 
     def diagnose(self, omega: float, carrier_state, load: float, torque: float) -> str | None:
         """Why the rigid contact has no solution at this torque-driven state, or None if it has.

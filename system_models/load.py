@@ -15,7 +15,7 @@ external force         hinge-moment offset, gust (scene profile)    F_ext(t)
 =====================  ==========================================  ===========================
 
 with r = 0.1 m.  These are representative round numbers (not one aircraft's data), chosen so
-that the surface mode (√(k/m_total) ≈ 45 rad/s with the actuator's own reflected mass of 49 kg)
+that the surface mode (√(k/m_total) ≈ 40 rad/s with the actuator's own reflected mass of 74 kg)
 lies inside the position loop's bandwidth and a 10 mm stroke needs 2 kN.
 
 Coupling (docs/ema.md): the mass is rigidly attached to the rod, so it is *not* integrated

@@ -64,7 +64,7 @@ class MotorParams:
     * ``resistance = 0.5`` Ω, ``inductance = 2e-3`` H (per phase): electrical time constant
       L/R = 4 ms, typical of servo motors of this torque class (1–10 ms); copper loss at the
       20 A limit 1.5 R I² = 300 W.
-    * ``rotor_inertia = 3e-4`` kg·m²: ≈ 1.5× the PRSM's own reflected inertia (1.95e-4 kg·m²);
+    * ``rotor_inertia = 3e-4`` kg·m²: ≈ 0.66× the PRSM's own reflected inertia (4.54e-4 kg·m²);
       reflected to the rod (÷ (Σ L/2π)² = 1.01e-5 m²) it is 30 kg.
     * ``bus_voltage = 270`` V: the aircraft high-voltage DC bus (MIL-STD-704); the phase
       voltage limit is V_dc/√3 = 156 V (space-vector PWM, linear range), so the no-load

@@ -80,7 +80,7 @@ def test_energy_balance_closes_on_a_speed_ramp_0_to_100_rad_s_in_1_ms(fidelity):
                                           ("rosenbrock", {"rtol": 1e-9, "atol": 1e-12}),
                                           ("explicit_adaptive", {"rtol": 1e-9, "atol": 1e-12})])
 def test_energy_balance_closes_over_a_speed_reversal_through_zero(stepper, opts):
-    # motor torque drops to 5 N·m under a 5 kN load: the screw stops at ~0.54 ms and the load
+    # motor torque drops to 5 N·m under a 5 kN load: the screw stops at ~1.04 ms and the load
     # back-drives it; the carriers' time constants collapse to nanoseconds at zero speed
     r = simulate(SEED000, "dynamic", "torque", screw_torque=5.0, load_force=5000.0,
                  t_end=1.5e-3, output_interval=1e-5, initial_screw_speed=30.0,

@@ -10,7 +10,7 @@ of it.  docs/accuracy.md §4 derives it and checks it against the work-precision
 * **quasi-static**: the carriers' lag behind their equilibrium ζ*ω, which the quasi-static level
   drops.  With τ the *slowest* carrier's linearised time constant at the operating point
   (:func:`carrier_time_constants`, carriers at equilibrium; τ ∝ ω/F: for seed 000 at 100 rad/s
-  and 5 kN 8.2 µs for carrier 1 — ``model.fastest_time_constant`` — and 20 µs for carrier 2):
+  and 5 kN 14.3 µs for carrier 1 — ``model.fastest_time_constant`` — and 31.5 µs for carrier 2):
 
   - a deviation d₀ = |ω_P/ω − ζ*|/ζ* present at the start shows undamped at the first output
     (the carriers at rest under a turning screw: d₀ = 1);

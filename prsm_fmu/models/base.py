@@ -85,6 +85,11 @@ class Model(ABC):
             + ["screw_friction_torque", "overall_efficiency"])
         #: inertia reflected to screw 1 of everything slaved to it [kg·m²] (screw_friction_torque)
         self._j_eq = self.mechanism.equivalent_inertia()
+        #: the per-stage output names, made once (the outputs are read at every step)
+        self._stage_keys = tuple(tuple(f"stage[{k}].{q}" for q in (
+            "contact_force", "normal_force", "driven_torque", "spline_friction", "carrier_speed",
+            "carrier_speed_ratio")) for k in range(1, n + 1))
+        self._term_keys = tuple((term, f"friction_power_{term}") for term in FRICTION_TERMS)
 
     # ---- hooks for levels with extra losses (kinematic efficiency) ------------------------
     def _extra_loss_torque(self, omega: float, load: float) -> float:
@@ -192,22 +197,22 @@ class Model(ABC):
             "screw_torque": motor, "rod_position": c_out * x[0], "rod_velocity": v_rod,
             "load_force": load,
         }
-        for k in range(len(mech.stages)):
-            pre = f"stage[{k + 1}]."
-            y[pre + "contact_force"] = sol.contact_force[k]
-            y[pre + "normal_force"] = sol.normal_force[k]
-            y[pre + "driven_torque"] = motor if k == 0 else sol.driven_torque[k]
-            y[pre + "spline_friction"] = sol.spline_friction[k]
-            y[pre + "carrier_speed"] = wps[k]
-            y[pre + "carrier_speed_ratio"] = wps[k] / omega if omega != 0.0 else 0.0
+        for k, (contact, normal, driven, spline, carrier, ratio) in enumerate(self._stage_keys):
+            y[contact] = sol.contact_force[k]
+            y[normal] = sol.normal_force[k]
+            y[driven] = motor if k == 0 else sol.driven_torque[k]
+            y[spline] = sol.spline_friction[k]
+            y[carrier] = wps[k]
+            y[ratio] = wps[k] / omega if omega != 0.0 else 0.0
         y["efficiency"] = efficiency(p_in, p_out)
         y["friction_power"] = sol.friction_power + loss * omega
-        terms = dict(sol.friction_power_terms)
+        terms = sol.friction_power_terms
         if loss:
+            terms = dict(terms)
             for term, p in self._extra_loss_terms(omega, load).items():
                 terms[term] += p
-        for term in FRICTION_TERMS:
-            y[f"friction_power_{term}"] = terms[term]
+        for term, key in self._term_keys:
+            y[key] = terms[term]
         # seed 003's M_f: the friction's generalized force on the screw angle, i.e. what the
         # motor torque spends beyond the load's torque and the slaved parts' inertial torque
         y["screw_friction_torque"] = motor - load * c_out - self._j_eq * sol.screw_acceleration

@@ -18,3 +18,58 @@ class DynamicModel(Model):
 
     fidelity = "dynamic"
     carriers = "dynamic"
+
+    def analytic_jacobian(self, t: float, x: list[float], u: tuple) -> list[list[float]]:
+        """d rhs / d x at (t, x, u), from the recursion's own derivatives.
+
+        :meth:`prsm_fmu.mechanics.Mechanism.rates_jacobian` differentiates the balances with
+        the sign pattern of the solution held (exact wherever the pattern does not change at
+        x); the screw angle and the work integrals appear in no derivative, so their columns
+        are zero.  tests/test_jacobian.py checks it against central differences of
+        :meth:`rhs`.
+
+        It is deliberately not called ``jacobian`` (the name the steppers pick up by
+        default): in plain Python it costs about six rhs calls against the three of the
+        forward-difference Jacobian the W-method is content with (benchmarks/step_cost.py
+        prints both), so the steppers keep the differences unless a caller asks for it.
+
+        Parameters
+        ----------
+        t : float
+            Time [s] (unused: the model is autonomous).
+        x : list of float
+            State (layout: module docstring of base).
+        u : tuple
+            Inputs held over the step.
+
+        Returns
+        -------
+        list of list of float
+            Row-major n × n matrix [SI units of d state_i/dt per unit of state_j].
+        """
+        load = u[1]
+        mech = self.mechanism
+        omega = x[1]
+        nc = self.n_carrier_states
+        ie = self._i_energy
+        if self._torque_drive:
+            (_, motor, _, _), dalpha, dmotor, dacc, dpf = mech.rates_jacobian(
+                omega, x[2:ie], load, u[0])
+            motor = u[0]
+            dw_in = [0.0] * (nc + 1)
+            dw_in[0] = motor
+        else:
+            (_, motor, _, _), dalpha, dmotor, dacc, dpf = mech.rates_jacobian(
+                omega, x[2:ie], load, acceleration=u[0])
+            dw_in = [d * omega for d in dmotor]
+            dw_in[0] += motor
+        n = self.n_states
+        pad_left, pad_right = [0.0], [0.0] * (n - 2 - nc)
+        theta = [0.0] * n
+        theta[1] = 1.0
+        rows = [theta, pad_left + dalpha + pad_right]
+        rows += [pad_left + d + pad_right for d in dacc]
+        w_out = [0.0] * n
+        w_out[1] = load * mech.c_out
+        rows += [pad_left + dw_in + pad_right, w_out, pad_left + dpf + pad_right]
+        return rows
