@@ -13,13 +13,17 @@ from __future__ import annotations
 
 from .builder import DEFAULT_EXPERIMENT, BuildError, build_fmu, validate
 from .mechanisms import FMUS, three_stage
+from .native import build_native
 
-__all__ = ["build_fmu", "build_named", "validate", "BuildError", "FMUS", "three_stage",
-           "DEFAULT_EXPERIMENT"]
+__all__ = ["build_fmu", "build_native", "build_named", "validate", "BuildError", "FMUS",
+           "three_stage", "DEFAULT_EXPERIMENT"]
 
 
-def build_named(name: str, dest="dist", check: bool = True):
+def build_named(name: str, dest="dist", check: bool = True, native: bool = False):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``.
+
+    ``native``: the native C FMU ``<name>-native.fmu`` (kinematic and quasi-static levels,
+    :mod:`fmu_build.native`) instead of the Python one.
 
     Returns
     -------
@@ -31,4 +35,4 @@ def build_named(name: str, dest="dist", check: bool = True):
     except KeyError:
         raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
                          "(or use --preset)") from None
-    return build_fmu(name, make(), source, dest, check)
+    return (build_native if native else build_fmu)(name, make(), source, dest, check)
