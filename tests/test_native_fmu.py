@@ -315,3 +315,14 @@ def test_c_host_runs_the_native_fmu_without_python_equal_to_python_fmu(native, c
     assert len(got) == HOST_STEPS
     assert max_relative_difference(got, expected) <= 1e-12
     assert min(r[0] for r in got) < -50.0 < 90.0 < max(r[0] for r in got)   # it did reverse
+
+
+# ---- the regression suite and the actuator loop ---------------------------------------------------
+
+def test_regression_case_at_quasi_static_passes_with_the_native_fmu(native):
+    from prsm_fmu.regress import core
+
+    (result,) = core.check(built_native()["PRSM2"], core.DEFAULT_DIR,
+                           cases=["startup_seed000_quasi-static"])
+    assert result.passed, result.error or [r for r in result.results if not r.passed]
+    assert len(result.results) >= 10          # every stored output was compared
