@@ -258,6 +258,15 @@ static double extra_loss(const prsm_model *m, double omega, double load) {
     return m->loss_factor * fabs(load) * regularised_sign(omega * m->c_out, m->v_eps);
 }
 
+/* Mechanism.solve/rates with slaved carriers: the carrier speeds, alpha and the sweep record
+ * (whose coefficients live in cache) for a torque on screw 1 */
+static double solve(const prsm_model *m, double omega, double load, double torque, double *wps,
+                    coef_cache *cache, sweep_rec *rec, int *consistent) {
+    memset(cache->have, 0, sizeof cache->have);
+    carrier_speeds(m, omega, wps);
+    return balance(m, omega, wps, load, torque, cache, rec, consistent);
+}
+
 /* Model.rhs, torque drive, slaved carriers */
 static void rhs(const prsm_model *m, const double *x, const double *u, double *dx) {
     double load = u[1], omega = x[1];
@@ -267,9 +276,7 @@ static void rhs(const prsm_model *m, const double *x, const double *u, double *d
     coef_cache cache;
     sweep_rec rec;
     int consistent;
-    memset(cache.have, 0, sizeof cache.have);
-    carrier_speeds(m, omega, wps);
-    double alpha = balance(m, omega, wps, load, motor - loss, &cache, &rec, &consistent);
+    double alpha = solve(m, omega, load, motor - loss, wps, &cache, &rec, &consistent);
     double p_fric = consistent ? rates_power(m, omega, alpha, &rec) : NAN;
     if (!consistent) alpha = NAN;
     dx[0] = omega;
@@ -538,9 +545,7 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX], const double u[2], 
     coef_cache cache;
     sweep_rec rec;
     int consistent;
-    memset(cache.have, 0, sizeof cache.have);
-    carrier_speeds(m, omega, wps);
-    double alpha = balance(m, omega, wps, load, u[0] - loss, &cache, &rec, &consistent);
+    double alpha = solve(m, omega, load, u[0] - loss, wps, &cache, &rec, &consistent);
     /* Mechanism._assemble(detail=True) */
     double motor_sol = rec.m0 + rec.m1 * alpha;
     double p_fric = 0.0;
