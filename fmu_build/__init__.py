@@ -13,14 +13,20 @@ from __future__ import annotations
 
 from .builder import DEFAULT_EXPERIMENT, BuildError, build_fmu, validate
 from .mechanisms import FMUS, three_stage
+from .native import build_native
 
-__all__ = ["build_fmu", "build_named", "validate", "BuildError", "FMUS", "three_stage",
-           "DEFAULT_EXPERIMENT"]
+__all__ = ["build_fmu", "build_native", "build_named", "validate", "BuildError", "FMUS",
+           "three_stage", "DEFAULT_EXPERIMENT"]
 
 
-def build_named(name: str, dest="dist", check: bool = True, start: dict | None = None):
+def build_named(name: str, dest="dist", check: bool = True, start: dict | None = None,
+                native: bool = False):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
-    (``start``: parameter start values other than the preset's, see ``builder.start_values``).
+    (``start``: parameter start values other than the preset's, see ``builder.start_values``;
+    Python FMU only).
+
+    ``native``: the native C FMU ``<name>-native.fmu`` (kinematic and quasi-static levels,
+    :mod:`fmu_build.native`) instead of the Python one.
 
     Returns
     -------
@@ -32,4 +38,9 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
     except KeyError:
         raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
                          "(or use --preset)") from None
+    if native:
+        if start:
+            raise ValueError("--start is for the Python FMU: the native FMU takes the preset's "
+                             "start values (set parameters at initialization instead)")
+        return build_native(name, make(), source, dest, check)
     return build_fmu(name, make(), source, dest, check, start)

@@ -2,8 +2,11 @@
 
 ::
 
-    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--dest DIR] [--no-validate]
-    prsm-fmu-build --preset NAME --name ID [--dest DIR]
+    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native] [--dest DIR] [--no-validate]
+    prsm-fmu-build --preset NAME --name ID [--native] [--dest DIR]
+
+``--native`` builds ``<name>-native.fmu`` instead: the kinematic and quasi-static levels in C,
+no Python needed to run it (:mod:`fmu_build.native`; needs gcc).
 
 A bad argument is answered with one line naming it and its allowed values, exit status 2,
 before anything is built (:mod:`prsm_fmu.arguments`); a failed build exits with 1.
@@ -15,13 +18,15 @@ import sys
 
 from prsm_fmu.arguments import ArgumentParser, one_line, writable_dir
 
-from . import FMUS, BuildError, build_fmu, build_named
+from . import FMUS, BuildError, build_fmu, build_named, build_native
 
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
                "DIR: PRSM2 by default, any of the standard FMUs by name or all with --all, or "
                "an FMU from any preset of prsm_fmu.presets with --preset NAME --name ID (ID "
                "is the FMI modelIdentifier, e.g. PRSM2_seed002). Each FMU is checked with "
                "fmpy validate and the project's modelDescription rules unless --no-validate. "
+               "With --native: the native C FMU <name>-native.fmu (kinematic and quasi-static "
+               "levels, needs gcc; runs without Python). "
                "Also runs as 'python -m fmu_build'.")
 
 
@@ -38,6 +43,9 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
                     help="a parameter start value other than the preset's, e.g. "
                          "fidelity=dynamic (for hosts that cannot set it); repeatable")
+    ap.add_argument("--native", action="store_true",
+                    help="build the native C FMU <name>-native.fmu (kinematic and quasi-static "
+                         "levels; needs gcc) instead of the Python one")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
     return ap
@@ -81,14 +89,23 @@ def main(argv: list[str] | None = None) -> int:
                          "mechanism the FMU can run: must be one of "
                          + ", ".join(n for n in presets.names()
                                      if isinstance(presets.load(n), MechanismParams)))
-            targets = [build_fmu(args.name, params, args.preset, args.dest, check, start)]
+            if args.native:
+                if start:
+                    ap.error("argument --start: must not be given with --native (the native FMU "
+                             "takes its parameters at initialization)")
+                targets = [build_native(args.name, params, args.preset, args.dest, check)]
+            else:
+                targets = [build_fmu(args.name, params, args.preset, args.dest, check, start)]
         else:
             unknown = [n for n in args.names if n not in FMUS]
             if unknown:
                 ap.error(f"argument FMU: invalid choice(s) {', '.join(map(repr, unknown))}: "
                          f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
-            targets = [build_named(n, args.dest, check, start) for n in names]
+            if args.native and start:
+                ap.error("argument --start: must not be given with --native (the native FMU "
+                         "takes its parameters at initialization)")
+            targets = [build_named(n, args.dest, check, start, native=args.native) for n in names]
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2
     except (BuildError, ValueError, OSError) as exc:

@@ -45,12 +45,16 @@ _ROOT = Path(__file__).resolve().parents[1]
 
 
 def _sources() -> list[Path]:
-    """The files an FMU is built from: prsm_fmu and fmu_build (Python sources)."""
+    """The files an FMU is built from: prsm_fmu and fmu_build (Python sources, and the C
+    sources of the native FMU)."""
     files: list[Path] = []
     for pkg in ("prsm_fmu", "fmu_build"):
         d = _ROOT / pkg
         if d.is_dir():
             files += [p for p in d.rglob("*.py")]
+    native = _ROOT / "fmu_build" / "native"
+    if native.is_dir():
+        files += sorted(native.glob("*.[ch]"))
     return files
 
 
@@ -71,7 +75,8 @@ def ensure_fmu(path: str | os.PathLike = "dist/PRSM2.fmu", rebuild_stale: bool =
     """Return ``path``, building it first if missing (or stale) in a child process.
 
     The FMU's name (``PRSM1``, ``PRSM2``, ``PRSM3``) is the file's stem; the build runs
-    ``python -m fmu_build NAME --dest DIR`` with this interpreter.
+    ``python -m fmu_build NAME --dest DIR`` with this interpreter (a stem ``PRSM2-native``:
+    ``python -m fmu_build --native PRSM2``, the native C FMU).
 
     Raises
     ------
@@ -83,12 +88,17 @@ def ensure_fmu(path: str | os.PathLike = "dist/PRSM2.fmu", rebuild_stale: bool =
     if why is None or (why != "missing" and not rebuild_stale):
         return p
     name = p.stem
+    extra = []
+    if name.endswith("-native"):
+        name, extra = name.removesuffix("-native"), ["--native"]
     stream = sys.stderr if stream is None else stream
-    print(f"building {p} ({why}) with python -m fmu_build {name} ...", file=stream, flush=True)
+    print(f"building {p} ({why}) with python -m fmu_build {' '.join(extra + [name])} ...",
+          file=stream, flush=True)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(_ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH")
                                                         else []))
-    proc = subprocess.run([sys.executable, "-m", "fmu_build", name, "--dest", str(p.parent or ".")],
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", *extra, name, "--dest",
+                           str(p.parent or ".")],
                           capture_output=True, text=True, env=env, timeout=600)
     if proc.returncode != 0 or not p.is_file():
         hint = ""

@@ -83,6 +83,12 @@ def unzipped(name: str) -> Path:
     return Path(extract(str(built_fmus()[name])))
 
 
+@functools.cache
+def unzipped_path(path: Path) -> Path:
+    """Any FMU file extracted once per process."""
+    return Path(extract(str(path)))
+
+
 @pytest.fixture(scope="session")
 def fmus() -> dict[str, Path]:
     return built_fmus()
@@ -92,8 +98,8 @@ class Host:
     """One FMU instance driven through fmpy's FMU2Slave; records every logged message."""
 
     def __init__(self, name: str = "PRSM2", instance: str = "prsm", start: dict | None = None,
-                 initialize: bool = True) -> None:
-        fmu = built_fmus()[name]
+                 initialize: bool = True, path: Path | None = None) -> None:
+        fmu = built_fmus()[name] if path is None else path
         self.md = read_model_description(str(fmu))
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.outputs = [v.name for v in self.md.modelVariables
@@ -104,7 +110,8 @@ class Host:
         cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         self._callbacks = cb
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(unzipped(name)),
+        where = unzipped(name) if path is None else unzipped_path(path)
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(where),
                              modelIdentifier=self.md.coSimulation.modelIdentifier,
                              instanceName=instance)
         self.fmu.instantiate(callbacks=cb, loggingOn=True)

@@ -1,6 +1,6 @@
 """A non-Python host: a small C program runs the FMU the way any FMI 2.0 tool would.
 
-The program (written below, compiled with gcc against the FMI 2.0 headers that fmpy ships)
+The program (tests/fmi_c_host.c, compiled with gcc against the FMI 2.0 headers that fmpy ships)
 loads the FMU's shared library with dlopen, instantiates it, sets the Enumeration ``fidelity``
 with fmi2SetInteger, and closes the torque-speed loop of ``test_fmu.controller`` for 1,000 steps.
 The pythonfmu binary has no Python of its own: the process gets libpython through
@@ -26,99 +26,15 @@ pytest.importorskip("pythonfmu")
 from test_fmu import Host, built_fmus, max_relative_difference, run_fmu, unzipped  # noqa: E402
 
 STEPS = 1000
-#: the Fidelity Enumeration's item values (docs/fmu.md's table)
-ENUM_VALUE = {"kinematic": 0, "quasi-static": 1, "dynamic": 2, "auto": 3}
 OUTPUTS = ["screw_speed", "screw_angle", "rod_position", "rod_velocity", "stage[1].contact_force",
            "stage[2].contact_force", "stage[2].driven_torque", "stage[2].spline_friction",
            "stage[1].carrier_speed_ratio", "efficiency", "friction_power", "friction_work"]
 
-C_HOST = r"""
-/* Minimal FMI 2.0 co-simulation host: a PI speed loop around a PRSM FMU. */
-#include <dlfcn.h>
-#include <math.h>
-#include <stdarg.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include "fmi2Functions.h"
+#: the item values of the FMU's Enumeration ``Fidelity`` (its modelDescription's TypeDefinitions)
+ENUM_VALUE = {"kinematic": 0, "quasi-static": 1, "dynamic": 2, "auto": 3}
 
-static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                   fmi2String category, fmi2String message, ...) {
-    fprintf(stderr, "[%d] %s %s: %s\n", (int)status, instance, category ? category : "", message);
-}
-
-static void *sym(void *lib, const char *name) {
-    void *f = dlsym(lib, name);
-    if (!f) { fprintf(stderr, "missing %s\n", name); exit(3); }
-    return f;
-}
-
-#define CHECK(call) do { fmi2Status s_ = (call); \
-    if (s_ != fmi2OK) { fprintf(stderr, "%s -> %d\n", #call, (int)s_); return 2; } } while (0)
-
-/* argv: library resourceURI guid fidelity steps vr_torque vr_load vr_fidelity vr_speed vr_out... */
-int main(int argc, char **argv) {
-    if (argc < 11) { fprintf(stderr, "usage\n"); return 1; }
-    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-    if (!lib) { fprintf(stderr, "dlopen: %s\n", dlerror()); return 1; }
-    fmi2InstantiateTYPE *instantiate = (fmi2InstantiateTYPE *)sym(lib, "fmi2Instantiate");
-    fmi2SetupExperimentTYPE *setup = (fmi2SetupExperimentTYPE *)sym(lib, "fmi2SetupExperiment");
-    fmi2EnterInitializationModeTYPE *enter =
-        (fmi2EnterInitializationModeTYPE *)sym(lib, "fmi2EnterInitializationMode");
-    fmi2ExitInitializationModeTYPE *exit_init =
-        (fmi2ExitInitializationModeTYPE *)sym(lib, "fmi2ExitInitializationMode");
-    fmi2SetRealTYPE *set_real = (fmi2SetRealTYPE *)sym(lib, "fmi2SetReal");
-    fmi2GetRealTYPE *get_real = (fmi2GetRealTYPE *)sym(lib, "fmi2GetReal");
-    fmi2SetIntegerTYPE *set_integer = (fmi2SetIntegerTYPE *)sym(lib, "fmi2SetInteger");
-    fmi2DoStepTYPE *do_step = (fmi2DoStepTYPE *)sym(lib, "fmi2DoStep");
-    fmi2TerminateTYPE *terminate = (fmi2TerminateTYPE *)sym(lib, "fmi2Terminate");
-    fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)sym(lib, "fmi2FreeInstance");
-
-    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("c_host", fmi2CoSimulation, argv[3], argv[2], &callbacks,
-                                  fmi2False, fmi2True);
-    if (!c) { fprintf(stderr, "fmi2Instantiate failed\n"); return 2; }
-    int steps = atoi(argv[5]);
-    fmi2ValueReference vr_in[2] = {(fmi2ValueReference)atol(argv[6]), (fmi2ValueReference)atol(argv[7])};
-    fmi2ValueReference vr_fidelity = (fmi2ValueReference)atol(argv[8]);
-    fmi2ValueReference vr_speed = (fmi2ValueReference)atol(argv[9]);
-    int n_out = argc - 10;
-    fmi2ValueReference *vr_out = malloc(n_out * sizeof *vr_out);
-    fmi2Real *y = malloc(n_out * sizeof *y);
-    for (int i = 0; i < n_out; i++) vr_out[i] = (fmi2ValueReference)atol(argv[10 + i]);
-    fmi2Integer fidelity = (fmi2Integer)atol(argv[4]);   /* the Enumeration's value */
-
-    CHECK(setup(c, fmi2False, 0.0, 0.0, fmi2False, 0.0));
-    CHECK(enter(c));
-    CHECK(set_integer(c, &vr_fidelity, 1, &fidelity));
-    CHECK(exit_init(c));
-
-    const double h = 1e-3;
-    double speed, integral = 0.0;
-    CHECK(get_real(c, &vr_speed, 1, &speed));
-    for (int k = 0; k < steps; k++) {          /* test_fmu.controller, operation for operation */
-        double ref = k < 150 ? 100.0 : -60.0;
-        double err = ref - speed;
-        integral = integral + err * h;
-        double torque = 0.05 * err + 2.0 * integral;
-        torque = fmin(40.0, fmax(-40.0, torque));
-        fmi2Real u[2] = {torque, 3000.0};
-        CHECK(set_real(c, vr_in, 2, u));
-        CHECK(do_step(c, k * h, h, fmi2True));
-        CHECK(get_real(c, vr_out, n_out, y));
-        for (int i = 0; i < n_out; i++) printf(i ? " %.17g" : "%.17g", y[i]);
-        printf("\n");
-        CHECK(get_real(c, &vr_speed, 1, &speed));
-    }
-    CHECK(terminate(c));
-    free_instance(c);
-    fprintf(stderr, "freed\n");
-    fflush(stdout);
-    fflush(stderr);
-    /* pythonfmu 0.7's embedded interpreter can crash the process in its exit-time teardown,
-       after fmi2FreeInstance has returned (docs/fmu.md, "Non-Python hosts"): leave without it */
-    _Exit(0);
-}
-"""
+#: the host program (also run by tests/test_native_fmu.py and benchmarks/native_step_cost.py)
+C_HOST = (Path(__file__).resolve().parent / "fmi_c_host.c").read_text()
 
 
 def _libpython() -> Path | None:

@@ -1,0 +1,456 @@
+"""Build the native FMU ``<name>-native.fmu``: the kinematic and quasi-static levels in C.
+
+No Python in the FMU: the physics of :mod:`prsm_fmu.mechanics`, :mod:`prsm_fmu.models.slaved`
+and the Dormand-Prince 5(4) fallback of :mod:`prsm_fmu.steppers` translated into C
+(``fmu_build/native/*.c``), operation for operation, so that the outputs equal the Python
+FMU's to round-off (tests/test_native_fmu.py: 1e-12).
+
+What this module does:
+
+1. builds the Python FMU of the same mechanism (:func:`fmu_build.builder.build_fmu`) and reads
+   its modelDescription: the native FMU mirrors its variables (names, value references, types,
+   units, descriptions, start values, enumerations) generically, so a variable added there
+   appears here without a change to this module -- or the build stops naming what the C does
+   not know (an output or input), or the parameter is accepted only at its start value zero
+   (a parameter, e.g. a new friction term, that the C does not model: setting it refuses
+   initialization with a logged fmi2Error rather than being silently ignored);
+2. computes the geometry-derived constants with the Python package (contact points, normals,
+   slip Jacobians of both flanks, c_k, the carrier ratios ζ) and writes them, with the
+   Dormand-Prince tableau of :mod:`prsm_fmu.steppers.tableaux`, into ``prsm_constants.h`` as
+   exact (hexadecimal) double literals, and the variable table into ``prsm_variables.h``;
+3. marks the parameters the constants are computed from as structural: causality ``local``,
+   variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
+   ``parameter``, variability ``fixed`` (settable before ``exitInitializationMode``);
+4. compiles the sources with gcc (``-std=c99 -O2 -fPIC -shared -ffp-contract=off``, libm only)
+   into ``binaries/linux64``, packs the sources into ``sources/`` (listed in
+   ``<SourceFiles>``, with the FMI 2.0 headers fmpy ships) and validates the FMU.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+import shutil
+import subprocess
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+from xml.dom.minidom import parseString
+
+import prsm_fmu
+from prsm_fmu.mechanics import Mechanism
+from prsm_fmu.params import MechanismParams
+from prsm_fmu.steppers.tableaux import EXPLICIT_TABLEAUS
+
+from . import model_description
+from .builder import BuildError, build_fmu, validate
+
+__all__ = ["build_native", "native_name", "STRUCTURAL", "SOURCES", "COMPILE_FLAGS"]
+
+#: the C sources (fmu_build/native)
+SOURCE_DIR = Path(__file__).resolve().parent / "native"
+SOURCES = ("prsm_model.c", "prsm_fmi2.c")
+HEADERS = ("prsm_model.h",)
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+#: gcc flags of the Linux binary (no fused multiply-add: the Python model's rounding)
+COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
+
+#: per-stage parameters the contact geometry is computed from: constants of the native FMU
+STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
+              "flank_angle")
+
+#: parameters the C reads: name (per stage: field) -> allowed FMI types
+_STAGE_PARAMS = {"screw_mass": "Real", "nut_mass": "Real", "roller_mass": "Real",
+                 "carrier_mass": "Real", "screw_inertia": "Real", "roller_inertia": "Real",
+                 "carrier_inertia": "Real", "spline_radius": "Real", "bearing_radius": "Real",
+                 "n_rollers": "Integer", "carriers": "Integer"}
+_SCALAR_PARAMS = {"mu_screw_roller": ("Real",), "mu_spline": ("Real",),
+                  "mu_nut_screw": ("Real",), "slip_velocity_scale": ("Real",),
+                  "tolerance": ("Real",), "substeps": ("Integer",),
+                  "max_substeps": ("Integer",), "kinematic_efficiency": ("Real",),
+                  "initial_screw_speed": ("Real",), "initial_screw_angle": ("Real",),
+                  "fidelity": ("String", "Enumeration"), "stepper": ("String", "Enumeration"),
+                  # the dynamic level's start; no effect at the kinematic and quasi-static levels
+                  "initial_carrier_equilibrium": ("Boolean",)}
+_INPUTS = {"screw_torque": 0, "load_force": 1}
+_OUTPUTS = {"screw_speed": "Q_SCREW_SPEED", "screw_angle": "Q_SCREW_ANGLE",
+            "screw_acceleration": "Q_SCREW_ACCELERATION", "screw_torque": "Q_SCREW_TORQUE",
+            "rod_position": "Q_ROD_POSITION", "rod_velocity": "Q_ROD_VELOCITY",
+            "load_force": "Q_LOAD_FORCE", "efficiency": "Q_EFFICIENCY",
+            "friction_power": "Q_FRICTION_POWER", "input_power": "Q_INPUT_POWER",
+            "output_power": "Q_OUTPUT_POWER", "input_work": "Q_INPUT_WORK",
+            "output_work": "Q_OUTPUT_WORK", "friction_work": "Q_FRICTION_WORK",
+            "kinetic_energy": "Q_KINETIC_ENERGY"}
+_STAGE_OUTPUTS = {"contact_force": "Q_CONTACT_FORCE", "normal_force": "Q_NORMAL_FORCE",
+                  "driven_torque": "Q_DRIVEN_TORQUE", "spline_friction": "Q_SPLINE_FRICTION",
+                  "carrier_speed": "Q_CARRIER_SPEED",
+                  "carrier_speed_ratio": "Q_CARRIER_SPEED_RATIO"}
+_COUNTERS = {"step_rhs_calls": "C_RHS_CALLS", "step_substeps": "C_SUBSTEPS",
+             "step_fidelity": "C_FIDELITY"}
+_STAGE_NAME = re.compile(r"^stage\[(\d+)\]\.(\w+)$")
+_TYPE_CODE = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN",
+              "String": "T_STRING", "Enumeration": "T_ENUM"}
+
+
+def native_name(name: str) -> str:
+    """The FMI modelIdentifier of the native FMU built as ``name`` (``PRSM2`` -> ``PRSM2_native``)."""
+    return f"{name}_native"
+
+
+def _hex(v: float) -> str:
+    """Exact C99 literal of a double."""
+    v = float(v)
+    if not math.isfinite(v):
+        raise BuildError(f"constant {v!r} is not finite")
+    return v.hex()
+
+
+def _c_string(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def constants_header(params: MechanismParams) -> str:
+    """``prsm_constants.h``: geometry-derived constants of ``params`` and the DP5(4) tableau."""
+    mech = Mechanism(params, "equilibrium")
+    flanks, consts = [], []
+    for st, s in zip(params.stages, mech.stages):
+        flanks.append("    {" + ", ".join("{" + ", ".join(_hex(v) for v in fl.consts) + "}"
+                                             for fl in s.flanks) + "}")
+        values = (s.c, s.c_prev, s.zeta_geometric, s.zeta_ideal, s.spline_speed_factor,
+                  s.min_normal_z, (st.screw_radius + st.roller_radius) ** 2,
+                  float((st.screw_starts - 1) ** 2))
+        consts.append("    {" + ", ".join(_hex(v) for v in values) + "}")
+    _, a, b, _ = EXPLICIT_TABLEAUS[5]
+    rows = ["    {" + ", ".join(_hex(v) for v in (list(a[i]) + [0.0] * 5)[:5]) + "}"
+            for i in range(1, 6)]
+    b_used = [b[i] for i in (0, 2, 3, 4, 5)]
+    bhat = EXPLICIT_TABLEAUS[5][3]
+    e = [b[i] - bhat[i] for i in range(7) if i != 1]     # as steppers.tableaux._DP_E
+    sep = ",\n"
+    flanks_c, consts_c, rows_c = sep.join(flanks), sep.join(consts), sep.join(rows)
+    return f"""/* Generated by fmu_build.native from {params.name} ({params.source}). Do not edit.
+ * prsm-fmu {prsm_fmu.__version__}; values are exact (C99 hexadecimal literals). */
+#ifndef PRSM_CONSTANTS_H
+#define PRSM_CONSTANTS_H
+
+#define PRSM_N_STAGES {params.n_stages}
+
+/* per stage, flank "+" then "-": slip Jacobians a (x, y, z) and b (x, y), contact point (x, y),
+   axial normal n_z and [P x n]_z (prsm_fmu.mechanics._Flank.consts) */
+static const double PRSM_FLANKS[PRSM_N_STAGES][2][9] = {{
+{flanks_c}
+}};
+
+/* per stage: c_k, c_(k-1) [m/rad], zeta* (quasi-static), r_S/(r_S + r_N) (kinematic), lead of
+   screw k-1 / 2 pi [m/rad], min |n_z|, (r_S + r_R)^2 [m2], (n_S - 1)^2 */
+static const double PRSM_STAGE_CONSTS[PRSM_N_STAGES][8] = {{
+{consts_c}
+}};
+
+/* Dormand-Prince 5(4) (prsm_fmu.steppers.tableaux): a rows 2..6, b (stages 1, 3..6), b - b_hat */
+static const double PRSM_DP_A[5][5] = {{
+{rows_c}
+}};
+static const double PRSM_DP_B[5] = {{{", ".join(_hex(v) for v in b_used)}}};
+static const double PRSM_DP_E[6] = {{{", ".join(_hex(v) for v in e)}}};
+
+#endif
+"""
+
+
+class _Var:
+    def __init__(self, sv: ET.Element, enums: dict) -> None:
+        self.name = sv.get("name")
+        self.vr = int(sv.get("valueReference"))
+        self.causality = sv.get("causality", "local")
+        self.variability = sv.get("variability", "continuous")
+        typed = model_description._typed(sv)
+        self.type = typed.tag
+        self.start = typed.get("start")
+        self.items = enums.get(typed.get("declaredType")) if self.type == "Enumeration" else None
+
+    def value(self):
+        """The start value as a Python value of the variable's type."""
+        s = self.start
+        if self.type == "Real":
+            return float(s) if s is not None else 0.0
+        if self.type in ("Integer", "Enumeration"):
+            return int(s) if s is not None else 0
+        if self.type == "Boolean":
+            return s in ("true", "1")
+        return s or ""
+
+
+def _enumerations(root: ET.Element) -> dict:
+    out = {}
+    for st in root.iterfind("TypeDefinitions/SimpleType"):
+        enum = st.find("Enumeration")
+        if enum is not None:
+            out[st.get("name")] = [(int(i.get("value")), i.get("name")) for i in enum.iterfind("Item")]
+    return out
+
+
+def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: str) -> str:
+    """``prsm_variables.h``: the Python FMU's variables as C tables (module docstring, step 1).
+
+    Raises
+    ------
+    BuildError
+        For an input or output the C does not compute, a parameter of an unexpected type, or a
+        parameter the C does not model whose start value is not zero.
+    """
+    root = ET.fromstring(md)
+    enums = _enumerations(root)
+    variables = [_Var(sv, enums) for sv in root.find("ModelVariables")]
+    n = params.n_stages
+    pools = {"Real": [], "Integer": [], "Boolean": [], "String": []}   # start values
+    struct_real, struct_int = [], []
+    out_q, out_stage, counters = [], [], []
+    rows, unmodelled = [], []
+    index: dict[str, tuple[str, int, _Var]] = {}
+    inputs_start = [0.0, 0.0]
+    for v in variables:
+        m = _STAGE_NAME.match(v.name)
+        stage, field = (int(m.group(1)), m.group(2)) if m else (0, "")
+        if v.causality == "input":
+            if v.name not in _INPUTS or v.type != "Real":
+                raise BuildError(f"input {v.name!r} ({v.type}) is not one the native FMU reads")
+            i = _INPUTS[v.name]
+            inputs_start[i] = v.value()
+            rows.append((v, "K_INPUT", i))
+        elif v.causality == "output" and v.type == "Real":
+            q = _STAGE_OUTPUTS.get(field) if m else _OUTPUTS.get(v.name)
+            if q is None or (m and not 1 <= stage <= n):
+                raise BuildError(f"output {v.name!r} is not one the native FMU computes: "
+                                 "add it to prsm_fmi2.c and fmu_build/native.py")
+            rows.append((v, "K_OUTPUT", len(out_q)))
+            out_q.append(q)
+            out_stage.append(stage - 1 if m else 0)
+        elif v.causality == "output" and v.name in _COUNTERS and v.type == "Integer":
+            rows.append((v, "K_COUNTER", len(counters)))
+            counters.append(_COUNTERS[v.name])
+        elif v.causality == "parameter":
+            if m and field in STRUCTURAL:
+                value = getattr(params.stages[stage - 1], field)
+                pool = struct_real if v.type == "Real" else struct_int
+                rows.append((v, "K_STRUCTURAL", len(pool)))
+                pool.append(value)
+                continue
+            key = "Integer" if v.type == "Enumeration" else v.type
+            if key not in pools:
+                raise BuildError(f"parameter {v.name!r} has type {v.type}, which the native FMU "
+                                 "cannot hold")
+            rows.append((v, "K_PARAM", len(pools[key])))
+            index[v.name] = (key, len(pools[key]), v)
+            pools[key].append(v.value())
+            known = (_STAGE_PARAMS.get(field) == v.type if m
+                     else v.type in _SCALAR_PARAMS.get(v.name, ()))
+            if not known:
+                if (m and field in _STAGE_PARAMS) or v.name in _SCALAR_PARAMS:
+                    raise BuildError(f"parameter {v.name!r} has type {v.type}, not the one the "
+                                     "native FMU reads")
+                if v.value() not in (0, 0.0, False, ""):
+                    raise BuildError(
+                        f"parameter {v.name!r} = {v.value()!r} is not modelled by the native FMU "
+                        "and not zero in this preset: the native FMU would run without it; "
+                        "build the Python FMU instead, or model it in fmu_build/native")
+                unmodelled.append((key, len(pools[key]) - 1, v.name))
+        else:
+            raise BuildError(f"variable {v.name!r} ({v.causality}, {v.type}) is not one the native "
+                             "FMU knows")
+    missing = [f"stage[{k}].{f}" for k in range(1, n + 1) for f in _STAGE_PARAMS
+               if f"stage[{k}].{f}" not in index]
+    missing += [p for p in _SCALAR_PARAMS if p not in index]
+    if missing:
+        raise BuildError(f"the Python FMU has no parameter(s) {missing}: the native FMU needs them")
+
+    def arr(values, ctype, fmt, name, size_macro) -> str:
+        body = ", ".join(fmt(v) for v in values) if values else {"double": "0.0", "int": "0",
+                                                                 "const char *const": '""'}[ctype]
+        decl = ctype if ctype.startswith("const") else f"const {ctype}"
+        return f"#define {size_macro} {len(values)}\nstatic {decl} {name}[] = {{{body}}};\n"
+
+    def idx(name: str) -> int:
+        return index[name][1]
+
+    lines = [f"/* Generated by fmu_build.native from the modelDescription of the Python FMU "
+             f"{identifier.removesuffix('_native')}. Do not edit. */",
+             f"#define PRSM_MODEL_IDENTIFIER {_c_string(identifier)}",
+             f"#define PRSM_GUID {_c_string(guid)}",
+             f"#define PRSM_N_VARS {len(rows)}",
+             f"#define PRSM_MAX_VR {max(v.vr for v, _, _ in rows)}",
+             "static const prsm_var PRSM_VARS[PRSM_N_VARS] = {"]
+    lines += [f"    {{{v.vr}u, {_TYPE_CODE[v.type]}, {kind}, {i}, {_c_string(v.name)}}},"
+              for v, kind, i in rows]
+    lines.append("};")
+    by_vr = [-1] * (max(v.vr for v, _, _ in rows) + 1)
+    for i, (v, _, _) in enumerate(rows):
+        by_vr[v.vr] = i
+    lines.append(f"static const int VR_INDEX[PRSM_MAX_VR + 1] = {{{', '.join(map(str, by_vr))}}};")
+    lines.append(f"static const double INPUT_START[2] = {{{_hex(inputs_start[0])}, {_hex(inputs_start[1])}}};")
+    lines.append(arr(pools["Real"], "double", _hex, "PAR_REAL_START", "N_PAR_REAL"))
+    lines.append(arr(pools["Integer"], "int", str, "PAR_INT_START", "N_PAR_INT"))
+    lines.append(arr([int(b) for b in pools["Boolean"]], "int", str, "PAR_BOOL_START", "N_PAR_BOOL"))
+    lines.append(arr(pools["String"], "const char *const", _c_string, "PAR_STRING_START",
+                     "N_PAR_STRING"))
+    lines.append(arr(struct_real, "double", _hex, "STRUCT_REAL", "N_STRUCT_REAL"))
+    lines.append(arr(struct_int, "int", str, "STRUCT_INT", "N_STRUCT_INT"))
+    lines.append(arr(out_q, "int", str, "OUT_QUANTITY", "N_OUT_REAL"))
+    lines.append(f"static const int OUT_STAGE[] = {{{', '.join(map(str, out_stage)) or '0'}}};")
+    lines.append(arr(counters, "int", str, "COUNTER_QUANTITY", "N_COUNTERS"))
+    for f in _STAGE_PARAMS:
+        lines.append(f"static const int P_{f.upper()}[PRSM_N_STAGES] = "
+                     f"{{{', '.join(str(idx(f'stage[{k}].{f}')) for k in range(1, n + 1))}}};")
+    for p in _SCALAR_PARAMS:
+        lines.append(f"#define P_{p.upper()} {idx(p)}")
+    for p in ("fidelity", "stepper"):
+        v = index[p][2]
+        items = v.items or []
+        lines.append(f"#define P_{p.upper()}_TYPE {_TYPE_CODE[v.type]}")
+        lines.append(f"#define P_{p.upper()}_N_ITEMS {len(items)}")
+        body = ", ".join(f"{{{val}, {_c_string(nm)}}}" for val, nm in items) or '{0, ""}'
+        lines.append(f"static const prsm_enum_item P_{p.upper()}_ITEMS[] = {{{body}}};")
+    lines.append(f"#define N_UNMODELLED {len(unmodelled)}")
+    body = ", ".join(f"{{{_TYPE_CODE[t]}, {i}, {_c_string(nm)}}}" for t, i, nm in unmodelled)
+    lines.append(f"static const prsm_par_ref UNMODELLED[] = {{{body or '{0, 0, NULL}'}}};")
+    return "\n".join(lines) + "\n"
+
+
+def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
+    """The native FMU's modelDescription.xml: the Python FMU's with its own identity, the
+    structural parameters as constants and the sources listed (module docstring, step 3)."""
+    root = ET.fromstring(md)
+    for elem in root.iter():
+        if elem.text is not None and not elem.text.strip():
+            elem.text = None
+        if elem.tail is not None and not elem.tail.strip():
+            elem.tail = None
+    root.set("modelName", identifier)
+    root.set("guid", guid)
+    root.set("generationTool", f"prsm-fmu fmu_build --native {prsm_fmu.__version__}")
+    root.set("description", root.get("description", "") + "; native C FMU: kinematic and "
+             "quasi-static levels, contact geometry built in")
+    cs = root.find("CoSimulation")
+    for key, value in (("modelIdentifier", identifier), ("needsExecutionTool", "false"),
+                       ("canHandleVariableCommunicationStepSize", "true"),
+                       ("canBeInstantiatedOnlyOncePerProcess", "false"),
+                       ("canNotUseMemoryManagementFunctions", "true"),
+                       ("canGetAndSetFMUstate", "true"), ("canSerializeFMUstate", "true")):
+        cs.set(key, value)
+    for old in cs.findall("SourceFiles"):
+        cs.remove(old)
+    files = ET.SubElement(cs, "SourceFiles")
+    for s in SOURCES:
+        ET.SubElement(files, "File", name=s)
+    for sv in root.find("ModelVariables"):
+        m = _STAGE_NAME.match(sv.get("name"))
+        if sv.get("causality") == "parameter" and m and m.group(2) in STRUCTURAL:
+            sv.set("causality", "local")
+            sv.set("variability", "constant")
+            sv.attrib.pop("initial", None)
+    return parseString(ET.tostring(root, encoding="utf-8")).toprettyxml(indent="  ", encoding="UTF-8")
+
+
+def _fmi_headers() -> Path:
+    try:
+        import fmpy
+    except ImportError as exc:
+        raise BuildError(f"the FMI 2.0 headers come from fmpy ({exc}): pip install -e \".[fmu]\"") from None
+    found = sorted(Path(fmpy.__file__).parent.rglob("fmi2Functions.h"))
+    if not found:
+        raise BuildError("fmpy ships no fmi2Functions.h")
+    return found[0].parent
+
+
+def compile_library(src: Path, out: Path) -> None:
+    """Compile the sources in ``src`` into the shared library ``out`` with gcc."""
+    gcc = shutil.which("gcc")
+    if gcc is None:
+        raise BuildError("gcc is needed to build the native FMU's Linux binary (apt-get install gcc)")
+    cmd = [gcc, *COMPILE_FLAGS, "-Wall", f"-I{src}", *(str(src / s) for s in SOURCES),
+           "-o", str(out), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise BuildError(f"gcc failed:\n{proc.stderr}")
+
+
+def build_native(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",
+                 check: bool = True) -> Path:
+    """Build ``<dest>/<name>-native.fmu`` (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        Name of the Python FMU it mirrors (``PRSM2``); the modelIdentifier is ``<name>_native``.
+    params : MechanismParams
+        The mechanism (start values and the built-in geometry).
+    preset : str
+        Name of the parameter source.
+    dest : str or Path
+        Output directory.
+    check : bool
+        Validate with fmpy and the project's modelDescription rules.
+
+    Returns
+    -------
+    Path
+        The FMU file.
+    """
+    params = params.validate()
+    identifier = native_name(name)
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="prsm_native_") as tmp:
+        tmp = Path(tmp)
+        py_fmu = build_fmu(name, params, preset, tmp / "python", check=False)
+        with zipfile.ZipFile(py_fmu) as z:
+            md = z.read("modelDescription.xml")
+        src = tmp / "sources"
+        src.mkdir()
+        for f in SOURCES + HEADERS:
+            shutil.copy(SOURCE_DIR / f, src / f)
+        for f in FMI_HEADERS:
+            shutil.copy(_fmi_headers() / f, src / f)
+        constants = constants_header(params)
+        (src / "prsm_constants.h").write_text(constants, encoding="utf-8")
+        stable = re.sub(rb'(guid|generationDateAndTime|generationTool)="[^"]*"', b"", md)
+        digest = hashlib.sha256(stable + constants.encode()
+                                + b"".join((SOURCE_DIR / f).read_bytes() for f in SOURCES + HEADERS))
+        guid = str(uuid.uuid5(uuid.NAMESPACE_URL, "prsm-fmu-native:" + digest.hexdigest()))
+        (src / "prsm_variables.h").write_text(variables_header(md, params, identifier, guid),
+                                              encoding="utf-8")
+        (src / "README.txt").write_text(SOURCES_README.format(id=identifier), encoding="utf-8")
+        lib = tmp / "binaries" / "linux64" / f"{identifier}.so"
+        lib.parent.mkdir(parents=True)
+        compile_library(src, lib)
+        fmu = tmp / f"{name}-native.fmu"
+        with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr("modelDescription.xml", native_model_description(md, identifier, guid))
+            z.write(lib, f"binaries/linux64/{identifier}.so")
+            for f in sorted(src.iterdir()):
+                z.write(f, f"sources/{f.name}")
+        if check:
+            problems = validate(fmu)
+            if problems:
+                raise BuildError(f"{fmu.name} is not valid:\n  " + "\n  ".join(problems))
+        target = dest / fmu.name
+        shutil.move(str(fmu), target)
+    return target
+
+
+SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation, C99, libm only).
+
+Compile for another platform, e.g.
+
+  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_fmi2.c -o {id}.so -lm
+  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_fmi2.c -o {id}.dylib
+  Windows  cl /O2 /fp:precise /LD prsm_model.c prsm_fmi2.c /Fe{id}.dll
+
+and put the library under binaries/<platform>/ (linux64, darwin64, win64).  Keep fused
+multiply-add off (-ffp-contract=off; MSVC /fp:precise) and no fast-math: the results then equal
+the Python FMU's to round-off.  prsm_constants.h (geometry) and prsm_variables.h (variables)
+were generated from the preset by prsm-fmu's fmu_build.native: rebuild the FMU to change them.
+"""

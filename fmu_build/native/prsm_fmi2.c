@@ -1,0 +1,808 @@
+/* FMI 2.0 co-simulation interface of the native PRSM FMU (kinematic and quasi-static levels).
+ *
+ * The variable table (names, value references, types, start values) is the Python FMU's,
+ * generated into prsm_variables.h by fmu_build.native; the physics is prsm_model.c.
+ *
+ * What a host sees (docs/fmu.md, "The native FMU"):
+ *  - state machine: instantiated -> (setupExperiment) -> initialization mode -> stepping ->
+ *    terminated; a call outside its state is refused with fmi2Error and a logged message;
+ *  - parameters (causality parameter) can be set before exitInitializationMode; structural
+ *    parameters (geometry: causality local, variability constant) cannot be set at all;
+ *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
+ *    in initialization mode) a value out of range, fidelity dynamic or auto, a stepper other
+ *    than default/closed_form/explicit_adaptive, or a value of a parameter this code does not
+ *    model (it must stay at its start value, 0);
+ *  - doStep refuses with fmi2Discard (logged, state unchanged) a non-finite or non-positive
+ *    step, non-finite inputs or a failed integration; with fmi2Error a communication point that
+ *    is not the FMU's time;
+ *  - the FMU state holds everything that decides the next step (parameters, inputs, time,
+ *    state vector, inputs held, counters, stepper memory) and is checked whole when restored.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "prsm_model.h"
+
+enum { T_REAL, T_INTEGER, T_BOOLEAN, T_STRING, T_ENUM };
+enum { K_INPUT, K_OUTPUT, K_COUNTER, K_PARAM, K_STRUCTURAL };
+enum {
+    Q_SCREW_SPEED, Q_SCREW_ANGLE, Q_SCREW_ACCELERATION, Q_SCREW_TORQUE, Q_ROD_POSITION,
+    Q_ROD_VELOCITY, Q_LOAD_FORCE, Q_CONTACT_FORCE, Q_NORMAL_FORCE, Q_DRIVEN_TORQUE,
+    Q_SPLINE_FRICTION, Q_CARRIER_SPEED, Q_CARRIER_SPEED_RATIO, Q_EFFICIENCY, Q_FRICTION_POWER,
+    Q_INPUT_POWER, Q_OUTPUT_POWER, Q_INPUT_WORK, Q_OUTPUT_WORK, Q_FRICTION_WORK,
+    Q_KINETIC_ENERGY
+};
+enum { C_RHS_CALLS, C_SUBSTEPS, C_FIDELITY };
+
+typedef struct {
+    fmi2ValueReference vr;
+    int type, kind, index;
+    const char *name;
+} prsm_var;
+
+typedef struct {
+    int value;
+    const char *name;
+} prsm_enum_item;
+
+typedef struct {
+    int type, index;
+    const char *name;
+} prsm_par_ref;
+
+#define PRSM_STR_LEN 64
+
+#include "prsm_variables.h"
+
+enum { PH_INSTANTIATED, PH_INITIALIZATION, PH_STEPPING, PH_TERMINATED };
+static const char *const PHASE_NAMES[] = {"instantiated", "initialization mode", "stepping",
+                                          "terminated"};
+
+#define MAGIC "PRSMNAT1"
+
+/* everything an FMU state holds (also the serialized bytes) */
+typedef struct {
+    char magic[8];
+    char guid[64];
+    int n_stages;
+    int phase;
+    double par_real[N_PAR_REAL > 0 ? N_PAR_REAL : 1];
+    int par_int[N_PAR_INT > 0 ? N_PAR_INT : 1];
+    int par_bool[N_PAR_BOOL > 0 ? N_PAR_BOOL : 1];
+    char par_str[N_PAR_STRING > 0 ? N_PAR_STRING : 1][PRSM_STR_LEN];
+    double u[2];
+    double t;
+    double x[PRSM_NX];
+    double u_held[2];
+    int stats[3];
+    prsm_memory mem;
+} snapshot;
+
+typedef struct {
+    snapshot s;
+    prsm_model model;          /* valid in phases stepping and terminated */
+    double y[N_OUT_REAL > 0 ? N_OUT_REAL : 1];
+    int y_valid;
+    fmi2CallbackFunctions cb;
+    char name[256];
+    int logging_on;
+} component;
+
+/* ---- logging ----------------------------------------------------------------------------------- */
+static void log_msg(component *c, fmi2Status status, const char *fmt, ...) {
+    if (!c->cb.logger) return;
+    if (status == fmi2OK && !c->logging_on) return;
+    char raw[2048], esc[4200];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(raw, sizeof raw, fmt, ap);
+    va_end(ap);
+    size_t j = 0;       /* the logger's message is a format: a literal % is %% */
+    for (size_t i = 0; raw[i] && j + 2 < sizeof esc; i++) {
+        if (raw[i] == '%') esc[j++] = '%';
+        esc[j++] = raw[i];
+    }
+    esc[j] = 0;
+    const char *category = status == fmi2Error ? "logStatusError"
+                           : status == fmi2Discard ? "logStatusDiscard"
+                           : status == fmi2Warning ? "logStatusWarning" : "logAll";
+    c->cb.logger(c->cb.componentEnvironment, c->name, status, category, esc);
+}
+
+/* ---- parameters ------------------------------------------------------------------------------- */
+static const char *choice(const snapshot *s, int type, int index, const prsm_enum_item *items,
+                          int n_items) {
+    if (type == T_STRING) return s->par_str[index];
+    for (int i = 0; i < n_items; i++)
+        if (items[i].value == s->par_int[index]) return items[i].name;
+    return "";
+}
+
+static int level_code(const char *fidelity) {
+    if (!strcmp(fidelity, "quasi-static") || !strcmp(fidelity, "auto")) return 1;
+    if (!strcmp(fidelity, "dynamic")) return 2;
+    return 0;
+}
+
+/* the model's configuration from the parameters; 0, or -1 with the reason */
+static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len) {
+    memset(cfg, 0, sizeof *cfg);
+    for (int k = 0; k < PRSM_N_STAGES; k++) {
+        prsm_stage_values *v = &cfg->stage[k];
+        v->screw_mass = s->par_real[P_SCREW_MASS[k]];
+        v->nut_mass = s->par_real[P_NUT_MASS[k]];
+        v->roller_mass = s->par_real[P_ROLLER_MASS[k]];
+        v->carrier_mass = s->par_real[P_CARRIER_MASS[k]];
+        v->screw_inertia = s->par_real[P_SCREW_INERTIA[k]];
+        v->roller_inertia = s->par_real[P_ROLLER_INERTIA[k]];
+        v->carrier_inertia = s->par_real[P_CARRIER_INERTIA[k]];
+        v->spline_radius = s->par_real[P_SPLINE_RADIUS[k]];
+        v->bearing_radius = s->par_real[P_BEARING_RADIUS[k]];
+        v->n_rollers = s->par_int[P_N_ROLLERS[k]];
+        v->carriers = s->par_int[P_CARRIERS[k]];
+    }
+    cfg->mu_screw_roller = s->par_real[P_MU_SCREW_ROLLER];
+    cfg->mu_spline = s->par_real[P_MU_SPLINE];
+    cfg->mu_nut_screw = s->par_real[P_MU_NUT_SCREW];
+    cfg->slip_velocity_scale = s->par_real[P_SLIP_VELOCITY_SCALE];
+    cfg->tolerance = s->par_real[P_TOLERANCE];
+    cfg->substeps = s->par_int[P_SUBSTEPS];
+    cfg->max_substeps = s->par_int[P_MAX_SUBSTEPS];
+    cfg->kinematic_efficiency = s->par_real[P_KINEMATIC_EFFICIENCY];
+    /* parameters this code does not model: only their start value (zero: the term is absent) */
+    for (int i = 0; i < N_UNMODELLED; i++) {
+        const prsm_par_ref *p = &UNMODELLED[i];
+        int same = p->type == T_REAL ? s->par_real[p->index] == PAR_REAL_START[p->index]
+                   : p->type == T_BOOLEAN ? s->par_bool[p->index] == PAR_BOOL_START[p->index]
+                   : p->type == T_STRING ? !strcmp(s->par_str[p->index], PAR_STRING_START[p->index])
+                   : s->par_int[p->index] == PAR_INT_START[p->index];
+        if (!same) {
+            snprintf(msg, (size_t)len, "%s is not modelled by the native FMU: it must stay at its "
+                     "start value (the term is absent); use the Python FMU for it", p->name);
+            return -1;
+        }
+    }
+    const char *fid = choice(s, P_FIDELITY_TYPE, P_FIDELITY, P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
+    if (!strcmp(fid, "kinematic")) cfg->kinematic = 1;
+    else if (!strcmp(fid, "quasi-static")) cfg->kinematic = 0;
+    else if (!strcmp(fid, "dynamic") || !strcmp(fid, "auto")) {
+        snprintf(msg, (size_t)len, "fidelity = '%s' is not available in the native FMU: it runs "
+                 "kinematic and quasi-static only (use the Python FMU for dynamic and auto)", fid);
+        return -1;
+    } else {
+        snprintf(msg, (size_t)len, "fidelity = '%s' is not allowed: must be one of kinematic, "
+                 "quasi-static (native FMU)", fid);
+        return -1;
+    }
+    const char *st = choice(s, P_STEPPER_TYPE, P_STEPPER, P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
+    if (!strcmp(st, "default") || !strcmp(st, "closed_form")) cfg->closed_form = 1;
+    else if (!strcmp(st, "explicit_adaptive")) cfg->closed_form = 0;
+    else {
+        snprintf(msg, (size_t)len, "stepper = '%s' is not allowed in the native FMU: must be one of "
+                 "default, closed_form, explicit_adaptive", st);
+        return -1;
+    }
+    const char *names[2] = {"initial_screw_speed", "initial_screw_angle"};
+    double vals[2] = {s->par_real[P_INITIAL_SCREW_SPEED], s->par_real[P_INITIAL_SCREW_ANGLE]};
+    for (int i = 0; i < 2; i++)
+        if (!isfinite(vals[i])) {
+            snprintf(msg, (size_t)len, "%s = %.17g is out of range: must be finite", names[i], vals[i]);
+            return -1;
+        }
+    return 0;
+}
+
+static int build_model(const snapshot *s, prsm_model *m, char *msg, int len) {
+    prsm_config cfg;
+    if (configuration(s, &cfg, msg, len)) return -1;
+    return prsm_model_init(m, &cfg, msg, len);
+}
+
+static void set_starts(snapshot *s) {
+    memset(s, 0, sizeof *s);
+    memcpy(s->magic, MAGIC, 8);
+    snprintf(s->guid, sizeof s->guid, "%s", PRSM_GUID);
+    s->n_stages = PRSM_N_STAGES;
+    s->phase = PH_INSTANTIATED;
+    for (int i = 0; i < N_PAR_REAL; i++) s->par_real[i] = PAR_REAL_START[i];
+    for (int i = 0; i < N_PAR_INT; i++) s->par_int[i] = PAR_INT_START[i];
+    for (int i = 0; i < N_PAR_BOOL; i++) s->par_bool[i] = PAR_BOOL_START[i];
+    for (int i = 0; i < N_PAR_STRING; i++)
+        snprintf(s->par_str[i], PRSM_STR_LEN, "%s", PAR_STRING_START[i]);
+    s->u[0] = INPUT_START[0];
+    s->u[1] = INPUT_START[1];
+    const char *fid = choice(s, P_FIDELITY_TYPE, P_FIDELITY, P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
+    s->stats[2] = level_code(fid);
+}
+
+/* ---- outputs ------------------------------------------------------------------------------------ */
+static void compute_outputs(component *c) {
+    prsm_model preview;
+    prsm_model *m = &c->model;
+    const double *x = c->s.x, *u = c->s.u_held;
+    double x0[PRSM_NX];
+    if (c->s.phase < PH_STEPPING) {      /* before exitInitializationMode: the initial state */
+        char msg[600];
+        if (build_model(&c->s, &preview, msg, sizeof msg)) {
+            log_msg(c, fmi2Error, "outputs cannot be computed: %s", msg);
+            for (int i = 0; i < N_OUT_REAL; i++) c->y[i] = NAN;
+            return;
+        }
+        m = &preview;
+        prsm_initial_state(x0, c->s.par_real[P_INITIAL_SCREW_ANGLE],
+                           c->s.par_real[P_INITIAL_SCREW_SPEED]);
+        x = x0;
+        u = c->s.u;
+    }
+    prsm_outputs o;
+    prsm_outputs_at(m, x, u, &o);
+    double omega = x[1], load = u[1], c_out = m->c_out;
+    for (int i = 0; i < N_OUT_REAL; i++) {
+        int k = OUT_STAGE[i];
+        double v;
+        switch (OUT_QUANTITY[i]) {
+        case Q_SCREW_SPEED: v = omega; break;
+        case Q_SCREW_ANGLE: v = x[0]; break;
+        case Q_SCREW_ACCELERATION: v = o.alpha; break;
+        case Q_SCREW_TORQUE: v = o.motor; break;
+        case Q_ROD_POSITION: v = c_out * x[0]; break;
+        case Q_ROD_VELOCITY: v = c_out * omega; break;
+        case Q_LOAD_FORCE: v = load; break;
+        case Q_CONTACT_FORCE: v = o.contact_force[k]; break;
+        case Q_NORMAL_FORCE: v = o.normal_force[k]; break;
+        case Q_DRIVEN_TORQUE: v = o.driven_torque[k]; break;
+        case Q_SPLINE_FRICTION: v = o.spline_friction[k]; break;
+        case Q_CARRIER_SPEED: v = o.carrier_speed[k]; break;
+        case Q_CARRIER_SPEED_RATIO: v = o.carrier_speed_ratio[k]; break;
+        case Q_EFFICIENCY: v = o.efficiency; break;
+        case Q_FRICTION_POWER: v = o.friction_power; break;
+        case Q_INPUT_POWER: v = o.motor * omega; break;
+        case Q_OUTPUT_POWER: v = load * (c_out * omega); break;
+        case Q_INPUT_WORK: v = x[2]; break;
+        case Q_OUTPUT_WORK: v = x[3]; break;
+        case Q_FRICTION_WORK: v = x[4]; break;
+        default: v = o.kinetic_energy; break;
+        }
+        c->y[i] = v;
+    }
+    if (m == &c->model) c->y_valid = 1;
+}
+
+/* ---- variable access ------------------------------------------------------------------------------ */
+static const char *TYPE_NAMES[] = {"Real", "Integer", "Boolean", "String", "Enumeration"};
+
+static const prsm_var *lookup(component *c, fmi2ValueReference vr, int type, const char *action) {
+    if (vr > PRSM_MAX_VR || VR_INDEX[vr] < 0) {
+        log_msg(c, fmi2Error, "fmi2%s%s: value reference %u is no variable", action,
+                TYPE_NAMES[type], (unsigned)vr);
+        return NULL;
+    }
+    const prsm_var *v = &PRSM_VARS[VR_INDEX[vr]];
+    int ok = v->type == type || (type == T_INTEGER && v->type == T_ENUM);
+    if (!ok) {
+        log_msg(c, fmi2Error, "fmi2%s%s: value reference %u is '%s', of type %s, not %s", action,
+                TYPE_NAMES[type], (unsigned)vr, v->name, TYPE_NAMES[v->type], TYPE_NAMES[type]);
+        return NULL;
+    }
+    return v;
+}
+
+/* may variable v be set now? */
+static int settable(component *c, const prsm_var *v, const char *type) {
+    if (v->kind == K_INPUT) {
+        if (c->s.phase == PH_TERMINATED) {
+            log_msg(c, fmi2Error, "fmi2Set%s: input '%s' cannot be set after fmi2Terminate", type, v->name);
+            return 0;
+        }
+        return 1;
+    }
+    if (v->kind == K_PARAM) {
+        if (c->s.phase >= PH_STEPPING) {
+            log_msg(c, fmi2Error, "fmi2Set%s: '%s' is a fixed parameter: setting it after "
+                    "initialization is not allowed; the value is unchanged", type, v->name);
+            return 0;
+        }
+        return 1;
+    }
+    if (v->kind == K_STRUCTURAL) {
+        log_msg(c, fmi2Error, "fmi2Set%s: '%s' is structural in the native FMU (a constant: the "
+                "contact geometry is computed from it when the FMU is built); rebuild the FMU "
+                "(python -m fmu_build --native --preset ...) or use the Python FMU to change it",
+                type, v->name);
+        return 0;
+    }
+    log_msg(c, fmi2Error, "fmi2Set%s: '%s' is an output and cannot be set", type, v->name);
+    return 0;
+}
+
+#define COMPONENT_OR_ERROR(comp) \
+    component *c = (component *)(comp); \
+    if (!c) return fmi2Error
+
+fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = lookup(c, vr[i], T_REAL, "Get");
+        if (!v) return fmi2Error;
+        switch (v->kind) {
+        case K_INPUT: value[i] = c->s.u[v->index]; break;
+        case K_PARAM: value[i] = c->s.par_real[v->index]; break;
+        case K_STRUCTURAL: value[i] = STRUCT_REAL[v->index]; break;
+        default:
+            if (!c->y_valid) compute_outputs(c);
+            value[i] = c->y[v->index];
+        }
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = lookup(c, vr[i], T_INTEGER, "Get");
+        if (!v) return fmi2Error;
+        switch (v->kind) {
+        case K_PARAM: value[i] = c->s.par_int[v->index]; break;
+        case K_STRUCTURAL: value[i] = STRUCT_INT[v->index]; break;
+        case K_COUNTER: value[i] = c->s.stats[COUNTER_QUANTITY[v->index]]; break;
+        default: return fmi2Error;
+        }
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = lookup(c, vr[i], T_BOOLEAN, "Get");
+        if (!v) return fmi2Error;
+        value[i] = c->s.par_bool[v->index] ? fmi2True : fmi2False;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = lookup(c, vr[i], T_STRING, "Get");
+        if (!v) return fmi2Error;
+        value[i] = c->s.par_str[v->index];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {      /* all checked before any is set */
+        const prsm_var *v = lookup(c, vr[i], T_REAL, "Set");
+        if (!v || !settable(c, v, "Real")) return fmi2Error;
+    }
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = &PRSM_VARS[VR_INDEX[vr[i]]];
+        if (v->kind == K_INPUT) c->s.u[v->index] = value[i];
+        else c->s.par_real[v->index] = value[i];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = lookup(c, vr[i], T_INTEGER, "Set");
+        if (!v || !settable(c, v, "Integer")) return fmi2Error;
+    }
+    for (size_t i = 0; i < nvr; i++) c->s.par_int[PRSM_VARS[VR_INDEX[vr[i]]].index] = value[i];
+    if (c->s.phase < PH_STEPPING) {
+        const char *fid = choice(&c->s, P_FIDELITY_TYPE, P_FIDELITY, P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
+        c->s.stats[2] = level_code(fid);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = lookup(c, vr[i], T_BOOLEAN, "Set");
+        if (!v || !settable(c, v, "Boolean")) return fmi2Error;
+    }
+    for (size_t i = 0; i < nvr; i++) c->s.par_bool[PRSM_VARS[VR_INDEX[vr[i]]].index] = value[i] ? 1 : 0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+    COMPONENT_OR_ERROR(comp);
+    if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const prsm_var *v = lookup(c, vr[i], T_STRING, "Set");
+        if (!v || !settable(c, v, "String")) return fmi2Error;
+        if (!value[i] || strlen(value[i]) >= PRSM_STR_LEN) {
+            log_msg(c, fmi2Error, "fmi2SetString: the value of '%s' must be a string of at most %d "
+                    "characters", v->name, PRSM_STR_LEN - 1);
+            return fmi2Error;
+        }
+    }
+    for (size_t i = 0; i < nvr; i++)
+        snprintf(c->s.par_str[PRSM_VARS[VR_INDEX[vr[i]]].index], PRSM_STR_LEN, "%s", value[i]);
+    if (c->s.phase < PH_STEPPING) {
+        const char *fid = choice(&c->s, P_FIDELITY_TYPE, P_FIDELITY, P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
+        c->s.stats[2] = level_code(fid);
+    }
+    return fmi2OK;
+}
+
+/* ---- life cycle ------------------------------------------------------------------------------------ */
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]) {
+    COMPONENT_OR_ERROR(comp);
+    (void)n;
+    (void)categories;
+    c->logging_on = loggingOn ? 1 : 0;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn) {
+    (void)fmuResourceLocation;
+    (void)visible;
+    component tmp;
+    memset(&tmp, 0, sizeof tmp);
+    if (functions) tmp.cb = *functions;
+    snprintf(tmp.name, sizeof tmp.name, "%s", instanceName ? instanceName : "");
+    tmp.logging_on = loggingOn ? 1 : 0;
+    if (fmuType != fmi2CoSimulation) {
+        log_msg(&tmp, fmi2Error, "fmi2Instantiate: this FMU supports co-simulation only");
+        return NULL;
+    }
+    if (!fmuGUID || strcmp(fmuGUID, PRSM_GUID)) {
+        log_msg(&tmp, fmi2Error, "fmi2Instantiate: GUID '%s' is not this FMU's ('%s')",
+                fmuGUID ? fmuGUID : "(null)", PRSM_GUID);
+        return NULL;
+    }
+    component *c = (component *)calloc(1, sizeof *c);
+    if (!c) {
+        log_msg(&tmp, fmi2Error, "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    *c = tmp;
+    set_starts(&c->s);
+    return c;
+}
+
+void fmi2FreeInstance(fmi2Component comp) { free(comp); }
+
+static fmi2Status wrong_phase(component *c, const char *call) {
+    log_msg(c, fmi2Error, "%s is not allowed in %s", call, PHASE_NAMES[c->s.phase]);
+    return fmi2Error;
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+    COMPONENT_OR_ERROR(comp);
+    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    if (c->s.phase != PH_INSTANTIATED) return wrong_phase(c, "fmi2SetupExperiment");
+    if (!isfinite(startTime)) {
+        log_msg(c, fmi2Error, "fmi2SetupExperiment: startTime = %.17g s must be finite", startTime);
+        return fmi2Error;
+    }
+    c->s.t = startTime;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
+    COMPONENT_OR_ERROR(comp);
+    if (c->s.phase != PH_INSTANTIATED) return wrong_phase(c, "fmi2EnterInitializationMode");
+    c->s.phase = PH_INITIALIZATION;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
+    COMPONENT_OR_ERROR(comp);
+    if (c->s.phase != PH_INITIALIZATION) return wrong_phase(c, "fmi2ExitInitializationMode");
+    char msg[600];
+    if (build_model(&c->s, &c->model, msg, sizeof msg)) {
+        log_msg(c, fmi2Error, "initialization failed: %s", msg);
+        return fmi2Error;
+    }
+    prsm_initial_state(c->s.x, c->s.par_real[P_INITIAL_SCREW_ANGLE], c->s.par_real[P_INITIAL_SCREW_SPEED]);
+    c->s.u_held[0] = c->s.u[0];
+    c->s.u_held[1] = c->s.u[1];
+    c->s.stats[0] = c->s.stats[1] = 0;
+    c->s.stats[2] = c->model.kinematic ? 0 : 1;
+    memset(&c->s.mem, 0, sizeof c->s.mem);
+    c->y_valid = 0;
+    c->s.phase = PH_STEPPING;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component comp) {
+    COMPONENT_OR_ERROR(comp);
+    if (c->s.phase != PH_STEPPING) return wrong_phase(c, "fmi2Terminate");
+    c->s.phase = PH_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component comp) {
+    COMPONENT_OR_ERROR(comp);
+    set_starts(&c->s);
+    c->y_valid = 0;
+    return fmi2OK;
+}
+
+/* ---- stepping ---------------------------------------------------------------------------------------- */
+static fmi2Status refuse(component *c, const char *reason) {
+    log_msg(c, fmi2Discard, "doStep refused, state unchanged: %s", reason);
+    return fmi2Discard;
+}
+
+fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+    COMPONENT_OR_ERROR(comp);
+    (void)noSetFMUStatePriorToCurrentPoint;
+    char reason[900];
+    if (c->s.phase != PH_STEPPING)
+        return wrong_phase(c, c->s.phase == PH_TERMINATED ? "fmi2DoStep after fmi2Terminate"
+                                                          : "fmi2DoStep before fmi2ExitInitializationMode");
+    double u[2] = {c->s.u[0], c->s.u[1]};
+    if (!(0.0 < h && h < INFINITY)) {
+        snprintf(reason, sizeof reason, "communication step size = %.17g s is out of range: must be a finite number > 0", h);
+        return refuse(c, reason);
+    }
+    if (!(isfinite(u[0]) && isfinite(u[1]))) {
+        snprintf(reason, sizeof reason, "inputs screw_torque = %.17g N.m, load_force = %.17g N: every input must be finite", u[0], u[1]);
+        return refuse(c, reason);
+    }
+    if (!isfinite(t)) {
+        snprintf(reason, sizeof reason, "currentCommunicationPoint = %.17g s must be finite", t);
+        return refuse(c, reason);
+    }
+    /* hosts compute communication times their own way: a point within 1e-9 of the step (or of
+       the time) from the FMU's own time is the same point */
+    if (fabs(t - c->s.t) > 1e-9 * fmax(fabs(c->s.t), h)) {
+        log_msg(c, fmi2Error, "fmi2DoStep: currentCommunicationPoint = %.17g s is not the FMU's time "
+                "%.17g s (the end of the last step); restore an FMU state to step from elsewhere",
+                t, c->s.t);
+        return fmi2Error;
+    }
+    double x_new[PRSM_NX];
+    prsm_stats stats;
+    char msg[700];
+    if (prsm_advance(&c->model, &c->s.mem, t, c->s.x, u, h, x_new, &stats, msg, sizeof msg)) {
+        snprintf(reason, sizeof reason, "integration failed: %s", msg);
+        return refuse(c, reason);
+    }
+    memcpy(c->s.x, x_new, sizeof x_new);
+    c->s.t = t + h;
+    c->s.u_held[0] = u[0];
+    c->s.u_held[1] = u[1];
+    c->s.stats[0] = stats.rhs_calls;
+    c->s.stats[1] = stats.substeps;
+    c->y_valid = 0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component comp) {
+    COMPONENT_OR_ERROR(comp);
+    log_msg(c, fmi2Error, "fmi2CancelStep: doStep always completes synchronously");
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Status *value) {
+    COMPONENT_OR_ERROR(comp);
+    (void)s; (void)value;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Real *value) {
+    COMPONENT_OR_ERROR(comp);
+    if (s == fmi2LastSuccessfulTime && value) {
+        *value = c->s.t;
+        return fmi2OK;
+    }
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Integer *value) {
+    (void)comp; (void)s; (void)value;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
+    (void)comp; (void)s; (void)value;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component comp, const fmi2StatusKind s, fmi2String *value) {
+    (void)comp; (void)s; (void)value;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[]) {
+    COMPONENT_OR_ERROR(comp);
+    (void)vr; (void)nvr; (void)order; (void)value;
+    log_msg(c, fmi2Error, "fmi2SetRealInputDerivatives: inputs are held over a step (canInterpolateInputs = false)");
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[]) {
+    COMPONENT_OR_ERROR(comp);
+    (void)vr; (void)nvr; (void)order; (void)value;
+    log_msg(c, fmi2Error, "fmi2GetRealOutputDerivatives is not supported (maxOutputDerivativeOrder = 0)");
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueReference vUnknown_ref[],
+                                        size_t nUnknown, const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
+    COMPONENT_OR_ERROR(comp);
+    (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
+    log_msg(c, fmi2Error, "fmi2GetDirectionalDerivative is not supported");
+    return fmi2Error;
+}
+
+/* ---- FMU state ---------------------------------------------------------------------------------- */
+static int finite_all(const double *v, int n) {
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+/* the whole snapshot checked; builds the model it needs into m.  0, or -1 and the reason */
+static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) {
+    if (memcmp(s->magic, MAGIC, 8) || strncmp(s->guid, PRSM_GUID, sizeof s->guid)
+        || s->n_stages != PRSM_N_STAGES) {
+        snprintf(msg, (size_t)len, "not a state of this FMU (%s, GUID %s)", PRSM_MODEL_IDENTIFIER, PRSM_GUID);
+        return -1;
+    }
+    if (s->phase < PH_INSTANTIATED || s->phase > PH_TERMINATED) {
+        snprintf(msg, (size_t)len, "bad phase %d", s->phase);
+        return -1;
+    }
+    for (int i = 0; i < N_PAR_STRING; i++)
+        if (!memchr(s->par_str[i], 0, PRSM_STR_LEN)) {
+            snprintf(msg, (size_t)len, "a String parameter is not terminated");
+            return -1;
+        }
+    for (int i = 0; i < N_PAR_BOOL; i++)
+        if (s->par_bool[i] != 0 && s->par_bool[i] != 1) {
+            snprintf(msg, (size_t)len, "a Boolean parameter is neither true nor false");
+            return -1;
+        }
+    if (!isfinite(s->t)) {
+        snprintf(msg, (size_t)len, "time %.17g s is not finite", s->t);
+        return -1;
+    }
+    if (s->stats[0] < 0 || s->stats[1] < 0 || s->stats[2] < 0 || s->stats[2] > 2) {
+        snprintf(msg, (size_t)len, "bad step counters");
+        return -1;
+    }
+    const prsm_memory *mem = &s->mem;
+    if ((mem->has_h_prop != 0 && mem->has_h_prop != 1) || (mem->has_fsal != 0 && mem->has_fsal != 1)
+        || (mem->has_h_prop && !(mem->h_prop > 0.0 && mem->h_prop < INFINITY))
+        || (mem->has_fsal && !(isfinite(mem->fsal_t) && finite_all(mem->fsal_x, PRSM_NX)
+                               && finite_all(mem->fsal_u, 2) && finite_all(mem->fsal_f, PRSM_NX)))) {
+        snprintf(msg, (size_t)len, "bad stepper memory");
+        return -1;
+    }
+    if (s->phase >= PH_STEPPING) {
+        if (!finite_all(s->x, PRSM_NX) || !finite_all(s->u_held, 2)) {
+            snprintf(msg, (size_t)len, "state vector or held inputs not finite");
+            return -1;
+        }
+        char why[600];
+        if (build_model(s, m, why, sizeof why)) {
+            snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
+            return -1;
+        }
+        if (s->stats[2] != (m->kinematic ? 0 : 1)) {
+            snprintf(msg, (size_t)len, "step_fidelity %d does not match the fidelity parameter", s->stats[2]);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *state) {
+    COMPONENT_OR_ERROR(comp);
+    if (!state) return fmi2Error;
+    snapshot *s = (snapshot *)*state;
+    if (!s) s = (snapshot *)malloc(sizeof *s);
+    if (!s) {
+        log_msg(c, fmi2Error, "fmi2GetFMUstate: out of memory");
+        return fmi2Error;
+    }
+    memcpy(s, &c->s, sizeof *s);
+    *state = s;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
+    COMPONENT_OR_ERROR(comp);
+    if (!state) {
+        log_msg(c, fmi2Error, "fmi2SetFMUstate: no state");
+        return fmi2Error;
+    }
+    const snapshot *s = (const snapshot *)state;
+    char msg[800];
+    prsm_model *m = (prsm_model *)malloc(sizeof *m);
+    if (!m) return fmi2Error;
+    if (check_snapshot(s, m, msg, sizeof msg)) {
+        log_msg(c, fmi2Error, "fmi2SetFMUstate: the state cannot be restored, nothing changed: %s", msg);
+        free(m);
+        return fmi2Error;
+    }
+    memcpy(&c->s, s, sizeof c->s);
+    if (c->s.phase >= PH_STEPPING) c->model = *m;
+    free(m);
+    c->y_valid = 0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *state) {
+    (void)comp;
+    if (state) {
+        free(*state);
+        *state = NULL;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate state, size_t *size) {
+    COMPONENT_OR_ERROR(comp);
+    (void)state;
+    if (!size) return fmi2Error;
+    *size = sizeof(snapshot);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
+    COMPONENT_OR_ERROR(comp);
+    if (!state || !bytes || size < sizeof(snapshot)) {
+        log_msg(c, fmi2Error, "fmi2SerializeFMUstate: needs a state and %u bytes", (unsigned)sizeof(snapshot));
+        return fmi2Error;
+    }
+    memcpy(bytes, state, sizeof(snapshot));
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state) {
+    COMPONENT_OR_ERROR(comp);
+    char msg[800];
+    if (!bytes || !state || size != sizeof(snapshot)) {
+        log_msg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a serialized state of this "
+                "FMU (%u bytes, expected %u)", (unsigned)size, (unsigned)sizeof(snapshot));
+        return fmi2Error;
+    }
+    snapshot *s = (snapshot *)malloc(sizeof *s);
+    prsm_model *m = (prsm_model *)malloc(sizeof *m);
+    if (!s || !m) {
+        free(s);
+        free(m);
+        return fmi2Error;
+    }
+    memcpy(s, bytes, sizeof *s);
+    if (check_snapshot(s, m, msg, sizeof msg)) {
+        log_msg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state: %s", msg);
+        free(s);
+        free(m);
+        return fmi2Error;
+    }
+    free(m);
+    if (*state) free(*state);
+    *state = s;
+    return fmi2OK;
+}

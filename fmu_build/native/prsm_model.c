@@ -1,0 +1,789 @@
+/* The PRSM's kinematic and quasi-static levels in C (see prsm_model.h for what it mirrors).
+ *
+ * Every expression keeps the Python code's order of floating-point operations: the FMU's
+ * outputs then equal the Python FMU's to round-off.  Compile without value-changing
+ * optimisations (no -ffast-math) and without fused multiply-add contraction
+ * (-ffp-contract=off where the target has FMA, e.g. arm64), or results differ in the last bits.
+ */
+#include "prsm_model.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef __clang__
+#pragma STDC FP_CONTRACT OFF
+#endif
+
+#define NS PRSM_N_STAGES
+#define MAX_SIGN_ITERATIONS 8
+
+/* ---- friction.py ------------------------------------------------------------------------- */
+static double regularised_factor(double speed, double v_scale) {
+    if (speed >= v_scale) return 1.0 / speed;
+    return (2.0 - speed / v_scale) / v_scale;
+}
+
+static double regularised_sign(double v, double v_scale) {
+    return v * regularised_factor(fabs(v), v_scale);
+}
+
+/* ---- mechanics.py ------------------------------------------------------------------------- */
+typedef struct {
+    int fi;
+    double a0, a1;
+    const double *co;
+    double x0, x1, h0, h1, b0, b1, e, g, sm, sb;
+} rec_stage;
+
+typedef struct {
+    double m0, m1;
+    rec_stage s[NS];
+} sweep_rec;
+
+typedef struct {
+    int have[2 * NS];
+    double co[2 * NS][4];
+} coef_cache;
+
+/* Mechanism._coefficients */
+static void coefficients(const prsm_model *m, const prsm_flank *f, double omega, double wp,
+                         double *co) {
+    double sx = omega * f->ax + wp * f->bx;
+    double sy = omega * f->ay + wp * f->by;
+    double sz = omega * f->az;
+    double v2 = sx * sx + sy * sy + sz * sz;
+    double v = sqrt(v2);
+    double mphi = m->mu * (v >= m->v_eps ? 1.0 / v : regularised_factor(v, m->v_eps));
+    double q = 1.0 / (f->nz - mphi * sz);
+    co[0] = (f->pn - mphi * (f->px * sy - f->py * sx)) * q;
+    co[1] = -mphi * (sx * f->bx + sy * f->by) * q;
+    co[2] = mphi * v2 * q;
+    co[3] = q;
+}
+
+/* Mechanism._sweep */
+static void sweep(const prsm_model *m, double omega, const double *wps, double load, double ag,
+                  coef_cache *cache, sweep_rec *rec) {
+    double v_eps = m->v_eps;
+    double a0 = load, a1 = m->last_mass;
+    double mn0 = 0.0, mn1 = 0.0, hn0 = 0.0, hn1 = 0.0;
+    for (int k = m->n - 1; k >= 0; k--) {
+        const prsm_stage *s = &m->st[k];
+        int fi = a0 + a1 * ag >= 0.0 ? 0 : 1;
+        int ci = 2 * k + fi;
+        if (!cache->have[ci]) {
+            coefficients(m, &m->fl[k][fi], omega, wps[k], cache->co[ci]);
+            cache->have[ci] = 1;
+        }
+        const double *co = cache->co[ci];
+        double kappa = co[0];
+        double x0 = mn0 - kappa * a0;
+        double x1 = s->j_screw + mn1 - kappa * a1;
+        rec_stage *r = &rec->s[k];
+        if (k == 0) {
+            r->fi = fi; r->a0 = a0; r->a1 = a1; r->co = co; r->x0 = x0; r->x1 = x1;
+            r->h0 = r->h1 = r->b0 = r->b1 = r->e = r->g = 0.0;
+            r->sm = r->sb = 1.0;
+            rec->m0 = x0;
+            rec->m1 = x1;
+            return;
+        }
+        double y0 = a0 - hn0;
+        double y1 = a1 - hn1 + s->m_sc;
+        double e = 0.0, g, sm, sb, m0, m1, b0, b1;
+        if (s->e_spline != 0.0) {
+            double v = omega * s->spline_f;
+            e = (v >= v_eps ? s->e_spline : v <= -v_eps ? -s->e_spline
+                 : s->e_spline * regularised_sign(v, v_eps));
+        }
+        if (s->g_bearing != 0.0) {
+            g = s->g_bearing * regularised_sign(omega * s->bearing_f, v_eps);
+            sm = x0 + x1 * ag >= 0.0 ? 1.0 : -1.0;
+            sb = y0 + y1 * ag >= 0.0 ? 1.0 : -1.0;
+            m0 = m1 = b0 = b1 = 0.0;
+            for (int i = 0; i < 3; i++) {
+                double den = 1.0 - g * sb * e * sm;
+                m0 = (x0 + g * sb * y0) / den;
+                m1 = (x1 + g * sb * y1) / den;
+                b0 = y0 + e * sm * m0;
+                b1 = y1 + e * sm * m1;
+                double sm_new = m0 + m1 * ag >= 0.0 ? 1.0 : -1.0;
+                double sb_new = b0 + b1 * ag >= 0.0 ? 1.0 : -1.0;
+                if (sm_new == sm && sb_new == sb) break;
+                sm = sm_new;
+                sb = sb_new;
+            }
+        } else {
+            g = 0.0;
+            sb = 1.0;
+            m0 = x0;
+            m1 = x1;
+            sm = x0 + x1 * ag >= 0.0 ? 1.0 : -1.0;
+            b0 = y0 + e * sm * m0;
+            b1 = y1 + e * sm * m1;
+        }
+        double h0 = e * sm * m0, h1 = e * sm * m1;
+        r->fi = fi; r->a0 = a0; r->a1 = a1; r->co = co; r->x0 = m0; r->x1 = m1;
+        r->h0 = h0; r->h1 = h1; r->b0 = b0; r->b1 = b1; r->e = e; r->g = g; r->sm = sm; r->sb = sb;
+        a0 = b0;
+        a1 = b1 + s->mass_below;
+        mn0 = m0; mn1 = m1; hn0 = h0; hn1 = h1;
+    }
+}
+
+/* Mechanism._signs_hold */
+static int signs_hold(const prsm_model *m, const sweep_rec *rec, double alpha) {
+    for (int k = 0; k < m->n; k++) {
+        const rec_stage *r = &rec->s[k];
+        if ((r->a0 + r->a1 * alpha >= 0.0 ? 0 : 1) != r->fi) return 0;
+        if ((r->e != 0.0 || r->g != 0.0) && (r->x0 + r->x1 * alpha >= 0.0 ? 1.0 : -1.0) != r->sm)
+            return 0;
+        if (r->g != 0.0 && (r->b0 + r->b1 * alpha >= 0.0 ? 1.0 : -1.0) != r->sb) return 0;
+    }
+    return 1;
+}
+
+static int cmp_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y ? 1 : 0;
+}
+
+static double imbalance(const prsm_model *m, double omega, const double *wps, double load,
+                        double torque, double a, coef_cache *cache, sweep_rec *rec) {
+    sweep(m, omega, wps, load, a, cache, rec);
+    return rec->m0 + rec->m1 * a - torque;
+}
+
+/* Mechanism._bracket: returns alpha, fills rec, sets *consistent */
+static double bracket(const prsm_model *m, double omega, const double *wps, double load,
+                      double torque, const double *visited, int n_visited, coef_cache *cache,
+                      sweep_rec *rec, int *consistent) {
+    double samples[MAX_SIGN_ITERATIONS + 1 + 14], vals[MAX_SIGN_ITERATIONS + 1 + 14];
+    int n = 0;
+    for (int i = 0; i < n_visited; i++) samples[n++] = visited[i];
+    samples[n++] = 0.0;
+    for (int e = 0; e <= 12; e += 2) {
+        double p = pow(10.0, (double)e);
+        samples[n++] = -1.0 * p;
+        samples[n++] = 1.0 * p;
+    }
+    /* sorted(set(...)): keep the first of equal values, then sort */
+    int u = 0;
+    for (int i = 0; i < n; i++) {
+        int dup = 0;
+        for (int j = 0; j < u; j++)
+            if (samples[j] == samples[i]) { dup = 1; break; }
+        if (!dup) samples[u++] = samples[i];
+    }
+    n = u;
+    qsort(samples, (size_t)n, sizeof samples[0], cmp_double);
+    sweep_rec tmp;
+    for (int i = 0; i < n; i++) vals[i] = imbalance(m, omega, wps, load, torque, samples[i], cache, &tmp);
+    double roots[MAX_SIGN_ITERATIONS + 1 + 14];
+    int n_roots = 0;
+    for (int i = 0; i + 1 < n; i++) {
+        double a_lo = samples[i], g_lo = vals[i], a_hi = samples[i + 1], g_hi = vals[i + 1];
+        if (g_lo == 0.0) {
+            roots[n_roots++] = a_lo;
+        } else if ((g_lo < 0.0) != (g_hi < 0.0)) {
+            double lo = a_lo, hi = a_hi;
+            for (int it = 0; it < 200; it++) {
+                double mid = 0.5 * (lo + hi);
+                double gm = imbalance(m, omega, wps, load, torque, mid, cache, &tmp);
+                if ((gm < 0.0) == (g_lo < 0.0)) lo = mid;
+                else hi = mid;
+                if (hi - lo <= 1e-15 * fmax(1.0, fabs(mid))) break;
+            }
+            roots[n_roots++] = 0.5 * (lo + hi);
+        }
+    }
+    double a;
+    if (n_roots) {
+        a = roots[0];
+        for (int i = 1; i < n_roots; i++)
+            if (fabs(roots[i]) < fabs(a)) a = roots[i];
+        *consistent = 1;
+    } else {
+        int best = 0;
+        for (int i = 1; i < n; i++)
+            if (fabs(vals[i]) < fabs(vals[best])) best = i;
+        a = samples[best];
+        *consistent = 0;
+    }
+    imbalance(m, omega, wps, load, torque, a, cache, rec);
+    return a;
+}
+
+/* Mechanism._balance with a motor torque (torque drive) */
+static double balance(const prsm_model *m, double omega, const double *wps, double load,
+                      double torque, coef_cache *cache, sweep_rec *rec, int *consistent) {
+    double visited[MAX_SIGN_ITERATIONS];
+    int n_visited = 0;
+    double ag = 0.0;
+    for (int i = 0; i < MAX_SIGN_ITERATIONS; i++) {
+        sweep(m, omega, wps, load, ag, cache, rec);
+        double alpha = (torque - rec->m0) / rec->m1;
+        if (rec->m1 > 0.0 && signs_hold(m, rec, alpha)) {
+            *consistent = 1;
+            return alpha;
+        }
+        visited[n_visited++] = ag;
+        ag = alpha;
+    }
+    return bracket(m, omega, wps, load, torque, visited, n_visited, cache, rec, consistent);
+}
+
+/* Mechanism._rates: the friction power [W] */
+static double rates_power(const prsm_model *m, double omega, double alpha, const sweep_rec *rec) {
+    double p_fric = 0.0;
+    for (int k = 0; k < m->n; k++) {
+        const rec_stage *r = &rec->s[k];
+        double a = r->a0 + r->a1 * alpha;
+        p_fric += r->co[2] * a;
+        if (r->e != 0.0) p_fric += (r->h0 + r->h1 * alpha) * omega * m->st[k].spline_f;
+        if (r->g != 0.0) p_fric += r->g * r->sb * (r->b0 + r->b1 * alpha) * omega;
+    }
+    return p_fric;
+}
+
+static void carrier_speeds(const prsm_model *m, double omega, double *wps) {
+    for (int k = 0; k < NS; k++) wps[k] = m->st[k].zeta * omega;
+}
+
+/* KinematicModel._extra_loss_torque (0 for the quasi-static level) */
+static double extra_loss(const prsm_model *m, double omega, double load) {
+    if (m->loss_factor == 0.0) return 0.0;
+    return m->loss_factor * fabs(load) * regularised_sign(omega * m->c_out, m->v_eps);
+}
+
+/* Mechanism.solve/rates with slaved carriers: the carrier speeds, alpha and the sweep record
+ * (whose coefficients live in cache) for a torque on screw 1 */
+static double solve(const prsm_model *m, double omega, double load, double torque, double *wps,
+                    coef_cache *cache, sweep_rec *rec, int *consistent) {
+    memset(cache->have, 0, sizeof cache->have);
+    carrier_speeds(m, omega, wps);
+    return balance(m, omega, wps, load, torque, cache, rec, consistent);
+}
+
+/* Model.rhs, torque drive, slaved carriers */
+static void rhs(const prsm_model *m, const double *x, const double *u, double *dx) {
+    double load = u[1], omega = x[1];
+    double loss = m->kinematic ? extra_loss(m, omega, load) : 0.0;
+    double motor = u[0];
+    double wps[NS];
+    coef_cache cache;
+    sweep_rec rec;
+    int consistent;
+    double alpha = solve(m, omega, load, motor - loss, wps, &cache, &rec, &consistent);
+    double p_fric = consistent ? rates_power(m, omega, alpha, &rec) : NAN;
+    if (!consistent) alpha = NAN;
+    dx[0] = omega;
+    dx[1] = alpha;
+    dx[2] = motor * omega;
+    dx[3] = load * m->c_out * omega;
+    dx[4] = p_fric + loss * omega;
+}
+
+/* ---- models/slaved.py ---------------------------------------------------------------------- */
+static const prsm_law *law_of(prsm_model *m, double sign_w, double sign_load) {
+    prsm_law *law = &m->law[sign_w > 0.0][sign_load > 0.0];
+    if (law->state) return law->state == 1 ? law : NULL;
+    double omega = sign_w * 100.0 * m->band_speed;
+    double load = sign_load * 1000.0;
+    double loss = extra_loss(m, omega, load);
+    double wps[NS];
+    coef_cache cache;
+    sweep_rec rec;
+    memset(cache.have, 0, sizeof cache.have);
+    carrier_speeds(m, omega, wps);
+    sweep(m, omega, wps, load, 0.0, &cache, &rec);
+    if (!signs_hold(m, &rec, 0.0)) {
+        law->state = 2;
+        return NULL;
+    }
+    int n = 0;
+    for (int k = 0; k < m->n; k++) {
+        const rec_stage *r = &rec.s[k];
+        law->c_load[n] = r->a0 / load; law->c_alpha[n] = r->a1; law->positive[n++] = r->fi == 0;
+        if (r->e != 0.0 || r->g != 0.0) {
+            law->c_load[n] = r->x0 / load; law->c_alpha[n] = r->x1;
+            law->positive[n++] = r->sm > 0.0;
+            law->c_load[n] = r->b0 / load; law->c_alpha[n] = r->b1;
+            law->positive[n++] = r->sb > 0.0;
+        }
+    }
+    law->n_checks = n;
+    double a_ref = 1000.0;
+    double p_0 = rates_power(m, omega, 0.0, &rec);
+    double p_a = rates_power(m, omega, a_ref, &rec);
+    double speed = fabs(omega);
+    law->q_alpha = (p_a - p_0) / a_ref / speed;
+    law->q_load = p_0 / load / speed;
+    law->loss_per_load = fabs(loss / load);
+    law->k_load = rec.m0 / load;
+    law->k_alpha = rec.m1;
+    law->state = 1;
+    return law;
+}
+
+/* SlavedAdvance.advance: 1 and y if exact, 0 if the caller must integrate */
+static int slaved_advance(prsm_model *m, const double *x, const double *u, double h, double *y) {
+    double w0 = x[1], load = u[1], band = m->band_speed;
+    if (fabs(w0) < band || load == 0.0) return 0;
+    double sign_w = w0 > 0.0 ? 1.0 : -1.0;
+    const prsm_law *law = law_of(m, sign_w, load > 0.0 ? 1.0 : -1.0);
+    if (!law) return 0;
+    double loss = law->loss_per_load * fabs(load) * sign_w;
+    double torque = u[0];
+    double alpha = (torque - loss - law->k_load * load) / law->k_alpha;
+    for (int i = 0; i < law->n_checks; i++)
+        if ((law->c_load[i] * load + law->c_alpha[i] * alpha >= 0.0) != law->positive[i]) return 0;
+    double w1 = w0 + alpha * h;
+    if (w1 * sign_w < band) return 0;
+    double dth = (w0 + 0.5 * alpha * h) * h;
+    double p_per_speed = law->q_load * load + law->q_alpha * alpha + law->loss_per_load * fabs(load);
+    y[0] = x[0] + dth;
+    y[1] = w1;
+    y[2] = x[2] + torque * dth;
+    y[3] = x[3] + load * m->c_out * dth;
+    y[4] = x[4] + p_per_speed * sign_w * dth;
+    return 1;
+}
+
+/* ---- model set-up ------------------------------------------------------------------------- */
+static int fail(char *msg, int len, const char *text) {
+    snprintf(msg, (size_t)len, "%s", text);
+    return -1;
+}
+
+static int check_positive(const char *name, int k, double v, char *msg, int len) {
+    if (isfinite(v) && v > 0.0) return 0;
+    if (k) snprintf(msg, (size_t)len, "stage[%d].%s = %.17g is out of range: must be a finite number > 0", k, name, v);
+    else snprintf(msg, (size_t)len, "%s = %.17g is out of range: must be a finite number > 0", name, v);
+    return -1;
+}
+
+static int check_non_negative(const char *name, int k, double v, char *msg, int len) {
+    if (isfinite(v) && v >= 0.0) return 0;
+    snprintf(msg, (size_t)len, "stage[%d].%s = %.17g is out of range: must be a finite number >= 0", k, name, v);
+    return -1;
+}
+
+static int check_int(const char *name, int k, int v, int minimum, char *msg, int len) {
+    if (v >= minimum) return 0;
+    snprintf(msg, (size_t)len, "stage[%d].%s = %d is out of range: must be an integer >= %d", k, name, v, minimum);
+    return -1;
+}
+
+static int check_friction(const char *name, double v, char *msg, int len) {
+    if (isfinite(v) && v >= 0.0 && v < 1.0) return 0;
+    snprintf(msg, (size_t)len, "%s = %.17g is out of range: friction coefficient must be in [0, 1)", name, v);
+    return -1;
+}
+
+/* MechanismParams.validate (the tunable fields), configure's solver checks, Mechanism.__init__,
+ * KinematicModel.__init__, SlavedAdvance.__init__ and the stepper's options */
+int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
+    memset(m, 0, sizeof *m);
+    m->n = NS;
+    for (int k = 0; k < NS; k++) {
+        const prsm_stage_values *v = &cfg->stage[k];
+        int K = k + 1;
+        if (check_positive("screw_mass", K, v->screw_mass, msg, len) ||
+            check_positive("nut_mass", K, v->nut_mass, msg, len) ||
+            check_positive("roller_mass", K, v->roller_mass, msg, len) ||
+            check_positive("carrier_mass", K, v->carrier_mass, msg, len) ||
+            check_positive("screw_inertia", K, v->screw_inertia, msg, len) ||
+            check_positive("roller_inertia", K, v->roller_inertia, msg, len) ||
+            check_positive("carrier_inertia", K, v->carrier_inertia, msg, len) ||
+            check_non_negative("spline_radius", K, v->spline_radius, msg, len) ||
+            check_non_negative("bearing_radius", K, v->bearing_radius, msg, len) ||
+            check_int("n_rollers", K, v->n_rollers, 1, msg, len) ||
+            check_int("carriers", K, v->carriers, 1, msg, len))
+            return -1;
+        if (K > 1 && cfg->mu_spline > 0.0 && check_positive("spline_radius", K, v->spline_radius, msg, len))
+            return -1;
+        if (K < NS && cfg->mu_nut_screw > 0.0 && check_positive("bearing_radius", K, v->bearing_radius, msg, len))
+            return -1;
+    }
+    if (check_friction("mu_screw_roller", cfg->mu_screw_roller, msg, len) ||
+        check_friction("mu_spline", cfg->mu_spline, msg, len) ||
+        check_friction("mu_nut_screw", cfg->mu_nut_screw, msg, len) ||
+        check_positive("slip_velocity_scale", 0, cfg->slip_velocity_scale, msg, len))
+        return -1;
+    double tol = cfg->tolerance;
+    if (!(isfinite(tol) && 0.0 < tol && tol < 1.0)) {
+        snprintf(msg, (size_t)len, "tolerance = %.17g is out of range: must be in (0, 1)", tol);
+        return -1;
+    }
+    if (cfg->substeps < 0) {
+        snprintf(msg, (size_t)len, "substeps = %d is out of range: must be an integer >= 0 (0: adaptive)", cfg->substeps);
+        return -1;
+    }
+    if (cfg->max_substeps < 1) {
+        snprintf(msg, (size_t)len, "max_substeps = %d is out of range: must be an integer >= 1", cfg->max_substeps);
+        return -1;
+    }
+    double eff = cfg->kinematic_efficiency;
+    if (!(isfinite(eff) && 0.0 < eff && eff <= 1.0)) {
+        snprintf(msg, (size_t)len, "kinematic_efficiency = %.17g is out of range: must be in (0, 1]", eff);
+        return -1;
+    }
+
+    m->kinematic = cfg->kinematic;
+    m->mu = m->kinematic ? 0.0 : cfg->mu_screw_roller;
+    m->v_eps = cfg->slip_velocity_scale;
+    double limit = INFINITY;
+    for (int k = 0; k < NS; k++) {
+        const prsm_stage_values *v = &cfg->stage[k];
+        const double *sc = PRSM_STAGE_CONSTS[k];
+        prsm_stage *s = &m->st[k];
+        s->n_rollers = (double)v->n_rollers;
+        s->c = sc[0];
+        s->c_prev = sc[1];
+        s->m_assembly = v->nut_mass + (double)v->n_rollers * v->roller_mass
+                        + (double)v->carriers * v->carrier_mass;
+        s->m_screw = k > 0 ? v->screw_mass : 0.0;
+        s->j_screw = v->screw_inertia;
+        s->j_carrier = (double)v->carriers * v->carrier_inertia
+                       + (double)v->n_rollers * v->roller_inertia * sc[7]
+                       + (double)v->n_rollers * v->roller_mass * sc[6];
+        s->e_spline = (k > 0 && cfg->mu_spline > 0.0) ? cfg->mu_spline / v->spline_radius : 0.0;
+        s->g_bearing = (k > 0 && cfg->mu_nut_screw > 0.0)
+                       ? cfg->mu_nut_screw * cfg->stage[k - 1].bearing_radius : 0.0;
+        s->spline_f = sc[4];
+        s->bearing_f = k > 0 ? cfg->stage[k - 1].bearing_radius : 0.0;
+        for (int f = 0; f < 2; f++) {
+            const double *c = PRSM_FLANKS[k][f];
+            prsm_flank *fl = &m->fl[k][f];
+            fl->ax = c[0]; fl->ay = c[1]; fl->az = c[2]; fl->bx = c[3]; fl->by = c[4];
+            fl->px = c[5]; fl->py = c[6]; fl->nz = c[7]; fl->pn = c[8];
+        }
+        if (m->kinematic) {
+            s->e_spline = 0.0;
+            s->g_bearing = 0.0;
+        }
+        if (sc[5] < limit) limit = sc[5];
+    }
+    if (m->mu >= limit) {
+        snprintf(msg, (size_t)len, "mu_screw_roller = %.17g is out of range for this geometry: must be "
+                 "< %.4f (the axial part of the contact normal); above it the thread self-locks "
+                 "and the rigid model has no solution", m->mu, limit);
+        return -1;
+    }
+    m->c_out = m->st[NS - 1].c;
+    for (int k = 0; k < NS; k++) {
+        prsm_stage *s = &m->st[k];
+        double z = m->kinematic ? PRSM_STAGE_CONSTS[k][3] : PRSM_STAGE_CONSTS[k][2];
+        s->zeta = z;
+        s->j_screw = s->j_screw + s->j_carrier * z * z;
+    }
+    for (int k = 0; k < NS; k++) {
+        prsm_stage *s = &m->st[k];
+        s->m_sc = s->m_screw * s->c_prev;
+        s->mass_below = k > 0 ? m->st[k - 1].m_assembly * m->st[k - 1].c : 0.0;
+    }
+    m->last_mass = m->st[NS - 1].m_assembly * m->st[NS - 1].c;
+    double j = 0.0;
+    for (int k = 0; k < NS; k++) {
+        const prsm_stage *s = &m->st[k];
+        j += s->j_screw + s->m_assembly * s->c * s->c + s->m_screw * s->c_prev * s->c_prev;
+    }
+    m->equivalent_inertia = j;
+    m->loss_factor = m->kinematic ? (1.0 / eff - 1.0) * m->c_out : 0.0;
+    /* SlavedAdvance.__init__: the slowest sliding speed per unit screw speed */
+    double fmin_ = INFINITY;
+    int first = 1;
+    for (int k = 0; k < NS; k++) {
+        const prsm_stage *s = &m->st[k];
+        double z = s->zeta;
+        for (int f = 0; f < 2; f++) {
+            const prsm_flank *fl = &m->fl[k][f];
+            double dx = fl->ax + z * fl->bx, dy = fl->ay + z * fl->by, dz = fl->az;
+            double v = sqrt(dx * dx + dy * dy + dz * dz);
+            if (first || v < fmin_) fmin_ = v;
+            first = 0;
+        }
+        if (s->e_spline != 0.0 && s->spline_f < fmin_) fmin_ = s->spline_f;
+        if (s->g_bearing != 0.0 && s->bearing_f < fmin_) fmin_ = s->bearing_f;
+    }
+    if (m->loss_factor != 0.0 && m->c_out < fmin_) fmin_ = m->c_out;
+    m->band_speed = m->v_eps / fmin_;
+    /* stepper: ClosedForm or ExplicitAdaptive (order 5), tuned_stepper_options */
+    m->closed_form = cfg->closed_form;
+    m->rtol = tol;
+    m->atol = 1e-2 * tol;
+    m->h_min = 1e-14;
+    m->safety = 0.9;
+    m->fac_min = 0.2;
+    m->fac_max = 5.0;
+    m->max_substeps = cfg->max_substeps;
+    m->fixed_substeps = cfg->substeps;
+    return 0;
+}
+
+void prsm_initial_state(double x[PRSM_NX], double screw_angle, double screw_speed) {
+    x[0] = screw_angle;
+    x[1] = screw_speed;
+    x[2] = x[3] = x[4] = 0.0;
+}
+
+/* ---- models/base.Model.outputs --------------------------------------------------------------- */
+static double efficiency(double p_in, double p_out) {
+    if (p_in > 0.0 && p_out >= 0.0) return p_out / p_in;
+    if (p_in < 0.0 && p_out < 0.0) return p_in / p_out;
+    return 0.0;
+}
+
+void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX], const double u[2], prsm_outputs *y) {
+    double omega = x[1], load = u[1];
+    double loss = extra_loss(m, omega, load);
+    double motor = u[0];
+    double wps[NS];
+    coef_cache cache;
+    sweep_rec rec;
+    int consistent;
+    double alpha = solve(m, omega, load, u[0] - loss, wps, &cache, &rec, &consistent);
+    /* Mechanism._assemble(detail=True) */
+    double motor_sol = rec.m0 + rec.m1 * alpha;
+    double p_fric = 0.0;
+    for (int k = 0; k < m->n; k++) {
+        const rec_stage *r = &rec.s[k];
+        const prsm_stage *s = &m->st[k];
+        double a = r->a0 + r->a1 * alpha;
+        double pk = r->co[2] * a;
+        if (k > 0) {
+            double hk = r->h0 + r->h1 * alpha;
+            double b = r->b0 + r->b1 * alpha;
+            pk += hk * omega * s->spline_f;
+            pk += r->g * r->sb * b * omega;
+        }
+        p_fric += pk;
+        double f_normal = a * r->co[3] / s->n_rollers;
+        y->normal_force[k] = f_normal;
+        y->contact_force[k] = f_normal * m->fl[k][r->fi].nz;
+        y->driven_torque[k] = k == 0 ? motor : r->x0 + r->x1 * alpha;
+        y->spline_friction[k] = k == 0 ? 0.0 : r->h0 + r->h1 * alpha;
+        y->carrier_speed[k] = wps[k];
+        y->carrier_speed_ratio[k] = omega != 0.0 ? wps[k] / omega : 0.0;
+    }
+    (void)motor_sol;
+    double v_rod = m->c_out * omega;
+    double p_in = motor * omega, p_out = load * v_rod;
+    y->alpha = alpha;
+    y->motor = motor;
+    y->loss = loss;
+    y->efficiency = efficiency(p_in, p_out);
+    y->friction_power = p_fric + loss * omega;
+    y->kinetic_energy = 0.5 * m->equivalent_inertia * omega * omega;
+}
+
+/* ---- steppers/explicit.py: Dormand-Prince 5(4) with step-size control ------------------------ */
+static int finite_sum(const double *v, int n) {
+    double s = 0.0;
+    for (int i = 0; i < n; i++) s += v[i];
+    return s - s == 0.0;
+}
+
+static double err_factor(const prsm_model *m, double err) {
+    if (err == 0.0) return m->fac_max;
+    if (!(err < INFINITY)) return m->fac_min;
+    return fmin(m->fac_max, fmax(m->fac_min, m->safety * pow(err, -1.0 / 5.0)));
+}
+
+/* Python's min/max of two floats (the first unless the second is strictly smaller/larger) */
+static double pmin(double a, double b) { return b < a ? b : a; }
+static double pmax(double a, double b) { return b > a ? b : a; }
+
+/* one trial step: xn, k7 = f(xn), err; returns 0, or nonzero if a value is not finite */
+static int trial_dp5(const prsm_model *m, const double *x, const double *k1, double hs,
+                     const double *u, double *xn, double *k7, double *err) {
+    const double (*A)[5] = PRSM_DP_A;
+    double k2[PRSM_NX], k3[PRSM_NX], k4[PRSM_NX], k5[PRSM_NX], k6[PRSM_NX], z[PRSM_NX];
+    double h21 = hs * A[0][0];
+    for (int i = 0; i < PRSM_NX; i++) z[i] = x[i] + h21 * k1[i];
+    rhs(m, z, u, k2);
+    double h31 = hs * A[1][0], h32 = hs * A[1][1];
+    for (int i = 0; i < PRSM_NX; i++) z[i] = x[i] + h31 * k1[i] + h32 * k2[i];
+    rhs(m, z, u, k3);
+    double h41 = hs * A[2][0], h42 = hs * A[2][1], h43 = hs * A[2][2];
+    for (int i = 0; i < PRSM_NX; i++) z[i] = x[i] + h41 * k1[i] + h42 * k2[i] + h43 * k3[i];
+    rhs(m, z, u, k4);
+    double h51 = hs * A[3][0], h52 = hs * A[3][1], h53 = hs * A[3][2], h54 = hs * A[3][3];
+    for (int i = 0; i < PRSM_NX; i++)
+        z[i] = x[i] + h51 * k1[i] + h52 * k2[i] + h53 * k3[i] + h54 * k4[i];
+    rhs(m, z, u, k5);
+    double h61 = hs * A[4][0], h62 = hs * A[4][1], h63 = hs * A[4][2], h64 = hs * A[4][3],
+           h65 = hs * A[4][4];
+    for (int i = 0; i < PRSM_NX; i++)
+        z[i] = x[i] + h61 * k1[i] + h62 * k2[i] + h63 * k3[i] + h64 * k4[i] + h65 * k5[i];
+    rhs(m, z, u, k6);
+    double g1 = hs * PRSM_DP_B[0], g3 = hs * PRSM_DP_B[1], g4 = hs * PRSM_DP_B[2],
+           g5 = hs * PRSM_DP_B[3], g6 = hs * PRSM_DP_B[4];
+    for (int i = 0; i < PRSM_NX; i++)
+        xn[i] = x[i] + g1 * k1[i] + g3 * k3[i] + g4 * k4[i] + g5 * k5[i] + g6 * k6[i];
+    rhs(m, xn, u, k7);
+    double e1 = hs * PRSM_DP_E[0], e3 = hs * PRSM_DP_E[1], e4 = hs * PRSM_DP_E[2],
+           e5 = hs * PRSM_DP_E[3], e6 = hs * PRSM_DP_E[4], e7 = hs * PRSM_DP_E[5];
+    double sq = 0.0;
+    for (int i = 0; i < PRSM_NX; i++) {
+        double d = (e1 * k1[i] + e3 * k3[i] + e4 * k4[i] + e5 * k5[i] + e6 * k6[i] + e7 * k7[i])
+                   / (m->atol + m->rtol * pmax(fabs(x[i]), fabs(xn[i])));
+        sq += pow(d, 2.0);
+    }
+    *err = sqrt(sq / (double)PRSM_NX);
+    int ok = finite_sum(k2, PRSM_NX) && finite_sum(k3, PRSM_NX) && finite_sum(k4, PRSM_NX) &&
+             finite_sum(k5, PRSM_NX) && finite_sum(k6, PRSM_NX) && finite_sum(k7, PRSM_NX) &&
+             finite_sum(xn, PRSM_NX) && isfinite(*err);
+    return !ok;
+}
+
+static void start_norms(const prsm_model *m, const double *x, const double *f0, double *w,
+                        double *d0, double *d1) {
+    double s0 = 0.0, s1 = 0.0;
+    for (int i = 0; i < PRSM_NX; i++) w[i] = m->atol + m->rtol * fabs(x[i]);
+    for (int i = 0; i < PRSM_NX; i++) s0 += pow(x[i] / w[i], 2.0);
+    for (int i = 0; i < PRSM_NX; i++) s1 += pow(f0[i] / w[i], 2.0);
+    *d0 = sqrt(s0 / (double)PRSM_NX);
+    *d1 = sqrt(s1 / (double)PRSM_NX);
+}
+
+/* ExplicitAdaptive._starting_step */
+static double starting_step(const prsm_model *m, const double *x, const double *k1,
+                            const double *u, double h, prsm_stats *stats) {
+    double w[PRSM_NX], d0, d1, z[PRSM_NX], f1[PRSM_NX];
+    start_norms(m, x, k1, w, &d0, &d1);
+    if (!(d1 > 1e-5)) return h;
+    double h0 = pmin(h, d0 >= 1e-5 ? 0.01 * d0 / d1 : 1e-6);
+    for (int i = 0; i < PRSM_NX; i++) z[i] = x[i] + h0 * k1[i];
+    rhs(m, z, u, f1);
+    stats->rhs_calls += 1;
+    double s = 0.0;
+    for (int i = 0; i < PRSM_NX; i++) s += pow((f1[i] - k1[i]) / w[i], 2.0);
+    double d2 = sqrt(s / (double)PRSM_NX) / h0;
+    double dm = pmax(d1, d2);
+    if (!isfinite(dm)) return pmin(h, h0);
+    double h1 = dm > 1e-15 ? pow(0.01 / dm, 1.0 / 6.0) : pmax(1e-6, 1e-3 * h0);
+    return pmin(pmin(h, 100.0 * h0), h1);
+}
+
+static int step_fail(char *msg, int len, const char *what, double t, double hs, double t0, double h) {
+    snprintf(msg, (size_t)len, "explicit_adaptive: %s at t = %.17g s with internal step %.17g s "
+             "(advance from t = %.17g s over h = %.17g s)", what, t, hs, t0, h);
+    return -1;
+}
+
+/* ExplicitAdaptive.advance */
+static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const double *x,
+                            const double *u, double h, double *y, prsm_stats *stats, char *msg,
+                            int len) {
+    double k1[PRSM_NX], yn[PRSM_NX], kn[PRSM_NX], err;
+    double h_or = mem->has_h_prop ? mem->h_prop : h;
+    /* _first_stage: the last advance's FSAL stage when this one starts where it ended */
+    int reuse = 0;
+    if (mem->has_fsal && mem->fsal_u[0] == u[0] && mem->fsal_u[1] == u[1]
+        && fabs(t - mem->fsal_t) <= 4e-16 * pmax(fabs(t), h)) {
+        reuse = 1;
+        for (int i = 0; i < PRSM_NX; i++)
+            if (mem->fsal_x[i] != x[i]) reuse = 0;
+    }
+    if (reuse) {
+        memcpy(k1, mem->fsal_f, sizeof k1);
+    } else {
+        rhs(m, x, u, k1);
+        stats->rhs_calls += 1;
+    }
+    if (!finite_sum(k1, PRSM_NX))
+        return step_fail(msg, len, "non-finite value (or wrong length) in stage 1 (rhs at the start point)",
+                         t, h_or, t, h);
+    memcpy(y, x, sizeof yn);
+    if (m->fixed_substeps) {
+        int n_sub = m->fixed_substeps;
+        double hs = h / n_sub;
+        for (int i = 0; i < n_sub; i++) {
+            double ti = t + i * hs;
+            int bad = trial_dp5(m, y, k1, hs, u, yn, kn, &err);
+            stats->rhs_calls += 6;
+            if (bad) return step_fail(msg, len, "non-finite value in a stage or the result", ti, hs, t, h);
+            memcpy(y, yn, sizeof yn);
+            memcpy(k1, kn, sizeof kn);
+        }
+        stats->substeps = n_sub;
+    } else {
+        double hs = mem->has_h_prop ? mem->h_prop : starting_step(m, x, k1, u, h, stats);
+        double tau = 0.0;
+        int attempts = 0, just_rejected = 0;
+        for (;;) {
+            double rem = h - tau;
+            int last = hs * 1.05 >= rem;
+            double h_step = last ? rem : hs;
+            attempts += 1;
+            if (attempts > m->max_substeps) {
+                char what[128];
+                snprintf(what, sizeof what, "more than max_substeps = %d internal steps (accepted + rejected)",
+                         m->max_substeps);
+                return step_fail(msg, len, what, t + tau, h_step, t, h);
+            }
+            double ti = t + tau;
+            int bad = trial_dp5(m, y, k1, h_step, u, yn, kn, &err);
+            stats->rhs_calls += 6;
+            if (bad) err = INFINITY;
+            if (err <= 1.0) {
+                stats->substeps += 1;
+                double fac = err_factor(m, err);
+                if (just_rejected && fac > 1.0) fac = 1.0;
+                double h_new = h_step * fac;
+                memcpy(y, yn, sizeof yn);
+                memcpy(k1, kn, sizeof kn);
+                just_rejected = 0;
+                if (last) {
+                    if (h_new >= h_step) h_new = pmax(h_new, hs);
+                    mem->has_h_prop = 1;
+                    mem->h_prop = h_new;
+                    break;
+                }
+                tau += h_step;
+                hs = h_new;
+            } else {
+                just_rejected = 1;
+                hs = h_step * err_factor(m, err);
+                if (hs < m->h_min) {
+                    char what[160];
+                    if (bad) snprintf(what, sizeof what, "step size %.17g s below h_min = %.17g s after rejection (non-finite value in a stage)", hs, m->h_min);
+                    else snprintf(what, sizeof what, "step size %.17g s below h_min = %.17g s after rejection (error norm %.3g > 1)", hs, m->h_min, err);
+                    return step_fail(msg, len, what, ti, h_step, t, h);
+                }
+            }
+        }
+    }
+    mem->has_fsal = 1;
+    mem->fsal_t = t + h;
+    memcpy(mem->fsal_x, y, sizeof mem->fsal_x);
+    mem->fsal_u[0] = u[0];
+    mem->fsal_u[1] = u[1];
+    memcpy(mem->fsal_f, k1, sizeof mem->fsal_f);
+    return 0;
+}
+
+/* ClosedForm.advance (or ExplicitAdaptive alone); memory changes only on success */
+int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_NX],
+                 const double u[2], double h, double x_new[PRSM_NX], prsm_stats *stats,
+                 char *msg, int len) {
+    stats->rhs_calls = 0;
+    stats->substeps = 0;
+    if (m->closed_form && slaved_advance(m, x, u, h, x_new)) {
+        if (!finite_sum(x_new, PRSM_NX))
+            return fail(msg, len, "closed_form: non-finite value in the closed-form step");
+        stats->rhs_calls = 1;
+        stats->substeps = 1;
+        return 0;
+    }
+    prsm_memory trial = *mem;
+    double y[PRSM_NX];
+    if (explicit_advance(m, &trial, t, x, u, h, y, stats, msg, len)) return -1;
+    *mem = trial;
+    memcpy(x_new, y, sizeof y);
+    return 0;
+}

@@ -1,0 +1,328 @@
+"""The native FMU (``python -m fmu_build --native``): one source of truth with the Python FMU.
+
+The native FMUs are built once per session in a child process (as the Python FMUs are,
+tests/test_fmu.py).  Expected values are the Python FMU's outputs on the same inputs (the C
+translation must add nothing: 1e-12 of each output's largest magnitude, DESIGN.md §5), FMI's
+rules for refused calls, and the FMU's own outputs before a refused call or a saved state.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+import pytest
+
+fmpy = pytest.importorskip("fmpy")
+pytest.importorskip("pythonfmu")
+
+from fmpy import read_model_description  # noqa: E402
+from fmpy.validation import validate_fmu  # noqa: E402
+
+from test_fmu import OK, DISCARD, Host, built_fmus, max_relative_difference, subprocess_env  # noqa: E402
+from test_fmu_c_host import STEPS as HOST_STEPS, c_host  # noqa: E402,F401 - fixture
+
+NATIVE = ("PRSM1", "PRSM2")
+ERROR = 3
+H = 1e-3
+#: the per-stage parameters the contact geometry is computed from (structural in the native FMU)
+GEOMETRY = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
+            "flank_angle")
+
+
+@functools.cache
+def built_native() -> dict[str, Path]:
+    """Build PRSM1/PRSM2-native.fmu once per test process, in a child process."""
+    dest = Path(tempfile.mkdtemp(prefix="prsm_native_"))
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", "--native", *NATIVE, "--dest",
+                           str(dest)], env=subprocess_env(), capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, f"python -m fmu_build --native failed:\n{proc.stdout}\n{proc.stderr}"
+    return {n: dest / f"{n}-native.fmu" for n in NATIVE}
+
+
+@pytest.fixture(scope="module")
+def native() -> dict[str, Path]:
+    if sys.platform != "linux":
+        pytest.skip("the native FMU is built here for Linux only")
+    return built_native()
+
+
+def native_host(name: str = "PRSM2", **kw) -> Host:
+    return Host(name, path=built_native()[name], **kw)
+
+
+def loop(host: Host, n: int, load: float, names, k0: int = 0, state=(0.0, None)):
+    """The PI speed loop of test_fmu.controller (reference 100 -> -60 rad/s at step 150) with
+    load ``load`` [N]; outputs ``names`` after each step and the loop's (integral, speed)."""
+    integral, speed = state
+    if speed is None:
+        speed = host.get_real(["screw_speed"])[0]
+    vr_in = [host.vars["screw_torque"].valueReference, host.vars["load_force"].valueReference]
+    rows = []
+    for k in range(k0, k0 + n):
+        ref = 100.0 if k < 150 else -60.0
+        err = ref - speed
+        integral = integral + err * H
+        torque = min(40.0, max(-40.0, 0.05 * err + 2.0 * integral))
+        host.fmu.setReal(vr_in, [torque, load])
+        assert host.step(k * H) == OK, host.messages
+        rows.append(host.get(names))
+        speed = host.get_real(["screw_speed"])[0]
+    return rows, (integral, speed)
+
+
+def all_outputs(host: Host) -> list[str]:
+    return [v.name for v in host.md.modelVariables if v.causality == "output"]
+
+
+# ---- the modelDescription -----------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", NATIVE)
+def test_model_description_mirrors_the_python_fmu_and_validates(native, name):
+    fmu = native[name]
+    assert validate_fmu(str(fmu)) == []
+    md, py = read_model_description(str(fmu)), read_model_description(str(built_fmus()[name]))
+    assert md.coSimulation.modelIdentifier == f"{name}_native" and md.guid != py.guid
+    assert not md.coSimulation.needsExecutionTool
+    assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+    assert len(md.modelVariables) == len(py.modelVariables)
+    for v, p in zip(md.modelVariables, py.modelVariables):
+        assert (v.name, v.valueReference, v.type, v.unit, v.description, v.start) == \
+               (p.name, p.valueReference, p.type, p.unit, p.description, p.start)
+        structural = p.causality == "parameter" and v.name.split(".")[-1] in GEOMETRY
+        expected = ("local", "constant") if structural else (p.causality, p.variability)
+        assert (v.causality, v.variability) == expected, v.name
+    with zipfile.ZipFile(fmu) as z:
+        names = set(z.namelist())
+        listed = [f.get("name") for f in ET.fromstring(z.read("modelDescription.xml"))
+                  .iterfind("CoSimulation/SourceFiles/File")]
+        assert listed and all(f"sources/{f}" in names for f in listed)
+        so = z.read(f"binaries/linux64/{name}_native.so")
+        assert not any(n.startswith("resources/") for n in names)      # no Python inside
+    lib = Path(tempfile.mkdtemp()) / "lib.so"
+    lib.write_bytes(so)
+    if shutil.which("readelf"):
+        dyn = subprocess.run(["readelf", "-d", str(lib)], capture_output=True, text=True).stdout
+        needed = {line.split("[")[1].split("]")[0] for line in dyn.splitlines() if "(NEEDED)" in line}
+        assert needed <= {"libc.so.6", "libm.so.6"}, needed
+
+
+# ---- one source of truth ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("fidelity,load", [("quasi-static", 3000.0), ("quasi-static", -3000.0),
+                                           ("kinematic", 3000.0)])
+def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, load):
+    start = {"fidelity": fidelity}
+    if fidelity == "kinematic":
+        start["kinematic_efficiency"] = 0.85
+    runs = []
+    for host in (Host("PRSM2", start=start), native_host(start=start)):
+        try:
+            names = all_outputs(host)
+            runs.append(loop(host, 400, load, names)[0])
+        finally:
+            host.free()
+    py, nat = runs
+    assert max_relative_difference(nat, py) <= 1e-12
+    i_speed, i_calls = names.index("screw_speed"), names.index("step_rhs_calls")
+    speeds = [r[i_speed] for r in py]
+    assert min(speeds) < -50.0 < 90.0 < max(speeds)              # it reversed
+    assert max(r[i_calls] for r in py) > 1                        # the band's numerical steps ran
+    assert [r[i_calls] for r in nat] == [r[i_calls] for r in py]  # ... the same ones
+
+
+def test_random_states_both_flanks_both_load_directions_equal_python_fmu(native):
+    rnd = random.Random(16)
+    flank_signs = set()
+    for case in range(10):
+        fidelity = ("quasi-static", "kinematic")[case % 2]
+        speed0 = rnd.choice([rnd.uniform(-0.05, 0.05), rnd.uniform(-150.0, 150.0)])
+        start = {"fidelity": fidelity, "initial_screw_speed": speed0,
+                 "initial_screw_angle": rnd.uniform(-10.0, 10.0),
+                 "mu_screw_roller": rnd.uniform(0.02, 0.15), "mu_spline": rnd.uniform(0.0, 0.3),
+                 "kinematic_efficiency": rnd.uniform(0.6, 1.0)}
+        inputs = [(rnd.uniform(-30.0, 30.0), rnd.choice([-1.0, 1.0]) * rnd.uniform(0.0, 8000.0))
+                  for _ in range(25)]
+        runs = []
+        for host in (Host("PRSM2", start=start), native_host(start=start)):
+            try:
+                names = all_outputs(host)
+                vr_in = [host.vars["screw_torque"].valueReference,
+                         host.vars["load_force"].valueReference]
+                rows = []
+                for k, u in enumerate(inputs):
+                    host.fmu.setReal(vr_in, list(u))
+                    assert host.step(k * H) == OK, host.messages
+                    rows.append(host.get(names))
+                runs.append(rows)
+            finally:
+                host.free()
+        assert max_relative_difference(runs[1], runs[0]) <= 1e-12, (case, start)
+        i = names.index("stage[2].contact_force")
+        flank_signs |= {r[i] > 0.0 for r in runs[0]}
+    assert flank_signs == {True, False}          # both flanks carried the load
+
+
+# ---- refusals and the state machine ------------------------------------------------------------
+
+def _last(host: Host) -> str:
+    return host.messages[-1][1] if host.messages else ""
+
+
+def test_refused_calls_are_logged_and_change_nothing(native):
+    from fmpy.fmi1 import FMICallException
+
+    host = native_host(initialize=False)
+    try:
+        assert host.step(0.0) == ERROR and "before fmi2ExitInitializationMode" in _last(host)
+        host.fmu.exitInitializationMode()
+        names = all_outputs(host)
+        loop(host, 20, 3000.0, names)
+        before = host.state_bytes()
+        y0 = host.get(names)
+        vr_t = host.vars["screw_torque"].valueReference
+        torque = host.get_real(["screw_torque"])
+        host.fmu.setReal([vr_t], [float("nan")])
+        assert host.step(20 * H) == DISCARD and "screw_torque" in _last(host)
+        host.fmu.setReal([vr_t], [1.0])
+        assert host.step(20 * H, 0.0) == DISCARD and "step size" in _last(host)
+        assert host.step(21 * H) == ERROR and "currentCommunicationPoint" in _last(host)
+        for call in (lambda: host.fmu.getInteger([host.vars["screw_speed"].valueReference]),
+                     lambda: host.fmu.setReal([host.vars["screw_speed"].valueReference], [1.0]),
+                     lambda: host.fmu.setReal([host.vars["stage[1].screw_lead"].valueReference], [0.02]),
+                     lambda: host.fmu.setReal([host.vars["mu_screw_roller"].valueReference], [0.1])):
+            with pytest.raises(FMICallException) as exc:
+                call()
+            assert exc.value.status == ERROR and host.messages[-1][0] == ERROR
+        assert "Real" in host.messages[-4][1] and "structural" in host.messages[-2][1]
+        host.fmu.setReal([vr_t], torque)           # the input as it was: the state is too
+        assert host.get(names) == y0 and host.state_bytes() == before
+        host.fmu.terminate()
+        assert host.step(20 * H) == ERROR and "after fmi2Terminate" in _last(host)
+        host.fmu.freeInstance()
+    except BaseException:
+        host.free()
+        raise
+
+
+@pytest.mark.parametrize("start,word", [({"fidelity": "dynamic"}, "fidelity"),
+                                        ({"stepper": "rosenbrock"}, "stepper"),
+                                        ({"mu_screw_roller": 0.9}, "mu_screw_roller"),
+                                        ({"stage[2].nut_mass": -1.0}, "stage[2].nut_mass")])
+def test_initialization_refuses_what_it_does_not_run(native, start, word):
+    from fmpy.fmi1 import FMICallException
+
+    host = native_host(start=start, initialize=False)
+    with pytest.raises(FMICallException) as exc:
+        host.fmu.exitInitializationMode()
+    assert exc.value.status == ERROR
+    assert word in _last(host) and _last(host).startswith("initialization failed")
+    host.fmu.freeInstance()
+
+
+def test_generator_pins_unmodelled_parameters_to_zero_and_refuses_unknown_outputs(native):
+    from fmu_build import BuildError
+    from fmu_build.native import variables_header
+    from prsm_fmu import presets
+
+    with zipfile.ZipFile(built_fmus()["PRSM2"]) as z:
+        md = z.read("modelDescription.xml")
+    params = presets.load("seed000_two_stage")
+
+    def with_variable(name: str, causality: str, start: str | None) -> bytes:
+        root = ET.fromstring(md)
+        mv = root.find("ModelVariables")
+        sv = ET.SubElement(mv, "ScalarVariable", name=name, valueReference="999",
+                           causality=causality, variability="fixed" if start else "continuous",
+                           description="x")
+        ET.SubElement(sv, "Real", {"start": start} if start else {})
+        return ET.tostring(root)
+
+    header = variables_header(with_variable("mu_viscous", "parameter", "0.0"), params, "X", "g")
+    assert '#define N_UNMODELLED 1' in header and '"mu_viscous"' in header
+    with pytest.raises(BuildError, match="mu_viscous"):
+        variables_header(with_variable("mu_viscous", "parameter", "0.1"), params, "X", "g")
+    with pytest.raises(BuildError, match="viscous_torque"):
+        variables_header(with_variable("viscous_torque", "output", None), params, "X", "g")
+
+
+# ---- FMU state -------------------------------------------------------------------------------------
+
+def test_fmu_state_round_trip_is_bit_exact_and_checked_whole(native):
+    from fmpy.fmi1 import FMICallException
+
+    a = native_host()
+    b = native_host()
+    try:
+        names = all_outputs(a)
+        _, lp = loop(a, 140, 3000.0, names)              # state saved before the reversal
+        state = a.fmu.getFMUstate()
+        data = bytes(a.fmu.serializeFMUstate(state))
+        ref, _ = loop(a, 60, 3000.0, names, k0=140, state=lp)
+        a.fmu.setFMUstate(state)                         # rewind the same instance
+        again, _ = loop(a, 60, 3000.0, names, k0=140, state=lp)
+        b.fmu.setFMUstate(b.fmu.deSerializeFMUstate(data))   # another instance, from bytes
+        other, _ = loop(b, 60, 3000.0, names, k0=140, state=lp)
+        assert again == ref and other == ref
+        bad = bytearray(data)
+        bad[0] ^= 0xFF
+        for junk in (bytes(bad), data[:-8]):
+            before = b.state_bytes()
+            with pytest.raises(FMICallException):
+                b.fmu.deSerializeFMUstate(junk)
+            assert b.messages[-1][0] == ERROR and b.state_bytes() == before
+        a.fmu.freeFMUstate(state)
+    finally:
+        a.free()
+        b.free()
+
+
+# ---- a host without Python --------------------------------------------------------------------------
+
+def test_c_host_runs_the_native_fmu_without_python_equal_to_python_fmu(native, c_host):
+    from test_fmu import run_fmu
+    from test_fmu_c_host import OUTPUTS
+
+    ref = Host("PRSM2", start={"fidelity": "quasi-static"})
+    try:
+        expected = run_fmu(ref, HOST_STEPS, OUTPUTS)
+    finally:
+        ref.free()
+    nat = native_host(initialize=False)
+    vr = {n: v.valueReference for n, v in nat.vars.items()}
+    guid = nat.md.guid
+    nat.fmu.freeInstance()
+    from test_fmu import unzipped_path
+
+    unzip = unzipped_path(built_native()["PRSM2"])
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "LD_"))}
+    args = [str(c_host), str(unzip / "binaries" / "linux64" / "PRSM2_native.so"),
+            (unzip / "resources").as_uri(), guid, "1", str(HOST_STEPS),  # fidelity 1: quasi-static
+            str(vr["screw_torque"]), str(vr["load_force"]), str(vr["fidelity"]),
+            str(vr["screw_speed"])] + [str(vr[n]) for n in OUTPUTS]
+    proc = subprocess.run(args, env=env, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = [[float(v) for v in line.split()] for line in proc.stdout.splitlines()]
+    assert len(got) == HOST_STEPS
+    assert max_relative_difference(got, expected) <= 1e-12
+    assert min(r[0] for r in got) < -50.0 < 90.0 < max(r[0] for r in got)   # it did reverse
+
+
+# ---- the regression suite and the actuator loop ---------------------------------------------------
+
+def test_regression_case_at_quasi_static_passes_with_the_native_fmu(native):
+    from prsm_fmu.regress import core
+
+    (result,) = core.check(built_native()["PRSM2"], core.DEFAULT_DIR,
+                           cases=["startup_seed000_quasi-static"])
+    assert result.passed, result.error or [r for r in result.results if not r.passed]
+    assert len(result.results) >= 10          # every stored output was compared
