@@ -83,13 +83,21 @@ _OUTPUTS = {"screw_speed": "Q_SCREW_SPEED", "screw_angle": "Q_SCREW_ANGLE",
             "friction_power": "Q_FRICTION_POWER", "input_power": "Q_INPUT_POWER",
             "output_power": "Q_OUTPUT_POWER", "input_work": "Q_INPUT_WORK",
             "output_work": "Q_OUTPUT_WORK", "friction_work": "Q_FRICTION_WORK",
-            "kinetic_energy": "Q_KINETIC_ENERGY"}
+            "kinetic_energy": "Q_KINETIC_ENERGY",
+            "friction_power_coulomb": "Q_FRICTION_POWER_COULOMB",
+            "friction_power_viscous": "Q_FRICTION_POWER_VISCOUS",
+            "friction_power_differential": "Q_FRICTION_POWER_DIFFERENTIAL",
+            "friction_power_joints": "Q_FRICTION_POWER_JOINTS",
+            "screw_friction_torque": "Q_SCREW_FRICTION_TORQUE",
+            "overall_efficiency": "Q_OVERALL_EFFICIENCY"}
 _STAGE_OUTPUTS = {"contact_force": "Q_CONTACT_FORCE", "normal_force": "Q_NORMAL_FORCE",
                   "driven_torque": "Q_DRIVEN_TORQUE", "spline_friction": "Q_SPLINE_FRICTION",
                   "carrier_speed": "Q_CARRIER_SPEED",
                   "carrier_speed_ratio": "Q_CARRIER_SPEED_RATIO"}
 _COUNTERS = {"step_rhs_calls": "C_RHS_CALLS", "step_substeps": "C_SUBSTEPS",
-             "step_fidelity": "C_FIDELITY"}
+             "step_fidelity": "C_FIDELITY", "contact_status": "C_CONTACT"}
+#: stage fields that only scale a term the native FMU leaves out (pinned to their start value)
+_SCALE_OF_ABSENT_TERM = ("threads_per_roller",)
 _STAGE_NAME = re.compile(r"^stage\[(\d+)\]\.(\w+)$")
 _TYPE_CODE = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN",
               "String": "T_STRING", "Enumeration": "T_ENUM"}
@@ -229,7 +237,7 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
             rows.append((v, "K_OUTPUT", len(out_q)))
             out_q.append(q)
             out_stage.append(stage - 1 if m else 0)
-        elif v.causality == "output" and v.name in _COUNTERS and v.type == "Integer":
+        elif v.causality == "output" and v.name in _COUNTERS and v.type in ("Integer", "Enumeration"):
             rows.append((v, "K_COUNTER", len(counters)))
             counters.append(_COUNTERS[v.name])
         elif v.causality == "parameter":
@@ -252,7 +260,9 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
                 if (m and field in _STAGE_PARAMS) or v.name in _SCALAR_PARAMS:
                     raise BuildError(f"parameter {v.name!r} has type {v.type}, not the one the "
                                      "native FMU reads")
-                if v.value() not in (0, 0.0, False, ""):
+                # threads_per_roller only scales the viscous term, pinned to 0 with mu_viscous:
+                # any start value is the absent term's (and stays pinned to it)
+                if v.value() not in (0, 0.0, False, "") and field not in _SCALE_OF_ABSENT_TERM:
                     raise BuildError(
                         f"parameter {v.name!r} = {v.value()!r} is not modelled by the native FMU "
                         "and not zero in this preset: the native FMU would run without it; "

@@ -34,9 +34,11 @@ enum {
     Q_ROD_VELOCITY, Q_LOAD_FORCE, Q_CONTACT_FORCE, Q_NORMAL_FORCE, Q_DRIVEN_TORQUE,
     Q_SPLINE_FRICTION, Q_CARRIER_SPEED, Q_CARRIER_SPEED_RATIO, Q_EFFICIENCY, Q_FRICTION_POWER,
     Q_INPUT_POWER, Q_OUTPUT_POWER, Q_INPUT_WORK, Q_OUTPUT_WORK, Q_FRICTION_WORK,
-    Q_KINETIC_ENERGY
+    Q_KINETIC_ENERGY, Q_FRICTION_POWER_COULOMB, Q_FRICTION_POWER_VISCOUS,
+    Q_FRICTION_POWER_DIFFERENTIAL, Q_FRICTION_POWER_JOINTS, Q_SCREW_FRICTION_TORQUE,
+    Q_OVERALL_EFFICIENCY
 };
-enum { C_RHS_CALLS, C_SUBSTEPS, C_FIDELITY };
+enum { C_RHS_CALLS, C_SUBSTEPS, C_FIDELITY, C_CONTACT };
 
 typedef struct {
     fmi2ValueReference vr;
@@ -265,11 +267,27 @@ static void compute_outputs(component *c) {
         case Q_INPUT_WORK: v = x[2]; break;
         case Q_OUTPUT_WORK: v = x[3]; break;
         case Q_FRICTION_WORK: v = x[4]; break;
+        /* the viscous and differential-sliding terms are pinned to 0 in the native FMU */
+        case Q_FRICTION_POWER_COULOMB: v = o.p_coulomb; break;
+        case Q_FRICTION_POWER_VISCOUS: v = 0.0; break;
+        case Q_FRICTION_POWER_DIFFERENTIAL: v = 0.0; break;
+        case Q_FRICTION_POWER_JOINTS: v = o.p_joints; break;
+        case Q_SCREW_FRICTION_TORQUE:
+            v = o.motor - load * c_out - m->equivalent_inertia * o.alpha; break;
+        case Q_OVERALL_EFFICIENCY: v = x[2] > 0.0 ? x[3] / x[2] : 0.0; break;
         default: v = o.kinetic_energy; break;
         }
         c->y[i] = v;
     }
     if (m == &c->model) c->y_valid = 1;
+}
+
+/* contact_status: 1 where the rigid contact has no solution at the current state and inputs */
+static int contact_status(component *c) {
+    if (c->s.phase != PH_STEPPING || !isfinite(c->s.u[0]) || !isfinite(c->s.u[1])) return 0;
+    prsm_outputs o;
+    prsm_outputs_at(&c->model, c->s.x, c->s.u, &o);
+    return o.consistent ? 0 : 1;
 }
 
 /* ---- variable access ------------------------------------------------------------------------------ */
@@ -350,7 +368,13 @@ fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
         switch (v->kind) {
         case K_PARAM: value[i] = c->s.par_int[v->index]; break;
         case K_STRUCTURAL: value[i] = STRUCT_INT[v->index]; break;
-        case K_COUNTER: value[i] = c->s.stats[COUNTER_QUANTITY[v->index]]; break;
+        case K_COUNTER:
+            if (COUNTER_QUANTITY[v->index] == C_CONTACT) {
+                value[i] = contact_status(c);
+            } else {
+                value[i] = c->s.stats[COUNTER_QUANTITY[v->index]];
+            }
+            break;
         default: return fmi2Error;
         }
     }

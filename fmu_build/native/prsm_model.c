@@ -548,17 +548,20 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX], const double u[2], 
     double alpha = solve(m, omega, load, u[0] - loss, wps, &cache, &rec, &consistent);
     /* Mechanism._assemble(detail=True) */
     double motor_sol = rec.m0 + rec.m1 * alpha;
-    double p_fric = 0.0;
+    double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0;
     for (int k = 0; k < m->n; k++) {
         const rec_stage *r = &rec.s[k];
         const prsm_stage *s = &m->st[k];
         double a = r->a0 + r->a1 * alpha;
         double pk = r->co[2] * a;
+        p_coulomb += r->co[2] * a;
         if (k > 0) {
             double hk = r->h0 + r->h1 * alpha;
             double b = r->b0 + r->b1 * alpha;
-            pk += hk * omega * s->spline_f;
-            pk += r->g * r->sb * b * omega;
+            /* Mechanism._assemble: p_joint = h ω ℓ_(k−1) + g σ_B B ω */
+            double p_joint = hk * omega * s->spline_f + r->g * r->sb * b * omega;
+            pk += p_joint;
+            p_joints += p_joint;
         }
         p_fric += pk;
         double f_normal = a * r->co[3] / s->n_rollers;
@@ -577,6 +580,9 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX], const double u[2], 
     y->loss = loss;
     y->efficiency = efficiency(p_in, p_out);
     y->friction_power = p_fric + loss * omega;
+    y->p_coulomb = loss != 0.0 ? p_coulomb + loss * omega : p_coulomb;
+    y->p_joints = p_joints;
+    y->consistent = consistent;
     y->kinetic_energy = 0.5 * m->equivalent_inertia * omega * omega;
 }
 

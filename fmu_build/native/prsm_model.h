@@ -86,6 +86,8 @@ typedef struct {
 /* the outputs of the Python model (models/base.Model.outputs) at one state */
 typedef struct {
     double alpha, motor, friction_power, kinetic_energy, efficiency, loss;
+    double p_coulomb, p_joints;      /* friction_power's Coulomb (contacts) and joints parts [W] */
+    int consistent;                  /* 0: the rigid contact has no solution here (Painleve) */
     double contact_force[PRSM_N_STAGES], normal_force[PRSM_N_STAGES],
         driven_torque[PRSM_N_STAGES], spline_friction[PRSM_N_STAGES],
         carrier_speed[PRSM_N_STAGES], carrier_speed_ratio[PRSM_N_STAGES];
