@@ -27,6 +27,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..profiles import ConstantSpeed, RampSpeed, SpeedProfile
 from .metrics import compute_metrics, derive_series
 from .study import apply_overrides, resolve_preset
 
@@ -134,13 +135,16 @@ def close_runners() -> None:
 # ---------------------------------------------------------------------------------------------
 # one point
 # ---------------------------------------------------------------------------------------------
-def speed_profile(screw_speed: float, accel_time: float):
-    """(ω_ref(t), ω̇_ref(0⁺)): a step to ``screw_speed`` at t = 0, or a linear ramp from rest."""
+def speed_profile(screw_speed: float, accel_time: float) -> tuple[SpeedProfile, float]:
+    """(the prescribed screw speed ω_ref(t) [rad/s], ω̇_ref(0⁺) [rad/s²]): a step to
+    ``screw_speed`` at t = 0, or a linear ramp from rest over ``accel_time`` [s].  The profile
+    serves both backends: the model follows it (:func:`prsm_fmu.simulate`), the FMU runner
+    reads its ``speed(t)``."""
     w = float(screw_speed)
     if accel_time == 0.0:
-        return (lambda t: w), 0.0
+        return ConstantSpeed(w), 0.0
     ta = float(accel_time)
-    return (lambda t: w * min(max(t, 0.0) / ta, 1.0)), w / ta
+    return RampSpeed(0.0, w, ta), w / ta
 
 
 def _check_scenario(sc: Mapping[str, Any]) -> tuple[float, float, int]:
@@ -179,26 +183,20 @@ def simulate_point(params, scenario: Mapping[str, Any], backend: str,
     driven torque includes the inertial torque of the ramp).
     """
     t_end, h, _ = _check_scenario(scenario)
-    speed, acc0 = speed_profile(scenario["screw_speed"], scenario["accel_time"])
+    profile, acc0 = speed_profile(scenario["screw_speed"], scenario["accel_time"])
     fidelity = scenario["fidelity"]
     load = float(scenario["load_force"])
     if backend == "model":
         from ..simulate import simulate
 
-        from ..profiles import RampSpeed
-
-        if scenario["accel_time"] == 0.0:
-            signal: Any = float(scenario["screw_speed"])
-        else:
-            signal = RampSpeed(0.0, float(scenario["screw_speed"]), float(scenario["accel_time"]))
-        return simulate(params, fidelity=fidelity, drive="speed", screw_speed=signal,
+        return simulate(params, fidelity=fidelity, drive="speed", screw_speed=profile,
                         load_force=load, t_end=t_end, output_interval=h)
     if backend != "fmu":
         raise ValueError(f"backend = {backend!r} is not allowed: must be 'fmu' or 'model'")
     ref = (fmus or {}).get(params.n_stages)
     if ref is None:
         raise ValueError(f"no FMU for {params.n_stages} stage(s) was given to this task")
-    return _runner(ref, tolerance).run(params, fidelity, speed, acc0, load, t_end, h)
+    return _runner(ref, tolerance).run(params, fidelity, profile.speed, acc0, load, t_end, h)
 
 
 def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None) -> PointResult:
