@@ -144,10 +144,10 @@ def reference_run(scene, fmu: Path):
 
 
 def max_difference(a, b, names=None) -> tuple[float, str]:
-    """max over outputs (``names``, default all of b's) of max|a − b| / max|b|, and the output
-    where it is reached."""
+    """max over outputs (``names``, default those both record) of max|a − b| / max|b|, and the
+    output where it is reached."""
     worst, where = 0.0, ""
-    for name in (b.names() if names is None else names):
+    for name in ([n for n in b.names() if n in a] if names is None else names):
         ref = float(np.max(np.abs(b[name]))) or 1.0
         d = float(np.max(np.abs(a[name] - b[name]))) / ref
         if d > worst:
