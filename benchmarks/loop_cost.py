@@ -12,13 +12,24 @@ medians over the rounds:
   CPU time, so the parts add up to the total and are measured in the same run;
 * the PRSM FMU's right-hand-side calls per step (its ``step_rhs_calls`` output).
 
-Configurations: the default loop (the motor's RK4 reference integrator) and the motor's exact
-exponential step (``Motor(integrator="exponential")``), with the largest difference of any
-recorded output between the two, relative to the output's largest magnitude (DESIGN.md §5).
+Configurations: the default loop (every output recorded, the motor's RK4 reference
+integrator); the same loop recording only the scene's outputs (``outputs`` of the scene file,
+plus ``prsm.step_rhs_calls`` for the count above): the blocks then read only what is recorded
+or connected (the FMU 7 of its 34 variables); and the motor's exact exponential step
+(``Motor(integrator="exponential")``).  Each configuration's largest difference of any
+recorded output from the default's, relative to the output's largest magnitude (DESIGN.md §5).
+
+Which motor integrator is closer to the truth: the loop is also run once with an independent
+reference motor (the motor ODE of system_models/motor.py's docstring under the same inputs,
+voltages held and the speed linear over the step as the master gives it, integrated by
+scipy's DOP853 at rtol 1e-13), and each integrator's loop is compared with it (largest
+|Δ|/max|y| over all outputs, and for prsm.efficiency and motor.i_d); so is each integrator's
+single step from the reference loop's states and inputs (local error, motor states).
+
 The issue's target for the loop is ≤ 0.35 CPU s per simulated second (floor ≤ 0.7).
 
 Run: ``python benchmarks/loop_cost.py [--scene position_step] [--rounds 3]`` (builds the FMU in
-a child process first; about 30 s).
+a child process first; about a minute).
 """
 
 from __future__ import annotations
@@ -38,11 +49,58 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from system_models.ema import build_system  # noqa: E402
+from system_models.motor import Motor  # noqa: E402
 from system_models.scenes import load_scene  # noqa: E402
 
 PARTS = ("prsm", "motor", "controller", "load", "master+recording")
-CONFIGS = {"default (motor RK4)": "rk4", "motor exponential": "exponential"}
+#: label -> (motor integrator, record only the scene's outputs)
+CONFIGS = {"default (motor RK4)": ("rk4", False), "scene outputs only": ("rk4", True),
+           "motor exponential": ("exponential", False)}
 TARGET, FLOOR = 0.35, 0.7
+
+
+class ReferenceMotor(Motor):
+    """The motor with its currents and energies integrated by scipy at rtol 1e-13.
+
+    Written from the model equations (system_models/motor.py docstring), not from the
+    block's integrators: L di_d/dt = v_d − R i_d + p ω L i_q, L di_q/dt = v_q − R i_q − p ω L i_d
+    − p ω ψ, and the energies' rates 1.5 (v_d i_d + v_q i_q), 1.5 R (i_d² + i_q²), k_t i_q ω,
+    with the applied voltages held and ω = ω_0 + ω' τ over the step (the master's inputs).
+    ``local`` keeps, per step, the reference state and the RK4 and exponential steps taken from
+    the same state and inputs."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.local: list[tuple[list[float], list[float], list[float]]] = []
+
+    def do_step(self, t: float, h: float) -> None:
+        from scipy.integrate import solve_ivp
+
+        vd, vq = self._applied()
+        m = self.params
+        r, ell, p, psi, kt = (m.resistance, m.inductance, m.pole_pairs, m.flux_linkage,
+                              m.torque_constant)
+        w0, dw = self.u[2], self.du[2]
+
+        def f(tau, s):
+            w = w0 + dw * tau
+            i_d, i_q = s[0], s[1]
+            return [(vd - r * i_d + p * w * ell * i_q) / ell,
+                    (vq - r * i_q - p * w * ell * i_d - p * w * psi) / ell,
+                    1.5 * (vd * i_d + vq * i_q), 1.5 * r * (i_d * i_d + i_q * i_q), kt * i_q * w]
+
+        sol = solve_ivp(f, (0.0, h), list(self.x), method="DOP853", rtol=1e-13, atol=1e-15)
+        ref = [float(v) for v in sol.y[:, -1]]
+        x0 = list(self.x)
+        rk4 = Motor(m, integrator="rk4", max_substep=self.max_substep)
+        exp = Motor(m, integrator="exponential", max_substep=self.max_substep)
+        steps = []
+        for other in (rk4, exp):
+            other.x, other.u, other.du = list(x0), list(self.u), list(self.du)
+            other.do_step(t, h)
+            steps.append(other.x)
+        self.local.append((ref, steps[0], steps[1]))
+        self.x = ref
 
 
 def build_fmu(dest: Path) -> Path:
@@ -54,9 +112,11 @@ def build_fmu(dest: Path) -> Path:
     return dest / "PRSM2.fmu"
 
 
-def run_once(scene, fmu: Path, integrator: str) -> tuple[dict[str, float], float, object]:
+def run_once(scene, fmu: Path, integrator: str,
+             scene_outputs: bool = False) -> tuple[dict[str, float], float, object]:
     """One run: (CPU s per simulated s by part and "total", rhs calls per step, result)."""
-    system = build_system(scene, prsm="fmu", fmu_path=fmu)
+    record = list(scene.outputs) + ["prsm.step_rhs_calls"] if scene_outputs else None
+    system = build_system(scene, prsm="fmu", fmu_path=fmu, record=record)
     master = system.master
     master.blocks[master.index["motor"]].integrator = integrator
     c0 = time.process_time()
@@ -71,10 +131,23 @@ def run_once(scene, fmu: Path, integrator: str) -> tuple[dict[str, float], float
     return cost, rhs, res
 
 
-def max_difference(a, b) -> tuple[float, str]:
-    """max over outputs of max|a − b| / max|b|, and the output where it is reached."""
+def reference_run(scene, fmu: Path):
+    """The loop with :class:`ReferenceMotor` in place of the motor: (result, motor)."""
+    system = build_system(scene, prsm="fmu", fmu_path=fmu)
+    master = system.master
+    i = master.index["motor"]
+    old = master.blocks[i]
+    ref = ReferenceMotor(old.params, name=old.name, i_d=old.x[0], i_q=old.x[1],
+                         max_substep=old.max_substep)
+    master.blocks[i] = ref
+    return system.run(), ref
+
+
+def max_difference(a, b, names=None) -> tuple[float, str]:
+    """max over outputs (``names``, default those both record) of max|a − b| / max|b|, and the
+    output where it is reached."""
     worst, where = 0.0, ""
-    for name in b.names():
+    for name in ([n for n in b.names() if n in a] if names is None else names):
         ref = float(np.max(np.abs(b[name]))) or 1.0
         d = float(np.max(np.abs(a[name] - b[name]))) / ref
         if d > worst:
@@ -95,27 +168,45 @@ def main() -> None:
         fmu = build_fmu(Path(tmp))
         run_once(scene, fmu, "rk4")                          # warm-up (imports, FMU unpacking)
         for _ in range(args.rounds):
-            for label, integrator in CONFIGS.items():        # interleaved rounds
-                cost, r, res = run_once(scene, fmu, integrator)
+            for label, (integrator, narrow) in CONFIGS.items():     # interleaved rounds
+                cost, r, res = run_once(scene, fmu, integrator, narrow)
                 samples[label].append(cost)
                 rhs[label].append(r)
                 results[label] = res
+        reference, motor = reference_run(scene, fmu)
     print(f"actuator loop, scene {scene.name}: {scene.t_end:g} s simulated in steps of "
           f"{scene.step:g} s, PRSM2 FMU through fmpy; medians of {args.rounds} rounds")
     print(f"{'CPU s per simulated s':<24}{'total':>8}" + "".join(f"{p:>18}" for p in PARTS)
           + f"{'rhs/step':>10}")
+    us = 1e6 * scene.step               # CPU s per simulated s -> µs per communication step
     for label, rows in samples.items():
         med = {k: statistics.median(r[k] for r in rows) for k in rows[0]}
         parts = "".join(f"{med[p]:>9.3f} ({100 * med[p] / med['total']:>4.1f} %)" for p in PARTS)
         print(f"{label:<24}{med['total']:>8.3f}{parts}{statistics.median(rhs[label]):>10.1f}")
+        print(f"{'  µs per step':<24}{med['total'] * us:>8.1f}"
+              + "".join(f"{med[p] * us:>18.1f}" for p in PARTS))
     default = statistics.median(r["total"] for r in samples["default (motor RK4)"])
     print(f"loop / real time = {default:.3f} (target <= {TARGET}: "
           f"{'met' if default <= TARGET else 'NOT met'}; floor <= {FLOOR}: "
           f"{'met' if default <= FLOOR else 'NOT met'})")
     labels = list(CONFIGS)
-    d, where = max_difference(results[labels[1]], results[labels[0]])
-    print(f"{labels[1]} against {labels[0]}: largest output difference {d:.2e} of the output's "
-          f"maximum ({where})")
+    for label in labels[1:]:
+        d, where = max_difference(results[label], results[labels[0]])
+        print(f"{label} against {labels[0]}: largest output difference {d:.2e} of the output's "
+              f"maximum ({where})")
+    print("against the loop with the reference motor (scipy DOP853, rtol 1e-13), |Δ|/max|y|:")
+    for label in (labels[0], labels[2]):
+        d, where = max_difference(results[label], reference)
+        eff, i_d = (max_difference(results[label], reference, [n])[0]
+                    for n in ("prsm.efficiency", "motor.i_d"))
+        print(f"  {label:<22} largest {d:.2e} ({where}); prsm.efficiency {eff:.2e}; "
+              f"motor.i_d {i_d:.2e}")
+    ref = np.array([a for a, _, _ in motor.local])
+    scale = np.max(np.abs(ref), axis=0)
+    for k, label in ((1, "RK4"), (2, "exponential")):
+        err = np.max(np.abs(np.array([row[k] for row in motor.local]) - ref), axis=0) / scale
+        print(f"  one motor step, {label:<12} largest error / max|x|: i_d {err[0]:.1e}, "
+              f"i_q {err[1]:.1e}, energies {max(err[2:]):.1e}")
 
 
 if __name__ == "__main__":

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import Any, Callable
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
@@ -450,7 +451,13 @@ class PRSMSlave(Fmi2Slave):
         self._par_types: list[type] = []
         self._u = [0.0, 0.0]
         self._out_names = output_names(n)
+        #: the model's output dict -> the FMU's Real outputs in their order
+        self._pick_outputs = itemgetter(*self._out_names)
         self._rget: dict[int, Callable[[], float]] = {}
+        #: value reference of a Real output -> its position in the outputs (fmi2GetReal's path)
+        self._out_index: dict[int, int] = {}
+        #: value reference of an Integer or Enumeration output -> its getter (fmi2GetInteger's)
+        self._iget: dict[int, Callable[[], int]] = {}
         self._rset: dict[int, Callable[[Any], None]] = {}
         self._types: dict[int, str] = {}
         # run-time state (see _get_fmu_state)
@@ -494,6 +501,11 @@ class PRSMSlave(Fmi2Slave):
                       description=row.description, getter=getter, setter=setter)
             self.register_variable(var, nested=False)
             self._types[var.value_reference] = row.type
+            if row.causality == "output":
+                if row.type == "Real":
+                    self._out_index[var.value_reference] = i_out[row.name]
+                elif row.type in _ACCESS["Integer"]:
+                    self._iget[var.value_reference] = getter
             if row.type == "Real":
                 self._rget[var.value_reference] = getter
                 if setter is not None:
@@ -571,11 +583,19 @@ class PRSMSlave(Fmi2Slave):
     # value written is ignored, and the next doStep is refused (fmi2Discard) naming it.
     @_guarded("fmi2GetReal", lambda self, vrs: [math.nan] * len(vrs))
     def get_real(self, vrs):
-        g = self._rget
-        try:
-            return [g[vr]() for vr in vrs]
+        index = self._out_index
+        try:                        # only outputs (a host's step loop): one list, no getters
+            positions = [index[vr] for vr in vrs]
         except KeyError:
-            return self._get_typed(vrs, "Real")
+            g = self._rget
+            try:
+                return [g[vr]() for vr in vrs]
+            except KeyError:
+                return self._get_typed(vrs, "Real")
+        y = self._y
+        if y is None:
+            y = self._compute_outputs()
+        return [y[k] for k in positions]
 
     @_guarded("fmi2SetReal")
     def set_real(self, vrs, values):
@@ -589,7 +609,11 @@ class PRSMSlave(Fmi2Slave):
 
     @_guarded("fmi2GetInteger", lambda self, vrs: [0] * len(vrs))
     def get_integer(self, vrs):
-        return self._get_typed(vrs, "Integer")
+        g = self._iget
+        getters = [g.get(vr) for vr in vrs]
+        if None in getters:         # not only outputs: by type, refusing what does not fit
+            return self._get_typed(vrs, "Integer")
+        return [int(get()) for get in getters]
 
     @_guarded("fmi2GetBoolean", lambda self, vrs: [False] * len(vrs))
     def get_boolean(self, vrs):
@@ -693,8 +717,7 @@ class PRSMSlave(Fmi2Slave):
             if model is None:
                 model, _, x, _, _ = self._build()
                 u = tuple(self._u)
-            y = model.outputs(self._t, x, u)
-            values = [float(y[name]) for name in self._out_names]
+            values = [float(v) for v in self._pick_outputs(model.outputs(self._t, x, u))]
         except Exception as exc:  # noqa: BLE001 - an exception here would be fmi2Fatal
             self.log(f"fmi2GetReal: the outputs cannot be computed (NaN): {exc}",
                      Fmi2Status.error)

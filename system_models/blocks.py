@@ -130,6 +130,15 @@ class Block(ABC):
             The step cannot be taken; the block's state is exactly as before the call.
         """
 
+    def select_outputs(self, ports: Sequence[int]) -> bool:
+        """Offer to give only the outputs at positions ``ports`` (ascending) of :attr:`outputs`.
+
+        A block that agrees returns True and from then on :meth:`get_outputs` returns those
+        values only, in that order (the master asks for the outputs that are connected or
+        recorded; an FMU then reads fewer variables).  The default keeps every output: False.
+        """
+        return False
+
     def update_outputs(self, t: float) -> None:
         """Recompute the outputs at ``t`` from the inputs just set (feedthrough blocks only)."""
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from scipy.optimize import brentq
 
@@ -151,7 +151,8 @@ def _nominals(motor: MotorParams, c: float, reference, scene: Scene, mode: str) 
 
 def build_system(scene: Scene, prsm: str = "fmu", fmu_path=None, fidelity: str | None = None,
                  step: float | None = None, order: str | None = None,
-                 extrapolation: int | None = None, retry: RetryPolicy | None = None) -> System:
+                 extrapolation: int | None = None, retry: RetryPolicy | None = None,
+                 record: Sequence[str] | None = None) -> System:
     """Blocks, connections and master for ``scene`` (options override the scene's values).
 
     Parameters
@@ -163,6 +164,9 @@ def build_system(scene: Scene, prsm: str = "fmu", fmu_path=None, fidelity: str |
         The FMU (default ``dist/<mechanism>.fmu``; build it with :func:`system_models.fmu.ensure_fmu`).
     fidelity, step, order, extrapolation, retry
         Override the scene.
+    record : sequence of str, optional
+        ``"block.port"`` outputs to record (default: every output).  The blocks read only the
+        outputs that are recorded or connected: the PRSM FMU's other variables are not read.
     """
     t0 = scene.t0
     motor = _overrides(MotorParams, MotorParams(), scene.motor, f"scene {scene.name}: [motor]").validate()
@@ -230,7 +234,8 @@ def build_system(scene: Scene, prsm: str = "fmu", fmu_path=None, fidelity: str |
         master = Master(blocks, CONNECTIONS, step if step is not None else scene.step, t0=t0,
                         order=order or scene.order,
                         extrapolation=scene.extrapolation if extrapolation is None else extrapolation,
-                        retry=rp, nominals=_nominals(motor, c, reference, scene, mode))
+                        retry=rp, nominals=_nominals(motor, c, reference, scene, mode),
+                        record=record)
     except Exception:
         for b in blocks:
             b.terminate()

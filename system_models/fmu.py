@@ -158,23 +158,14 @@ class FMUBlock(Block):
         self.inputs = tuple(self._port(n) for n in in_names)
         self.outputs = tuple(self._port(n) for n in out_names)
         self._vr_in = [self.vars[n].valueReference for n in in_names]
-        self._vr_real = [self.vars[n].valueReference for n in out_names
-                         if self.vars[n].type == "Real"]
-        self._vr_int = [self.vars[n].valueReference for n in out_names
-                        if self.vars[n].type != "Real"]
-        self._real_pos = [i for i, n in enumerate(out_names) if self.vars[n].type == "Real"]
-        self._int_pos = [i for i, n in enumerate(out_names) if self.vars[n].type != "Real"]
         self._log = FmuLog()                     # keeps the ctypes callbacks alive
         self.messages = self._log.messages
         # the step loop's calls go straight to the FMU's C functions with buffers made once
         # (fmpy's wrappers build two ctypes arrays per call); statuses are checked here
-        from fmpy.fmi2 import fmi2Integer, fmi2Real, fmi2ValueReference
+        from fmpy.fmi2 import fmi2Real, fmi2ValueReference
         self._buf_in = (fmi2Real * len(self._vr_in))()
         self._arr_in = (fmi2ValueReference * len(self._vr_in))(*self._vr_in)
-        self._buf_real = (fmi2Real * len(self._vr_real))()
-        self._arr_real = (fmi2ValueReference * len(self._vr_real))(*self._vr_real)
-        self._buf_int = (fmi2Integer * len(self._vr_int))()
-        self._arr_int = (fmi2ValueReference * len(self._vr_int))(*self._vr_int)
+        self._read(range(len(out_names)))
         self._unzipdir = extract(str(self.path))
         self._alive = False
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
@@ -231,6 +222,34 @@ class FMUBlock(Block):
         msgs = self._log.reason(n0)
         return (": " + msgs) if msgs else " (the FMU logged no message)"
 
+    def _read(self, ports: Sequence[int]) -> None:
+        """Buffers of the outputs :meth:`get_outputs` reads: ``ports`` (positions in
+        :attr:`outputs`), Real ones with one fmi2GetReal, Integer ones with one
+        fmi2GetInteger."""
+        from fmpy.fmi2 import fmi2Integer, fmi2Real, fmi2ValueReference
+
+        names = [self.outputs[i].name for i in ports]
+        real = [k for k, n in enumerate(names) if self.vars[n].type == "Real"]
+        ints = [k for k, n in enumerate(names) if self.vars[n].type != "Real"]
+        vr_real = [self.vars[names[k]].valueReference for k in real]
+        self._vr_int = [self.vars[names[k]].valueReference for k in ints]
+        self._buf_real = (fmi2Real * len(vr_real))()
+        self._arr_real = (fmi2ValueReference * len(vr_real))(*vr_real)
+        self._buf_int = (fmi2Integer * len(self._vr_int))()
+        self._arr_int = (fmi2ValueReference * len(self._vr_int))(*self._vr_int)
+        #: the Real values first, then the Integer ones: where each selected output is in
+        #: that list (None: they are in order already)
+        merged = real + ints
+        self._order = None if merged == sorted(merged) else [merged.index(k)
+                                                               for k in range(len(names))]
+        self._n_read = len(names)
+
+    def select_outputs(self, ports: Sequence[int]) -> bool:
+        """Read only the outputs at ``ports`` (positions in :attr:`outputs`) from now on: the
+        variables nobody uses are not read (:meth:`Block.select_outputs`)."""
+        self._read(list(ports))
+        return True
+
     def set_values(self, values: dict[str, Any]) -> None:
         """Set variables by name with the setter of their type; an Enumeration takes an item
         name (from the modelDescription's TypeDefinitions) or its integer value."""
@@ -264,13 +283,13 @@ class FMUBlock(Block):
         buf = self._buf_in
         if len(values) != len(buf):
             raise ValueError(f"{self.name}: {len(values)} input values for {len(buf)} inputs")
-        for k, v in enumerate(values):
-            buf[k] = v                   # ctypes converts to double (TypeError if it cannot)
+        buf[:] = values                  # ctypes converts to double (TypeError if it cannot)
         n0 = len(self.messages)
         self._check("setReal", self._c_set_real(self.fmu.component, self._arr_in, len(buf), buf),
                     n0)
 
     def get_outputs(self) -> list[float]:
+        """The selected outputs (every output unless :meth:`select_outputs` narrowed them)."""
         n0 = len(self.messages)
         comp = self.fmu.component
         real = self._buf_real
@@ -280,12 +299,9 @@ class FMUBlock(Block):
             return real[:]
         ints = self._buf_int
         self._check("getInteger", self._c_get_integer(comp, self._arr_int, len(ints), ints), n0)
-        out = [0.0] * len(self.outputs)
-        for i, v in zip(self._real_pos, real):
-            out[i] = v
-        for i, v in zip(self._int_pos, ints):
-            out[i] = float(v)
-        return out
+        out = real[:] + [float(v) for v in ints[:]]
+        order = self._order
+        return out if order is None else [out[k] for k in order]
 
     def do_step(self, t: float, h: float) -> None:
         n0 = len(self.messages)

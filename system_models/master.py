@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from array import array
 from dataclasses import dataclass, field
 from operator import itemgetter
 from typing import Any, Callable, Mapping, Sequence
@@ -197,7 +198,6 @@ class Master:
         self.order, self.extrapolation, self.retry = order, extrapolation, retry
         self._sources = self._connect(connections)
         self._record = self._record_list(record)
-        self._plan_step()
         self._nominal = [[port.nominal for port in b.outputs] for b in self.blocks]
         for ref, value in (nominals or {}).items():
             i, port = self._split(ref)
@@ -207,6 +207,8 @@ class Master:
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"nominals: {ref} = {value!r} must be a finite number > 0")
             self._nominal[i][names.index(port)] = float(value)
+        self._select_outputs()
+        self._plan_step()
 
     # ---- set-up ------------------------------------------------------------------------------
     def _split(self, ref: str) -> tuple[int, str]:
@@ -261,6 +263,35 @@ class Master:
             out.append((i, p, ref, self.blocks[i].outputs[p].unit))
         return out
 
+    def _select_outputs(self) -> None:
+        """Ask every block to give only the outputs that are connected or recorded
+        (:meth:`~system_models.blocks.Block.select_outputs`); for a block that agrees, the
+        connections, recorded columns and nominal magnitudes are renumbered to the positions
+        in its shorter list of outputs."""
+        used: list[set[int]] = [set() for _ in self.blocks]
+        for srcs in self._sources:
+            for src in srcs:
+                if src[0] == "port":
+                    used[src[1]].add(src[2])
+        for i, p, _, _ in self._record:
+            used[i].add(p)
+        pos: list[dict[int, int] | None] = []
+        for i, b in enumerate(self.blocks):
+            ports = sorted(used[i])
+            if len(ports) < len(b.outputs) and b.select_outputs(ports):
+                pos.append({p: k for k, p in enumerate(ports)})
+                self._nominal[i] = [self._nominal[i][p] for p in ports]
+            else:
+                pos.append(None)
+        if all(m is None for m in pos):
+            return
+        for srcs in self._sources:
+            for j, src in enumerate(srcs):
+                if src[0] == "port" and pos[src[1]] is not None:
+                    srcs[j] = ("port", src[1], pos[src[1]][src[2]], src[3])
+        self._record = [(i, p if pos[i] is None else pos[i][p], name, unit)
+                        for i, p, name, unit in self._record]
+
     def _plan_step(self) -> None:
         """What each step needs, worked out once: the outputs whose coupling error is
         estimated (sources of continuous connections read before their block has stepped:
@@ -299,6 +330,11 @@ class Master:
         grouped = all(order[k] <= order[k + 1] for k in range(len(order) - 1))
         self._row_getters = ([(i, itemgetter(*ps) if len(ps) > 1 else (lambda v, q=ps[0]: (v[q],)))
                               for i, ps in by_block.items()] if grouped else None)
+        # each input's branch in _step, fixed by the order: 0 constant, 1 a source that has
+        # already stepped (Gauss-Seidel, earlier in the list), 2 a source read at t_k
+        self._plan = [[(0, src[1], 0, True) if src[0] == "const" else
+                       ((1 if gs and src[1] < i else 2), src[1], src[2], src[3])
+                       for src in srcs] for i, srcs in enumerate(self._sources)]
 
     # ---- stepping ----------------------------------------------------------------------------
     def _values(self, i: int, y: list) -> list[float]:
@@ -336,58 +372,59 @@ class Master:
         blocks, y, y_prev = self.blocks, self.y, self.y_prev
         gs = self.order == "gauss-seidel"
         first = self.extrapolation == 1 and y_prev is not None
+        hold_new = self.extrapolation == 0          # a stepped source's value at t_(k+1), held
         dtp = (t - self.t_prev) if first else 1.0
+        half_h = 0.5 * h
         y_new: list[list[float] | None] = [None] * len(blocks)
         predictions: list[tuple[int, int, float]] = []
         timers = self._block_time
         read_after = self._read_after_step
+        clock = _time.perf_counter
         for i, b in enumerate(blocks):
             vals, slopes = [], []
-            for src in self._sources[i]:
-                if src[0] == "const":
-                    vals.append(src[1])
+            for kind, s, p, discrete in self._plan[i]:
+                if kind == 0:                           # constant
+                    vals.append(s)
                     slopes.append(0.0)
-                    continue
-                _, s, p, discrete = src
-                yn = y_new[s]
-                if yn is not None:                      # Gauss-Seidel: source already stepped
-                    if discrete or self.extrapolation == 0:
+                elif kind == 1:                         # Gauss-Seidel: source already stepped
+                    yn = y_new[s]
+                    if discrete or hold_new:
                         vals.append(yn[p])
                         slopes.append(0.0)
                     else:
-                        vals.append(y[s][p])
-                        slopes.append((yn[p] - y[s][p]) / h)
-                    continue
-                yc = y[s][p]
-                if discrete or not first:
-                    sl = 0.0
+                        yc = y[s][p]
+                        vals.append(yc)
+                        slopes.append((yn[p] - yc) / h)
                 else:
-                    sl = (yc - y_prev[s][p]) / dtp
-                vals.append(yc)
-                slopes.append(sl)
-                if not discrete:
+                    yc = y[s][p]
+                    vals.append(yc)
+                    if discrete:
+                        slopes.append(0.0)
+                        continue
+                    sl = (yc - y_prev[s][p]) / dtp if first else 0.0
+                    slopes.append(sl)
                     predictions.append((s, p, yc + sl * h))
-            c0 = _time.perf_counter()
+            c0 = clock()
             if b.interpolates_inputs:
                 b.set_inputs(vals, slopes)
             else:
-                b.set_inputs([v + 0.5 * h * sl for v, sl in zip(vals, slopes)])
+                b.set_inputs([v + half_h * sl for v, sl in zip(vals, slopes)])
             b.do_step(t, h)
             if gs and read_after[i]:
                 y_new[i] = b.get_outputs()
-            timers[i] += _time.perf_counter() - c0
+            timers[i] += clock() - c0
         if not gs:
             for i, b in enumerate(blocks):
-                c0 = _time.perf_counter()
+                c0 = clock()
                 y_new[i] = b.get_outputs()
-                timers[i] += _time.perf_counter() - c0
+                timers[i] += clock() - c0
         for i, b in enumerate(blocks):
             if b.feedthrough:
-                c0 = _time.perf_counter()
+                c0 = clock()
                 b.set_inputs(self._values(i, y_new))
                 b.update_outputs(t + h)
                 y_new[i] = b.get_outputs()
-                timers[i] += _time.perf_counter() - c0
+                timers[i] += clock() - c0
         err = 0.0
         scale = self.scale
         for s, p, pred in predictions:
@@ -468,7 +505,8 @@ class Master:
         self._block_time = [0.0] * len(self.blocks)
         wall0 = _time.perf_counter()
         self._initialize()
-        rows = [self._row()]
+        rows = array("d")                        # the recorded rows, one after the other
+        self._record_row(rows)
         times = [t0]
         for k in range(n):
             t, t_next = t0 + k * h, t0 + (k + 1) * h
@@ -484,24 +522,24 @@ class Master:
                     f"{exc.step:.3g} s: {exc.reason}{tried}. The run is incomplete: no result "
                     f"beyond t = {times[-1]:.9g} s.", t, exc.block, exc.reason, partial) from exc
             self._stats["macro_steps"] += 1
-            rows.append(self._row())
+            self._record_row(rows)
             times.append(t_next)
             if progress is not None:
                 progress(t_next, t_end)
         return self._result(times, rows, wall0)
 
-    def _row(self) -> list[float]:
+    def _record_row(self, rows: array) -> None:
+        """Append the recorded outputs at the current communication point to ``rows``."""
         y = self.y
         getters = self._row_getters
         if getters is None:
-            return [y[i][p] for i, p, _, _ in self._record]
-        row: list[float] = []
+            rows.extend([y[i][p] for i, p, _, _ in self._record])
+            return
         for i, get in getters:
-            row += get(y[i])
-        return row
+            rows.extend(get(y[i]))
 
-    def _result(self, times: list[float], rows: list[list[float]], wall0: float) -> Result:
-        data = np.asarray(rows, dtype=float).reshape(len(rows), len(self._record))
+    def _result(self, times: list[float], rows: array, wall0: float) -> Result:
+        data = np.frombuffer(rows, dtype=float).reshape(len(times), len(self._record))
         stats = dict(self._stats)
         stats["wall_time"] = _time.perf_counter() - wall0
         stats["block_time"] = {b.name: tb for b, tb in zip(self.blocks, self._block_time)}

@@ -772,6 +772,32 @@ def test_access_through_the_wrong_type_is_refused_naming_the_call_and_the_variab
     assert tried == 6 * len(host.md.modelVariables)
 
 
+def test_one_read_of_outputs_parameters_and_inputs_gives_what_reads_one_by_one_give():
+    """The slave's batched paths (outputs by position, counters by getter) and its per-variable
+    path return the same values, in the order asked, with the values set coming back."""
+    host = Host("PRSM2", "batched", start={"tolerance": 1e-8, "screw_torque": 1.25,
+                                           "load_force": 300.0})
+    try:
+        for k in range(3):
+            assert host.step(k * H) == OK
+        host.set({"screw_torque": 2.5})
+        names = host.outputs + ["tolerance", "screw_torque", "load_force"]
+        batch = host.get_real(names)
+        assert batch[-3:] == [1e-8, 2.5, 300.0]
+        assert batch == [host.get_real([n])[0] for n in names]
+        assert host.get_real(names[::-1]) == batch[::-1]
+        assert host.get_real(host.outputs[:4]) == batch[:4]
+        counters = [v.name for v in host.md.modelVariables
+                    if v.causality == "output" and v.type != "Real"]
+        ints = host.fmu.getInteger([host.vars[n].valueReference for n in counters])
+        assert ints == [host.get([n])[0] for n in counters]
+        assert dict(zip(counters, ints))["step_rhs_calls"] >= 1       # a step took place
+        assert host.fmu.getInteger([host.vars["substeps"].valueReference,
+                                    host.vars[counters[0]].valueReference])[0] == 0
+    finally:
+        host.free()
+
+
 def test_auto_fidelity_runs_the_documented_level():
     """At the default start auto starts with the documented level and then switches along the
     run exactly as the Python model does (prsm_fmu/models/adaptive.py)."""

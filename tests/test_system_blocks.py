@@ -174,6 +174,52 @@ def test_held_inputs_get_the_mean_of_the_extrapolation_and_discrete_ports_are_ne
     assert stair[-1] == pytest.approx(h * h * n * (n - 1) / 2, rel=1e-12)
 
 
+class Ramps(PythonBlock):
+    """Outputs t, 2t, 3t; can give only some of them (and notes which it was asked for)."""
+
+    inputs = ()
+    outputs = (Port("a", "s"), Port("b", "s"), Port("c", "s"))
+    _state_attrs = ("t",)
+
+    def __init__(self, name="ramps"):
+        super().__init__(name)
+        self.t, self.ports, self.calls = 0.0, [0, 1, 2], 0
+
+    def select_outputs(self, ports):
+        self.ports = list(ports)
+        return True
+
+    def do_step(self, t, h):
+        self.t = t + h
+
+    def get_outputs(self):
+        self.calls += 1
+        return [(k + 1) * self.t for k in self.ports]
+
+
+def test_blocks_give_only_the_connected_and_recorded_outputs_and_the_values_are_the_same():
+    h, n = 0.01, 50
+    connections = {"int.u": "ramps.b"}
+    # every output recorded: the block is not asked to narrow them
+    full_block = Ramps()
+    full = Master([full_block, Integrator()], connections, h, extrapolation=1).run(n * h)
+    assert full_block.ports == [0, 1, 2]
+    # b feeds the integrator, c is recorded, a nobody uses: the block gives b and c only
+    block = Ramps()
+    part = Master([block, Integrator()], connections, h, extrapolation=1,
+                  record=["ramps.c", "int.z", "ramps.b"]).run(n * h)
+    assert block.ports == [1, 2]
+    assert part.names() == ["ramps.c", "int.z", "ramps.b"]
+    for name in part.names():
+        assert np.array_equal(part[name], full[name])
+    # closed forms on the grid t_k = k h: c = 3 t, b = 2 t, and the integrator's exact
+    # integral of the interpolated 2t (Gauss-Seidel, first order) z = t²
+    t = h * np.arange(n + 1)
+    assert np.allclose(part["ramps.c"], 3 * t, rtol=1e-15, atol=0)
+    assert np.allclose(part["ramps.b"], 2 * t, rtol=1e-15, atol=0)
+    assert np.allclose(part["int.z"], t * t, rtol=1e-12, atol=1e-15)
+
+
 @pytest.mark.parametrize("extrapolation", [0, 1])
 def test_explicit_spring_coupling_follows_its_linear_map_and_grows_by_sqrt_1_plus_a_over_2(extrapolation):
     """A mass (exact under a held force) and a spring force F = −k x_k held over each step:
@@ -254,6 +300,61 @@ def test_locked_rotor_current_rises_as_v_over_r_times_one_minus_exp():
     iq = mot.get_outputs()[1]
     assert iq == pytest.approx(v / p.resistance * (1 - math.exp(-t * p.resistance / p.inductance)),
                                rel=1e-10)
+
+
+def test_one_default_motor_step_at_locked_rotor_is_the_rl_closed_form_worked_by_hand():
+    # R = 0.5 Ω, L = 2e-3 H (MotorParams' defaults, restated): τ = L/R = 4 ms.  From rest, v_q =
+    # 10 V held, ω = 0, one step h = 1e-4 s:
+    #   i_q(h) = v/R (1 − e^{−h/τ}) = 20 A · (1 − e^{−0.025}) = 20 · 0.024690087971667 A
+    #          = 0.49380175943334 A,   i_d = 0
+    #   E_el = 1.5 v ∫ i_q dt = 1.5 · 10 · 20 (h − τ (1 − e^{−h/τ}))
+    #        = 300 (1e-4 − 4e-3 · 0.024690087971667) J = 300 · 1.23964811333e-6 J
+    #        = 3.71894434e-4 J
+    #   E_mag = 0.75 L i_q² = 1.5e-3 J/A² · 0.49380175943334² A² = 1.5e-3 · 0.24384017762 J
+    #         = 3.65760266e-4 J
+    #   E_cu = E_el − E_mag (ω = 0: no air-gap work) = (3.71894434 − 3.65760266)e-4 J
+    #        = 6.134168e-6 J
+    mot = Motor(MotorParams(resistance=0.5, inductance=2e-3))
+    assert mot.integrator == "rk4"                       # the default
+    mot.set_inputs([0.0, 10.0, 0.0], [0.0, 0.0, 0.0])
+    mot.do_step(0.0, 1e-4)
+    y = dict(zip(mot.output_names(), mot.get_outputs()))
+    # RK4 on 5 substeps of 20 µs: error ≈ (20 µs / 4 ms)^5 / 120 per substep, ~1e-14 relative
+    assert y["i_q"] == pytest.approx(0.49380175943334, rel=1e-11)
+    assert y["i_d"] == 0.0
+    assert y["electrical_energy"] == pytest.approx(3.71894434e-4, rel=1e-8)
+    assert y["magnetic_energy"] == pytest.approx(3.65760266e-4, rel=1e-8)
+    assert y["copper_energy"] == pytest.approx(6.134168e-6, rel=1e-6)
+    assert y["airgap_energy"] == 0.0
+
+
+def test_the_default_rk4_step_is_closer_than_the_exponential_one_to_a_tight_reference():
+    """The motor ODE written out here under the master's inputs (voltages held, the speed
+    linear over the step), integrated by scipy at rtol 1e-13: the reference both integrators
+    are measured against (why RK4 stays the default: docs of system_models/motor.py)."""
+    from scipy.integrate import solve_ivp
+
+    r, ell, p, psi, kt = 0.5, 2e-3, 4, 0.25, 1.5          # ψ = k_t/(1.5 p) = 1.5/6 Wb
+    mp = MotorParams(pole_pairs=p, resistance=r, inductance=ell, torque_constant=kt)
+    h, w0, dw, vd, vq = 1e-4, 120.0, 2e4, -15.0, 140.0    # 2e4 rad/s²: the loop's peak
+
+    def f(tau, s):
+        w = w0 + dw * tau
+        return [(vd - r * s[0] + p * w * ell * s[1]) / ell,
+                (vq - r * s[1] - p * w * ell * s[0] - p * w * psi) / ell,
+                1.5 * (vd * s[0] + vq * s[1]), 1.5 * r * (s[0] ** 2 + s[1] ** 2), kt * s[1] * w]
+
+    x0 = [0.3, 12.0, 0.0, 0.0, 0.0]
+    ref = solve_ivp(f, (0.0, h), x0, method="DOP853", rtol=1e-13, atol=1e-15).y[:, -1]
+    errors = {}
+    for integrator in ("rk4", "exponential"):
+        mot = Motor(mp, integrator=integrator, i_d=x0[0], i_q=x0[1])
+        mot.set_inputs([vd, vq, w0], [0.0, 0.0, dw])
+        mot.do_step(0.0, h)
+        errors[integrator] = abs(complex(mot.x[0] - ref[0], mot.x[1] - ref[1])) / abs(
+            complex(ref[0], ref[1]))
+    assert errors["rk4"] < 1e-10
+    assert errors["exponential"] > 100 * errors["rk4"]
 
 
 def test_steady_voltages_hold_the_current_and_the_dq_power_identity_closes():

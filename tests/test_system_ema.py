@@ -129,6 +129,23 @@ def test_the_same_scene_with_the_fmu_and_the_python_prsm_agrees_to_1e_10(step_ru
     assert max_relative_difference(a, b, a.names()) <= 1e-10
 
 
+def test_recording_only_the_scenes_outputs_reads_fewer_fmu_variables_and_changes_no_value(step_runs):
+    scene = load_scene("position_step")
+    system = build_system(scene, prsm="fmu", fmu_path=fmu(), record=scene.outputs)
+    prsm = system.master.blocks[system.master.index["prsm"]]
+    # recorded: rod_position, screw_speed, the two contact forces, efficiency; connected:
+    # rod_position, screw_speed, rod_velocity -> 6 distinct variables of the FMU's 34
+    assert prsm.output_names() == prsm_output_names(2) + ["step_rhs_calls", "step_substeps",
+                                                          "step_fidelity"]
+    assert prsm._n_read == 6 and not prsm._vr_int
+    part = system.run()
+    full = step_runs["fmu"].result
+    assert part.names() == scene.outputs
+    assert np.array_equal(part.time, full.time)
+    for name in scene.outputs:
+        assert np.array_equal(part[name], full[name]), name
+
+
 @pytest.mark.parametrize("scene,fidelity", [("startup_seed000", None), ("speed_reversal", "dynamic")])
 def test_fmu_and_python_agree_to_1e_10_at_the_dynamic_level(scene, fidelity):
     a = run_scene(scene, prsm="fmu", fmu_path=fmu(), fidelity=fidelity).result
