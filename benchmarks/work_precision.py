@@ -96,7 +96,8 @@ class Config:
         the level of each step chosen along the run; its ``rtol`` is both the model tolerance
         and the dynamic steps' rtol, as the FMU's ``tolerance``).
     stepper : str
-        ``rk4`` (explicit fixed), ``explicit_adaptive`` (Dormand–Prince 5(4)), ``rosenbrock``
+        ``rk4`` (explicit fixed), ``explicit_adaptive`` (Dormand–Prince 5(4)), ``exponential``
+        (dynamic level: exponential Rosenbrock exprb32), ``rosenbrock``
         (implicit, ROS34PW2), ``closed_form`` (slaved levels), ``default`` (``auto`` only: its
         own choice of DP5(4) or ROS34PW2 per step, the FMU's default) or ``radau``
         (``solve_ivp`` restarted on each communication step: the baseline and the reference).
@@ -175,6 +176,8 @@ def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
         grid += [Config(fid, "rk4", "substeps", n) for n in substeps]
         grid += [Config(fid, "explicit_adaptive", "rtol", r) for r in rtols]
         grid += [Config(fid, "rosenbrock", "rtol", r) for r in rtols]
+        if fid == "dynamic":
+            grid += [Config(fid, "exponential", "rtol", r) for r in rtols]
         if fid != "dynamic":
             grid.append(Config(fid, "closed_form"))
     grid += [Config("auto", "rk4", "substeps", n) for n in substeps if n <= 4]
@@ -437,6 +440,7 @@ def loop_grid(rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
         grid += [Config(fid, "closed_form"), Config(fid, "rk4", "substeps", 1)]
         grid += [Config(fid, "rosenbrock", "rtol", r) for r in (1e-4, 1e-8)]
     grid += [Config("dynamic", "rosenbrock", "rtol", r) for r in rtols]
+    grid += [Config("dynamic", "exponential", "rtol", r) for r in rtols]
     grid += [Config("auto", st, "rtol", r) for st in ("rosenbrock", "default") for r in auto_rtols]
     grid += [Config("dynamic", "radau", "rtol", r) for r in radau_rtols]
     return tuple(grid)
@@ -715,6 +719,7 @@ def write_csv(scene: Scene, result: dict, path: Path) -> None:
 STEPPER_STYLE = {"rk4": ("tab:blue", "explicit fixed (RK4 × substeps)"),
                  "explicit_adaptive": ("tab:orange", "explicit adaptive (DP5(4), rtol)"),
                  "rosenbrock": ("tab:green", "implicit (ROS34PW2, rtol)"),
+                 "exponential": ("tab:olive", "exponential Rosenbrock (exprb32, rtol)"),
                  "closed_form": ("tab:purple", "closed form (slaved levels)"),
                  "default": ("tab:brown", "auto's own choice per step (DP5(4) or ROS34PW2)"),
                  "radau": ("tab:gray", "solve_ivp Radau restarted (baseline, rtol)")}

@@ -24,7 +24,7 @@ Signal = Union[float, Callable[[float], float]]
 #: default stepper per fidelity level (used by simulate and the FMU); ``auto``'s ``default``
 #: chooses explicit or linearly implicit dynamic steps from the communication step and the
 #: carriers' time constant (prsm_fmu/models/adaptive.py)
-DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
+DEFAULT_STEPPER = {"dynamic": "exponential", "quasi-static": "closed_form",
                    "kinematic": "closed_form", "auto": "default"}
 
 def _signal(value: Signal, name: str) -> Callable[[float], float]:
@@ -73,7 +73,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     output_interval : float
         Output (and input-hold) interval h [s], > 0.
     stepper : str, optional
-        ``rk4``, ``explicit_adaptive``, ``rosenbrock``, ``radau`` or ``closed_form``
+        ``rk4``, ``explicit_adaptive``, ``rosenbrock``, ``exponential``, ``radau`` or ``closed_form``
         (slaved-carrier levels only); default by fidelity (:data:`DEFAULT_STEPPER`).
     rtol, atol : float
         Tolerances of adaptive steppers [-], [state units].

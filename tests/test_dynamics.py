@@ -62,6 +62,16 @@ def test_energy_balance_closes_over_the_start_up_transient(startup):
     assert energy_residual(startup) <= 1e-9
 
 
+@pytest.mark.parametrize("stepper", ["rosenbrock", "exponential"])
+def test_energy_balance_closes_over_the_start_up_with_the_stiff_steppers(stepper):
+    # the start-up of the fixture with 10 µs communication steps (the carriers' transient
+    # spans ~0.1 ms): the work integrals are integrated with the speeds, the balance closes
+    r = simulate(SEED000, "dynamic", "speed", screw_speed=100.0, load_force=5000.0,
+                 t_end=1.5e-3, output_interval=1e-5, stepper=stepper,
+                 stepper_options={"rtol": 1e-9, "atol": 1e-12})
+    assert energy_residual(r) <= 1e-9
+
+
 @pytest.mark.parametrize("fidelity", ["dynamic", "quasi-static"])
 def test_energy_balance_closes_on_a_speed_ramp_0_to_100_rad_s_in_1_ms(fidelity):
     # the prescribed acceleration 1e5 rad/s² enters the driven torque as J·α: the input work
@@ -78,6 +88,9 @@ def test_energy_balance_closes_on_a_speed_ramp_0_to_100_rad_s_in_1_ms(fidelity):
 
 @pytest.mark.parametrize("stepper,opts", [("radau", {"rtol": 1e-11, "atol": 1e-13}),
                                           ("rosenbrock", {"rtol": 1e-9, "atol": 1e-12}),
+                                          # a tenth of the rtol: the same accuracy
+                                          # (steppers.options.TOLERANCE_FACTOR)
+                                          ("exponential", {"rtol": 1e-10, "atol": 1e-13}),
                                           ("explicit_adaptive", {"rtol": 1e-9, "atol": 1e-12})])
 def test_energy_balance_closes_over_a_speed_reversal_through_zero(stepper, opts):
     # motor torque drops to 5 N·m under a 5 kN load: the screw stops at ~1.04 ms and the load
@@ -184,7 +197,8 @@ STUCK = dict(screw_torque=20.0, load_force=500.0, t_end=2e-3, output_interval=1e
              initial_screw_speed=-1.0, initial_carrier_ratio=0.0)
 
 
-@pytest.mark.parametrize("stepper", ["rosenbrock", "radau", "explicit_adaptive", "rk4"])
+@pytest.mark.parametrize("stepper", ["rosenbrock", "exponential", "radau", "explicit_adaptive",
+                                     "rk4"])
 def test_a_state_without_rigid_solution_is_refused_with_its_named_cause(stepper):
     # −1 rad/s, carriers at rest, +20 N·m: with the light inertias the slip direction makes
     # stage 1's thread self-locking for forward acceleration, M_S1(α) falls for α > 0 and never

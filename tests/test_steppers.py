@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from prsm_fmu.steppers import (
+    ExponentialRosenbrock,
     EXPLICIT_TABLEAUS,
     ROS_ALPHA,
     ROS_B,
@@ -192,6 +193,8 @@ def all_steppers(model_j, model_nojac=None):
         ExplicitAdaptive(model_j, order=3),
         Rosenbrock(model_j),
         Rosenbrock(m2, jacobian="fd"),
+        ExponentialRosenbrock(model_j),
+        ExponentialRosenbrock(m2, jacobian="fd"),
         ScipyRadau(model_j),
     ]
 
@@ -974,6 +977,8 @@ def _memory_cases():
         Rosenbrock(cycj, rtol=1e-6),
         Rosenbrock(cyc, rtol=1e-5, jacobian="fd"),
         Rosenbrock(cycj, fixed_substeps=4),
+        ExponentialRosenbrock(cyc, rtol=1e-6),
+        ExponentialRosenbrock(cycj, fixed_substeps=4),
         ScipyRadau(cycj),
     ]
 
@@ -1044,6 +1049,8 @@ def _nan_steppers(t_bad):
         ExplicitAdaptive(m, fixed_substeps=4),
         Rosenbrock(m),
         Rosenbrock(m, fixed_substeps=4),
+        ExponentialRosenbrock(m),
+        ExponentialRosenbrock(m, fixed_substeps=4),
         ScipyRadau(m),
     ]
 

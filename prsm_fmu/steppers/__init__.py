@@ -22,6 +22,10 @@ Provided steppers (see :func:`make_stepper`), one module each on the shared base
 ``"rosenbrock"``
     :class:`Rosenbrock` (:mod:`.rosenbrock`), linearly implicit L-stable ROS34PW2
     (order 3, embedded 2) for stiff models (contact stiffness, electrical time constants).
+``"exponential"``
+    :class:`ExponentialRosenbrock` (:mod:`.exponential`), exponential Rosenbrock exprb32
+    (order 3, embedded 2): the stiff speed block integrated exactly through its φ-functions
+    (:mod:`.phi`); the dynamic level's default.
 ``"radau"``
     :class:`ScipyRadau` (:mod:`.radau`), the reference path through
     :func:`scipy.integrate.solve_ivp`.
@@ -42,6 +46,7 @@ from __future__ import annotations
 from .base import OdeModel, StepFailure, Stepper, StepStats
 from .closed_form import ClosedForm
 from .explicit import ExplicitAdaptive
+from .exponential import ExponentialRosenbrock
 from .factory import STEPPER_NAMES, make_stepper
 # private names re-exported for the tests that check the LU and the quadrature weights
 from .linalg import SMALL_LU as _SMALL_LU
@@ -62,6 +67,7 @@ __all__ = [
     "RK4",
     "ExplicitAdaptive",
     "Rosenbrock",
+    "ExponentialRosenbrock",
     "ScipyRadau",
     "ClosedForm",
     "make_stepper",

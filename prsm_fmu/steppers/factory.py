@@ -7,6 +7,7 @@ from typing import Any
 from .base import Stepper
 from .closed_form import ClosedForm
 from .explicit import ExplicitAdaptive
+from .exponential import ExponentialRosenbrock
 from .radau import ScipyRadau
 from .rk4 import RK4
 from .rosenbrock import Rosenbrock
@@ -17,6 +18,7 @@ _STEPPERS: dict[str, type[Stepper]] = {
     "rk4": RK4,
     "explicit_adaptive": ExplicitAdaptive,
     "rosenbrock": Rosenbrock,
+    "exponential": ExponentialRosenbrock,
     "radau": ScipyRadau,
     "closed_form": ClosedForm,
 }
@@ -30,7 +32,7 @@ def make_stepper(name: str, model: Any, **options: Any) -> Stepper:
 
     Parameters
     ----------
-    name : {"rk4", "explicit_adaptive", "rosenbrock", "radau", "closed_form"}
+    name : {"rk4", "explicit_adaptive", "rosenbrock", "exponential", "radau", "closed_form"}
         Stepper kind.
     model : OdeModel
         Model to integrate.  A model with a ``stepper_factory(name, **options)`` (the

@@ -1,0 +1,344 @@
+"""Exponential Rosenbrock method exprb32 with error control, for stiff models whose stiffness sits
+in a small block of states (φ-functions of that block in :mod:`.phi`)."""
+
+from __future__ import annotations
+
+import math
+from operator import mul
+from typing import Any, Callable, Sequence
+
+from .base import StepStats, _INF, _SQRT_EPS, _bad_text, _is_finite_sum, _model_quadrature
+from .control import AdaptiveBase
+from .linalg import getter
+from .phi import prepare
+
+__all__ = ["ExponentialRosenbrock"]
+
+#: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
+_TIME_MATCH = 4e-16
+
+
+class ExponentialRosenbrock(AdaptiveBase):
+    """Exponential Rosenbrock method exprb32 (order 3, embedded order 2) with error control.
+
+    Hochbruck, Ostermann & Schweitzer, SIAM J. Numer. Anal. 47 (2009) 786, Sec. 5: with
+    ``J = f'(x_n)`` and ``g(x) = f(x) - f(x_n) - J (x - x_n)`` (the model is autonomous within
+    an advance: inputs held),
+
+    ``U = x_n + h φ_1(hJ) f(x_n)``   (exponential Rosenbrock–Euler, order 2),
+    ``x_{n+1} = U + 2h φ_3(hJ) (g(U) - g(x_n))``   (order 3; ``g(x_n) = 0``),
+
+    and the difference ``2h φ_3(hJ) g(U)`` is the error estimate (controller exponent 1/3).
+    The linear part is integrated exactly: a stiff linear system is solved exactly at any step
+    size, and the carriers' fast relaxation of a PRSM model (time constants ~10 µs, far below a
+    1 ms communication step) costs no step-size reduction; steps are limited by the
+    non-linearity only.  Each internal step costs one rhs at its start, the Jacobian, and one
+    rhs at ``U``; a rejected step costs one rhs (the retry re-uses both).  The method needs the
+    exact Jacobian for order 3 (it is not a W-method): a fresh one at every accepted point.
+
+    Block structure: the states that no rhs component depends on (``quadrature_states``: the
+    screw angle and the work integrals) have zero Jacobian columns, so with the other states
+    ``d`` (the speeds) ``J = [[A, 0], [B, 0]]`` (rows ``d``, ``q``) and
+    ``φ_k(hJ) = [[φ_k(hA), 0], [h B φ_{k+1}(hA), I/k!]]``: only the small block ``A`` (1 + one
+    per carrier states) needs φ-functions (:mod:`.phi`, plain Python floats), the
+    quadrature states follow from ``φ_2`` and ``φ_4`` of it, and the finite-difference Jacobian
+    costs one rhs per state ``d`` (increment ``sqrt(eps) max(|x_i|, state_scale_i)``).  With
+    ``jacobian = "analytic"`` (or ``"auto"`` and a model with ``jacobian``) the model's own is
+    used.  As in :class:`Rosenbrock`, an exact treatment holds up to round-off only if the
+    declaration of ``quadrature_states`` is right.
+
+    Memory (:meth:`get_memory`): the controller's proposal after the first accepted step of
+    the last advance (for an advance after an input change, as :class:`Rosenbrock`), and, for
+    the next advance that starts where the last one ended with the same state and inputs (a
+    continued integration, e.g. constant inputs), the proposal after its last step together
+    with that end point: such an advance continues with the step size the controller had
+    reached instead of starting over.  Without memory the first internal step tries the whole
+    communication step (a rejection costs one rhs).
+
+    Error control, step landing and failures as in :class:`ExplicitAdaptive`; non-finite
+    values or an overflow of ``e^{hλ}`` in a trial step reject it.
+
+    Parameters
+    ----------
+    model : OdeModel
+        Model to integrate; needs ``state_scale`` [SI].
+    rtol, atol, h_min, max_substeps, fixed_substeps :
+        As in :class:`ExplicitAdaptive` (``h_min`` in seconds).
+    jacobian : {"auto", "fd", "analytic"}, optional
+        Jacobian source.
+    safety, fac_min, fac_max : float, optional
+        Controller safety factor and limits of the step-size ratio.
+    """
+
+    name = "exponential"
+    method = "exprb32"
+    _q1 = 3.0
+
+    def __init__(
+        self,
+        model: Any,
+        rtol: float = 1e-6,
+        atol: float = 1e-9,
+        h_min: float = 1e-14,
+        max_substeps: int = 100000,
+        fixed_substeps: int | None = None,
+        jacobian: str = "auto",
+        *,
+        safety: float = 0.9,
+        fac_min: float = 0.2,
+        fac_max: float = 5.0,
+    ) -> None:
+        super().__init__(model, rtol, atol, h_min, max_substeps, fixed_substeps, safety, fac_min, fac_max)
+        has_jac = callable(getattr(model, "jacobian", None))
+        if jacobian == "auto":
+            self._analytic = has_jac
+        elif jacobian == "analytic":
+            if not has_jac:
+                raise ValueError('jacobian = "analytic" but the model has no callable jacobian(t, x, u)')
+            self._analytic = True
+        elif jacobian == "fd":
+            self._analytic = False
+        else:
+            raise ValueError(
+                f"jacobian = {jacobian!r} is out of range: allowed are 'auto', 'fd', 'analytic'"
+            )
+        self.jacobian = "analytic" if self._analytic else "fd"
+        n = self.n_states
+        self._quad = _model_quadrature(model, n)
+        self._dyn = tuple(i for i in range(n) if i not in self._quad)
+        if not self._dyn:
+            raise ValueError("model.quadrature_states lists every state: no state left to integrate")
+        pos = {i: p for p, i in enumerate(self._dyn + self._quad)}
+        self._merge = getter(tuple(pos[i] for i in range(n)))
+        self._get_d = getter(self._dyn)
+        self._get_q = getter(self._quad) if self._quad else (lambda v: ())
+        self._cont: tuple | None = None
+
+    # --- memory ---------------------------------------------------------------------------
+
+    def get_memory(self) -> tuple:
+        """Return ``(h_proposal, continuation)``: the first-step proposal [s] for an advance
+        after an input change (None before the first adaptive advance), and ``(t_end, x_end,
+        u, h_next)`` of the last advance (None if there is none): its end time [s], state and
+        inputs, and the proposal [s] after its last step, used by an advance that continues it."""
+        return (self._h_prop, self._cont)
+
+    def set_memory(self, m: tuple) -> None:
+        """Restore ``(h_proposal, continuation)`` from :meth:`get_memory`."""
+        m = tuple(m)
+        if len(m) != 2:
+            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation), got {m!r}")
+        cont = m[1]
+        if cont is not None:
+            ok = isinstance(cont, tuple) and len(cont) == 4
+            if ok:
+                t_end, x_end, u, h_next = cont
+                ok = (isinstance(t_end, float) and math.isfinite(t_end)
+                      and isinstance(x_end, tuple) and len(x_end) == self.n_states
+                      and all(isinstance(v, float) and math.isfinite(v) for v in x_end)
+                      and isinstance(u, tuple)
+                      and all(isinstance(v, float) and math.isfinite(v) for v in u)
+                      and isinstance(h_next, float) and 0.0 < h_next < _INF)
+            if not ok:
+                raise ValueError(f"{self.name}: memory's continuation must be None or (t_end, "
+                                 f"x_end, u, h_next) with {self.n_states} finite states, finite "
+                                 f"inputs and h_next > 0 [s], got {cont!r}")
+        super().set_memory(m[:1])
+        self._cont = cont
+
+    def reset(self) -> None:
+        """Forget the step-size proposals."""
+        super().reset()
+        self._cont = None
+
+    def _continues(self, t: float, x: Sequence[float], u: tuple, h: float) -> float | None:
+        """The last advance's final proposal if this one continues it (same end time, state
+        and inputs), else None."""
+        c = self._cont
+        if c is None or abs(t - c[0]) > _TIME_MATCH * max(abs(t), h) or c[2] != tuple(u):
+            return None
+        return c[3] if c[1] == tuple(x) else None
+
+    # --- Jacobian ---------------------------------------------------------------------------
+
+    def _jac(self, f: Callable, t: float, x: list[float], f0: list[float], u: tuple,
+             stats: StepStats) -> tuple:
+        """``(A, B)``: the Jacobian's rows ``d`` and ``q`` restricted to the columns ``d`` (the
+        columns ``q`` are zero); forward differences cost one rhs per column ``d``."""
+        dyn, quad = self._dyn, self._quad
+        stats.jacobian_calls += 1
+        if self._analytic:
+            n = self.n_states
+            jac = self.model.jacobian(t, x, u)
+            if len(jac) != n or any(len(row) != n for row in jac):
+                raise ValueError(f"model.jacobian must return {n} rows of {n} entries")
+            return ([[jac[i][j] for j in dyn] for i in dyn],
+                    [[jac[i][j] for j in dyn] for i in quad])
+        cols = []
+        scale = self.state_scale
+        for i in dyn:
+            xi = x[i]
+            xp = list(x)
+            xp[i] = xi + _SQRT_EPS * max(abs(xi), scale[i])
+            inv = 1.0 / (xp[i] - xi)  # the increment actually represented
+            fp = f(t, xp, u)
+            stats.rhs_calls += 1
+            cols.append([(p - q) * inv for p, q in zip(fp, f0)])
+        return [[c[i] for c in cols] for i in dyn], [[c[i] for c in cols] for i in quad]
+
+    # --- one trial step ---------------------------------------------------------------------
+
+    def _trial(self, f: Callable, t: float, x: list[float], f0: list[float], jac: tuple,
+               hs: float, u: tuple) -> tuple:
+        """One exprb32 step of size ``hs``: ``(x_new, err, bad)`` (``bad``: 0, 2 for a
+        non-finite or wrong-length rhs at ``U``, -1 for a non-finite result)."""
+        a, b = jac
+        n = self.n_states
+        get_d, get_q = self._get_d, self._get_q
+        try:
+            ph = prepare([[hs * v for v in row] for row in a])
+            xd, fd = get_d(x), get_d(f0)
+            p1, p2 = ph.apply(fd, (1, 2))
+        except (OverflowError, ZeroDivisionError):
+            return None, _INF, -1
+        ud = [p + hs * q for p, q in zip(xd, p1)]
+        dd = [hs * q for q in p1]                   # U_d - x_d
+        xq, fq = get_q(x), get_q(f0)
+        h2 = hs * hs
+        uq = [p + hs * g + h2 * sum(map(mul, row, p2)) for p, g, row in zip(xq, fq, b)]
+        xu = list(self._merge(ud + uq))
+        fu = f(t + hs, xu, u)
+        if len(fu) != n or not _is_finite_sum(fu):
+            return None, _INF, 2
+        # D = g(U) = f(U) - f(x) - J (U - x)
+        ddv = [p - q - sum(map(mul, row, dd)) for p, q, row in zip(get_d(fu), fd, a)]
+        dq = [p - q - sum(map(mul, row, dd)) for p, q, row in zip(get_q(fu), fq, b)]
+        try:
+            p3, p4 = ph.apply(ddv, (3, 4))
+        except (OverflowError, ZeroDivisionError):
+            return None, _INF, -1
+        h2s = 2.0 * hs
+        ed = [h2s * v for v in p3]
+        eq = [h2s * (v / 6.0 + hs * sum(map(mul, row, p4))) for v, row in zip(dq, b)]
+        e = self._merge(ed + eq)
+        rtol = self.rtol
+        sq = 0.0
+        xn = []
+        for p, uu, ei, at in zip(x, xu, e, self._atol_w):
+            pn = uu + ei
+            sq += (ei / (at + rtol * max(abs(p), abs(pn)))) ** 2
+            xn.append(pn)
+        err = math.sqrt(sq / self._n_err)
+        chk = sum(xn) + err
+        if chk - chk != 0.0:
+            return xn, err, -1
+        return xn, err, 0
+
+    # --- driver -----------------------------------------------------------------------------
+
+    def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
+        h = self._check_args(t, x, h)
+        f = self.model.rhs
+        stats = StepStats()
+        fixed = self.fixed_substeps
+        if fixed is not None:
+            hs = h / fixed
+        else:
+            hs = self._continues(t, x, u, h)
+            if hs is None:
+                hs = self._h_prop if self._h_prop is not None else h
+        tau = 0.0
+        y = x
+        attempts = 0
+        just_rejected = False
+        f0 = jac = None
+        h_mem = None
+        reason = ""
+        i_fixed = 0
+        while True:
+            if fixed is not None:
+                ti = t + i_fixed * hs
+                h_step = hs
+                last = i_fixed == fixed - 1
+            else:
+                ti = t + tau
+                rem = h - tau
+                last = hs * 1.05 >= rem
+                h_step = rem if last else hs
+                attempts += 1
+                if attempts > self.max_substeps:
+                    raise self._fail(
+                        f"more than max_substeps = {self.max_substeps} internal steps (accepted + rejected)",
+                        ti, h_step, t, h,
+                    )
+            if f0 is None:
+                try:
+                    f0 = f(ti, y, u)
+                    stats.rhs_calls += 1
+                    if len(f0) != self.n_states or not _is_finite_sum(f0):
+                        raise self._fail(
+                            "non-finite value (or wrong length) in the rhs at an accepted point",
+                            ti, h_step, t, h,
+                        )
+                    jac = self._jac(f, ti, y, f0, u, stats)
+                except (ArithmeticError, ValueError) as exc:
+                    raise self._fail(f"rhs or jacobian raised {exc!r}", ti, h_step, t, h) from exc
+                if not _is_finite_sum([sum(row) for part in jac for row in part]):
+                    raise self._fail("non-finite value in the Jacobian", ti, h_step, t, h)
+            try:
+                y_new, err, bad = self._trial(f, ti, y, f0, jac, h_step, u)
+            except (ArithmeticError, ValueError) as exc:
+                if fixed is not None:
+                    raise self._fail(f"rhs raised {exc!r}", ti, h_step, t, h) from exc
+                y_new, err, bad = None, _INF, 0
+                reason = f"rhs raised {exc!r}"
+            else:
+                if bad:
+                    if fixed is not None:
+                        raise self._fail(_bad_text(bad) if bad > 0 else
+                                         "non-finite value (or overflow) in the result",
+                                         ti, h_step, t, h)
+                    err = _INF
+                    reason = _bad_text(bad)
+                elif not err <= 1.0:
+                    reason = f"error norm {err:.3g} > 1"
+            stats.rhs_calls += 1
+            if fixed is not None:
+                stats.substeps += 1
+                stats.error_estimate = err
+                y = y_new
+                f0 = jac = None
+                if last:
+                    return y, stats
+                i_fixed += 1
+                continue
+            if err <= 1.0:
+                stats.substeps += 1
+                stats.error_estimate = err
+                fac = self._factor(err)
+                if just_rejected and fac > 1.0:
+                    fac = 1.0
+                h_new = h_step * fac
+                # for a step shortened to land on t + h, the untruncated size unless the
+                # controller asks to shrink
+                h_next = max(h_new, hs) if last and h_new >= h_step else h_new
+                if h_mem is None:
+                    h_mem = h_next
+                y = y_new
+                f0 = jac = None
+                just_rejected = False
+                if last:
+                    self._h_prop = h_mem
+                    self._cont = (t + h, tuple(y), tuple(float(v) for v in u), h_next)
+                    return y, stats
+                tau += h_step
+                hs = h_new
+            else:
+                stats.rejected += 1
+                just_rejected = True
+                hs = h_step * self._factor(err)
+                if hs < self.h_min:
+                    raise self._fail(
+                        f"step size {hs!r} s below h_min = {self.h_min!r} s after rejection ({reason})",
+                        ti, h_step, t, h,
+                    )
