@@ -29,7 +29,7 @@ FIDELITY_CHOICES = FIDELITIES + ("auto",)
 AUTO_FIDELITY = "quasi-static"
 
 #: stepper choices: ``default`` is ``closed_form`` for the levels with slaved carriers
-#: (quasi-static, kinematic), ``exponential`` for the dynamic level, and for the dynamic steps of
+#: (quasi-static, kinematic), ``rosenbrock`` for the dynamic level, and for the dynamic steps of
 #: ``auto`` explicit or linearly implicit per step (prsm_fmu/models/adaptive.py)
 STEPPER_CHOICES = ("default",) + STEPPER_NAMES
 
@@ -45,7 +45,7 @@ FIDELITY_ITEMS: dict[str, tuple[int, str]] = {
 
 #: the FMU's Enumeration ``Stepper``: item name -> (value, description) (values fixed as above)
 STEPPER_ITEMS: dict[str, tuple[int, str]] = {
-    "default": (0, "closed_form for kinematic and quasi-static, exponential for dynamic, a choice "
+    "default": (0, "closed_form for kinematic and quasi-static, rosenbrock for dynamic, a choice "
                    "per step for auto"),
     "closed_form": (1, "exact constant-acceleration step, adaptive Dormand-Prince in the friction "
                        "band (kinematic and quasi-static only)"),

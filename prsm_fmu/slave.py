@@ -173,7 +173,7 @@ SOLVER_FIELDS: dict[str, tuple] = {
                   "(absolute tolerance: 0.01 * tolerance in rad, rad/s and J)",
                   TOLERANCE_RANGE[0], TOLERANCE_RANGE[1], 1e-6),
     "stepper": ("Enumeration:Stepper", None, "time stepper inside a communication step: default "
-                "(closed_form for kinematic and quasi-static, exponential for dynamic), closed_form, "
+                "(closed_form for kinematic and quasi-static, rosenbrock for dynamic), closed_form, "
                 "explicit_adaptive, rosenbrock, rk4, radau or exponential", None, None,
                 STEPPER_ITEMS["default"][0]),
     "substeps": ("Integer", None, "0: internal steps chosen by the stepper to meet tolerance; "
