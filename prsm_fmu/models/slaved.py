@@ -60,6 +60,8 @@ class SlavedAdvance:
                 factors.append(s.bearing_speed_factor)
         if getattr(model, "coulomb_loss", False):
             factors.append(mech.c_out)
+        #: sliding speed per unit screw speed of every regularised law [m/rad]
+        self.factors = tuple(factors)
         #: a viscous term makes the forces depend on the speed: no closed-form step then
         self.viscous = mech.viscous or getattr(model, "viscous", False)
         #: screw speed [rad/s] above which every law is exactly Coulomb
@@ -139,6 +141,25 @@ class SlavedAdvance:
 class SlavedLevel:
     """Mixin for levels with slaved carriers: exposes the closed-form step to the steppers."""
 
+    def _advance_law(self) -> SlavedAdvance:
+        adv = self.__dict__.get("_slaved_advance")
+        if adv is None:
+            adv = self._slaved_advance = SlavedAdvance(self)
+        return adv
+
+    def smooth_breaks(self) -> tuple[float, ...]:
+        """Screw speeds [rad/s] at which the rhs is only C¹ (steppers split their steps there).
+
+        Zero and ±v_ε/f for every regularised law's sliding speed per unit screw speed f (a
+        contact flank, spline, bearing or loss torque): there a sliding speed crosses zero or its
+        band edge, where the law r(2 − r)µ|N| of friction.py meets its neighbour with equal value
+        and slope but not curvature.  The largest is the band speed of :class:`SlavedAdvance`.
+        """
+        adv = self._advance_law()
+        v_eps = self.mechanism.v_eps
+        edges = sorted({v_eps / f for f in adv.factors if f > 0.0})
+        return tuple([-e for e in reversed(edges)] + [0.0] + edges)
+
     def closed_form_advance(self, t: float, x: list[float], u: tuple, h: float) -> list[float] | None:
         """State after a step h [s] in closed form, or None where it is not exact.
 
@@ -147,7 +168,4 @@ class SlavedLevel:
         """
         if self.drive == "speed" and u[0] == 0.0:
             return [xi + h * di for xi, di in zip(x, self.rhs(t, x, u))]
-        adv = self.__dict__.get("_slaved_advance")
-        if adv is None:
-            adv = self._slaved_advance = SlavedAdvance(self)
-        return adv.advance(x, u, h)
+        return self._advance_law().advance(x, u, h)
