@@ -48,20 +48,28 @@ class SlavedAdvance:
         self.mech = mech
         # slowest sliding speed per unit screw speed [m/rad]: contacts, splines, bearings, loss
         factors = []
+        laws = []               # the same, without the contact flanks when they have no friction
         for s, z in zip(mech.stages, mech.zeta):
             for fl in s.flanks:
                 dx, dy, dz = fl.ax + z * fl.bx, fl.ay + z * fl.by, fl.az
                 factors.append(math.sqrt(dx * dx + dy * dy + dz * dz))
+                if mech.mu:
+                    laws.append(factors[-1])
                 if mech.mu3:
                     factors.append(fl.radius)     # differential sliding: sgñ(ω r)
+                    laws.append(fl.radius)
             if s.e_spline:
                 factors.append(s.spline_speed_factor)
+                laws.append(s.spline_speed_factor)
             if s.g_bearing:
                 factors.append(s.bearing_speed_factor)
+                laws.append(s.bearing_speed_factor)
         if getattr(model, "coulomb_loss", False):
             factors.append(mech.c_out)
-        #: sliding speed per unit screw speed of every regularised law [m/rad]
-        self.factors = tuple(factors)
+            laws.append(mech.c_out)
+        #: sliding speed per unit screw speed [m/rad] of every regularised law that acts (the
+        #: contact flanks only with µ_SR > 0: the kinematic level's contacts have no friction)
+        self.law_factors = tuple(laws)
         #: a viscous term makes the forces depend on the speed: no closed-form step then
         self.viscous = mech.viscous or getattr(model, "viscous", False)
         #: screw speed [rad/s] above which every law is exactly Coulomb
@@ -157,7 +165,7 @@ class SlavedLevel:
         """
         adv = self._advance_law()
         v_eps = self.mechanism.v_eps
-        edges = sorted({v_eps / f for f in adv.factors if f > 0.0})
+        edges = sorted({v_eps / f for f in adv.law_factors if f > 0.0})
         return tuple([-e for e in reversed(edges)] + [0.0] + edges)
 
     def closed_form_advance(self, t: float, x: list[float], u: tuple, h: float) -> list[float] | None:

@@ -67,6 +67,15 @@ from .control import AdaptiveBase
 
 __all__ = ["ScalarExponential", "phi_functions"]
 
+#: Gauss–Legendre rules on [−1, 1]: 5 points (exact to degree 9) and 3 points (degree 5), which
+#: share the midpoint
+_G5X1 = math.sqrt(5.0 - 2.0 * math.sqrt(10.0 / 7.0)) / 3.0
+_G5X2 = math.sqrt(5.0 + 2.0 * math.sqrt(10.0 / 7.0)) / 3.0
+_G5W1 = (322.0 + 13.0 * math.sqrt(70.0)) / 900.0
+_G5W2 = (322.0 - 13.0 * math.sqrt(70.0)) / 900.0
+_GAUSS = (((-_G5X2, -_G5X1, 0.0, _G5X1, _G5X2), (_G5W2, _G5W1, 128.0 / 225.0, _G5W1, _G5W2)),
+          ((-math.sqrt(0.6), 0.0, math.sqrt(0.6)), (5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0)))
+
 #: 1/k! for k = 0..25 (the series of the φ functions)
 _INV_FACT = tuple(1.0 / math.factorial(k) for k in range(26))
 
@@ -156,8 +165,8 @@ class ScalarExponential(AdaptiveBase):
         self._quad = quad
         breaks_fn = getattr(model, "smooth_breaks", None)
         breaks = tuple(float(b) for b in breaks_fn()) if callable(breaks_fn) else ()
-        if not all(math.isfinite(b) for b in breaks):
-            raise ValueError(f"model.smooth_breaks() = {breaks!r}: every break must be finite")
+        # a break at ±inf (a law whose band is unbounded) is never crossed
+        breaks = tuple(b for b in breaks if math.isfinite(b))
         self._breaks = tuple(sorted(set(breaks)))
         positive = [abs(b) for b in self._breaks if b != 0.0]
         #: scale of the free state for the difference increment [its SI unit]
@@ -237,6 +246,67 @@ class ScalarExponential(AdaptiveBase):
             return tau if tau < 0.95 * hs else None
         return None
 
+    def _traverse(self, t: float, x: list[float], u: tuple, f0: list[float], col: list[float],
+                  rem: float, stats: StepStats) -> tuple[float, list[float], float] | None:
+        """Cross to the next break in w-space (module docstring, "Traversal"): (time [s], state
+        at the break, error norm), or None where it does not apply (exprb32 steps in time)."""
+        i = self._i
+        w0, g0, lam = x[i], f0[i], col[i]
+        if g0 == 0.0:
+            return None
+        ahead = [b for b in self._breaks if (b > w0 if g0 > 0.0 else b < w0)]
+        if not ahead:
+            return None
+        b = min(ahead, key=lambda v: abs(v - w0))
+        d = b - w0
+        a = lam * d / g0
+        if a < -0.5:                       # g would fall below half its value: near a root
+            return None
+        if d / g0 * (math.log1p(a) / a if a != 0.0 else 1.0) > 0.95 * rem:
+            return None                    # the linearised motion does not get there in time
+        f = self.model.rhs
+        for _ in range(3):                 # the whole way to the break, then a quarter, ...
+            mid, half = w0 + 0.5 * d, 0.5 * d
+            rules = []
+            seen: dict = {}
+            for nodes, weights in _GAUSS:
+                time = 0.0
+                acc = [0.0] * len(x)
+                for xi, wt in zip(nodes, weights):
+                    fk = seen.get(xi)
+                    if fk is None:
+                        xk = list(x)
+                        xk[i] = mid + xi * half
+                        try:
+                            fk = f(t, xk, u)
+                        except (ArithmeticError, ValueError):
+                            return None
+                        stats.rhs_calls += 1
+                        if not (fk[i] * g0 > 0.0 and _is_finite_sum(fk)):
+                            return None    # a root of g (or no solution) inside: no traversal
+                        seen[xi] = fk
+                    c = wt * half / fk[i]  # dt = dw / g, dq = p dw / g
+                    time += c
+                    acc = [s + c * v for s, v in zip(acc, fk)]
+                rules.append((time, acc))
+            (t5, q5), (t3, q3) = rules
+            if not 0.0 < t5 <= rem:
+                return None
+            y = [a + dq for a, dq in zip(x, q5)]
+            y[i] = w0 + d
+            # the lower rule's difference; in w a time error δt is a speed error g δt
+            est = [p - q for p, q in zip(q5, q3)]
+            est[i] = g0 * (t5 - t3)
+            rtol = self.rtol
+            err = math.sqrt(sum([(e / (at + rtol * max(abs(p), abs(q)))) ** 2
+                                 for e, p, q, at in zip(est, x, y, self._atol_w)]) / self._n_err)
+            if err <= 1.0:
+                if d == b - w0:
+                    y[i] = b                   # land on the break exactly
+                return t5, y, err
+            d *= 0.25
+        return None
+
     # --- driver -------------------------------------------------------------------------
 
     def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
@@ -264,6 +334,19 @@ class ScalarExponential(AdaptiveBase):
         while True:
             ti = t + tau
             f0, col = self._checked_linearise(ti, y, u, stats, t, h, hs)
+            crossed = self._traverse(ti, y, u, f0, col, h - tau, stats)
+            if crossed is not None:
+                dt, y, stats.error_estimate = crossed
+                stats.substeps += 1
+                tau += dt
+                if self._exact is not None:
+                    ye = self._exact(t + tau, y, u, h - tau)
+                    if ye is not None and _is_finite_sum(ye):
+                        stats.rhs_calls += 1
+                        stats.substeps += 1
+                        self._h_prop = hs
+                        return ye, stats
+                continue
             just_rejected = False
             while True:
                 rem = h - tau
