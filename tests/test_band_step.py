@@ -1,5 +1,5 @@
 """The friction band of the slaved-carrier levels stepped by the exponential Rosenbrock path of
-``closed_form`` (prsm_fmu/steppers/exponential.py) instead of the explicit Dormand-Prince one.
+``closed_form`` (prsm_fmu/steppers/band.py) instead of the explicit Dormand-Prince one.
 
 Expected values come from closed forms worked out here (the φ functions to 60 digits, the
 relaxation of an affine rhs), from an independent root solve of the speed-drive balance (the
@@ -18,7 +18,7 @@ from scipy.optimize import brentq
 from prsm_fmu import presets
 from prsm_fmu.models import make_model
 from prsm_fmu.steppers import ClosedForm, make_stepper
-from prsm_fmu.steppers.exponential import ScalarExponential, phi_functions
+from prsm_fmu.steppers.band import ScalarExponential, phi_functions
 
 SEED000 = presets.load("seed000_two_stage")
 SEED003 = presets.load("seed003_single_stage")   # with the viscous term

@@ -28,7 +28,7 @@ Provided steppers (see :func:`make_stepper`), one module each on the shared base
 ``"closed_form"``
     :class:`ClosedForm` (:mod:`.closed_form`), the model's exact step where it has one, and
     where it has none (the slaved levels' friction band) :class:`ScalarExponential`
-    (:mod:`.exponential`), an exponential Rosenbrock step for one free state plus quadratures.
+    (:mod:`.band`), an exponential Rosenbrock step for one free state plus quadratures.
 
 The methods' coefficients are data in :mod:`.tableaux`; the small dense LU of the linearly
 implicit steppers is in :mod:`.linalg`; the options tuned for the PRSM models in
@@ -44,7 +44,7 @@ from __future__ import annotations
 from .base import OdeModel, StepFailure, Stepper, StepStats
 from .closed_form import ClosedForm
 from .explicit import ExplicitAdaptive
-from .exponential import ScalarExponential
+from .band import ScalarExponential
 from .factory import STEPPER_NAMES, make_stepper
 # private names re-exported for the tests that check the LU and the quadrature weights
 from .linalg import SMALL_LU as _SMALL_LU

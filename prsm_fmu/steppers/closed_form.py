@@ -6,7 +6,7 @@ from typing import Any
 
 from .base import Stepper, StepStats, _is_finite_sum
 from .explicit import ExplicitAdaptive
-from .exponential import ScalarExponential
+from .band import ScalarExponential
 
 __all__ = ["ClosedForm", "BAND_METHODS"]
 
@@ -23,7 +23,7 @@ class ClosedForm(Stepper):
     levels: constant acceleration under held inputs outside the friction band).  Where it
     answers None (friction band, zero speed crossed, sign pattern left, viscous term), the step
     is integrated by :class:`ScalarExponential` (exprb32: exact for an affine rhs, three rhs
-    calls per internal step, split at the band edges; :mod:`.exponential` says why), which
+    calls per internal step, split at the band edges; :mod:`.band` says why), which
     returns to the closed form as soon as it answers for the rest of the step.  A closed-form
     step counts as one rhs call.
 
