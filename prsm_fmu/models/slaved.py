@@ -48,18 +48,28 @@ class SlavedAdvance:
         self.mech = mech
         # slowest sliding speed per unit screw speed [m/rad]: contacts, splines, bearings, loss
         factors = []
+        laws = []               # the same, without the contact flanks when they have no friction
         for s, z in zip(mech.stages, mech.zeta):
             for fl in s.flanks:
                 dx, dy, dz = fl.ax + z * fl.bx, fl.ay + z * fl.by, fl.az
                 factors.append(math.sqrt(dx * dx + dy * dy + dz * dz))
+                if mech.mu:
+                    laws.append(factors[-1])
                 if mech.mu3:
                     factors.append(fl.radius)     # differential sliding: sgñ(ω r)
+                    laws.append(fl.radius)
             if s.e_spline:
                 factors.append(s.spline_speed_factor)
+                laws.append(s.spline_speed_factor)
             if s.g_bearing:
                 factors.append(s.bearing_speed_factor)
+                laws.append(s.bearing_speed_factor)
         if getattr(model, "coulomb_loss", False):
             factors.append(mech.c_out)
+            laws.append(mech.c_out)
+        #: sliding speed per unit screw speed [m/rad] of every regularised law that acts (the
+        #: contact flanks only with µ_SR > 0: the kinematic level's contacts have no friction)
+        self.law_factors = tuple(laws)
         #: a viscous term makes the forces depend on the speed: no closed-form step then
         self.viscous = mech.viscous or getattr(model, "viscous", False)
         #: screw speed [rad/s] above which every law is exactly Coulomb
@@ -139,6 +149,25 @@ class SlavedAdvance:
 class SlavedLevel:
     """Mixin for levels with slaved carriers: exposes the closed-form step to the steppers."""
 
+    def _advance_law(self) -> SlavedAdvance:
+        adv = self.__dict__.get("_slaved_advance")
+        if adv is None:
+            adv = self._slaved_advance = SlavedAdvance(self)
+        return adv
+
+    def smooth_breaks(self) -> tuple[float, ...]:
+        """Screw speeds [rad/s] at which the rhs is only C¹ (steppers split their steps there).
+
+        Zero and ±v_ε/f for every regularised law's sliding speed per unit screw speed f (a
+        contact flank, spline, bearing or loss torque): there a sliding speed crosses zero or its
+        band edge, where the law r(2 − r)µ|N| of friction.py meets its neighbour with equal value
+        and slope but not curvature.  The largest is the band speed of :class:`SlavedAdvance`.
+        """
+        adv = self._advance_law()
+        v_eps = self.mechanism.v_eps
+        edges = sorted({v_eps / f for f in adv.law_factors if f > 0.0})
+        return tuple([-e for e in reversed(edges)] + [0.0] + edges)
+
     def closed_form_advance(self, t: float, x: list[float], u: tuple, h: float) -> list[float] | None:
         """State after a step h [s] in closed form, or None where it is not exact.
 
@@ -147,7 +176,4 @@ class SlavedLevel:
         """
         if self.drive == "speed" and u[0] == 0.0:
             return [xi + h * di for xi, di in zip(x, self.rhs(t, x, u))]
-        adv = self.__dict__.get("_slaved_advance")
-        if adv is None:
-            adv = self._slaved_advance = SlavedAdvance(self)
-        return adv.advance(x, u, h)
+        return self._advance_law().advance(x, u, h)

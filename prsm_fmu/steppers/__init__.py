@@ -25,12 +25,14 @@ Provided steppers (see :func:`make_stepper`), one module each on the shared base
 ``"exponential"``
     :class:`ExponentialRosenbrock` (:mod:`.exponential`), exponential Rosenbrock exprb32
     (order 3, embedded 2): the stiff speed block integrated exactly through its φ-functions
-    (:mod:`.phi`); the dynamic level's default.
+    (:mod:`.phi`); a choice for the dynamic level (its default stays ``rosenbrock``).
 ``"radau"``
     :class:`ScipyRadau` (:mod:`.radau`), the reference path through
     :func:`scipy.integrate.solve_ivp`.
 ``"closed_form"``
-    :class:`ClosedForm` (:mod:`.closed_form`), the model's exact step where it has one.
+    :class:`ClosedForm` (:mod:`.closed_form`), the model's exact step where it has one, and
+    where it has none (the slaved levels' friction band) :class:`ScalarExponential`
+    (:mod:`.band`), an exponential Rosenbrock step for one free state plus quadratures.
 
 The methods' coefficients are data in :mod:`.tableaux`; the small dense LU of the linearly
 implicit steppers is in :mod:`.linalg`; the options tuned for the PRSM models in
@@ -46,6 +48,7 @@ from __future__ import annotations
 from .base import OdeModel, StepFailure, Stepper, StepStats
 from .closed_form import ClosedForm
 from .explicit import ExplicitAdaptive
+from .band import ScalarExponential
 from .exponential import ExponentialRosenbrock
 from .factory import STEPPER_NAMES, make_stepper
 # private names re-exported for the tests that check the LU and the quadrature weights
@@ -70,6 +73,7 @@ __all__ = [
     "ExponentialRosenbrock",
     "ScipyRadau",
     "ClosedForm",
+    "ScalarExponential",
     "make_stepper",
     "STEPPER_NAMES",
     "EXPLICIT_TABLEAUS",
