@@ -47,14 +47,17 @@ FIDELITY_ITEMS: dict[str, tuple[int, str]] = {
 STEPPER_ITEMS: dict[str, tuple[int, str]] = {
     "default": (0, "closed_form for kinematic and quasi-static, rosenbrock for dynamic, a choice "
                    "per step for auto"),
-    "closed_form": (1, "exact constant-acceleration step, adaptive Dormand-Prince in the friction "
-                       "band (kinematic and quasi-static only)"),
+    "closed_form": (1, "exact constant-acceleration step, scalar exponential Rosenbrock in the "
+                       "friction band (kinematic and quasi-static only)"),
     "explicit_adaptive": (2, "Dormand-Prince 5(4) with error control"),
     "rosenbrock": (3, "linearly implicit ROS34PW2 with error control (stiff)"),
     "rk4": (4, "classical Runge-Kutta, substeps equal steps, no error control"),
     "radau": (5, "scipy's Radau IIA (reference; slow)"),
     "exponential": (6, "exponential Rosenbrock exprb32 with error control: the stiff speeds "
                        "integrated exactly through their phi-functions (stiff)"),
+    "closed_form_explicit": (7, "exact constant-acceleration step, adaptive Dormand-Prince 5(4) in "
+                                "the friction band (kinematic and quasi-static only; the native C "
+                                "FMU's method)"),
 }
 
 #: Enumeration name -> its items, as the modelDescription's TypeDefinitions declare them
@@ -191,8 +194,8 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
                                              else "auto")
     name = stepper_name(solver["stepper"])
     name = DEFAULT_STEPPER[level] if name == "default" else name
-    if name == "closed_form" and level == "dynamic":
-        raise ValueError("stepper = 'closed_form' is not allowed with fidelity = 'dynamic': "
+    if name in ("closed_form", "closed_form_explicit") and level == "dynamic":
+        raise ValueError(f"stepper = {name!r} is not allowed with fidelity = 'dynamic': "
                          "the closed form exists only for kinematic and quasi-static")
     opts: dict[str, Any] = {}
     if name == "radau":      # scipy's solve_ivp has no step limit: bound its rhs calls instead

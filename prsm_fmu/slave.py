@@ -174,7 +174,7 @@ SOLVER_FIELDS: dict[str, tuple] = {
                   TOLERANCE_RANGE[0], TOLERANCE_RANGE[1], 1e-6),
     "stepper": ("Enumeration:Stepper", None, "time stepper inside a communication step: default "
                 "(closed_form for kinematic and quasi-static, rosenbrock for dynamic), closed_form, "
-                "explicit_adaptive, rosenbrock, rk4, radau or exponential", None, None,
+                "explicit_adaptive, rosenbrock, rk4, radau, exponential or closed_form_explicit", None, None,
                 STEPPER_ITEMS["default"][0]),
     "substeps": ("Integer", None, "0: internal steps chosen by the stepper to meet tolerance; "
                  "n >= 1: n equal internal steps per communication step without error control "

@@ -644,7 +644,7 @@ def test_a_parameter_cannot_change_after_initialization_nor_an_output_be_set():
 BAD_VALUES = {
     "Real": [math.nan, math.inf, -math.inf, 0.0, -1.0, -1e308, 1e308, 1e-300],
     "Integer": [0, -1, -(2**31), 2**31 - 1],
-    "Enumeration": [-1, 4, 7, -(2**31), 2**31 - 1],   # 7: past both (Fidelity 0..3, Stepper 0..6)
+    "Enumeration": [-1, 4, 8, -(2**31), 2**31 - 1],   # 8: past both (Fidelity 0..3, Stepper 0..7)
     "Boolean": [],
 }
 

@@ -181,11 +181,13 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         return -1;
     }
     const char *st = choice(s, P_STEPPER_TYPE, P_STEPPER, P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
-    if (!strcmp(st, "default") || !strcmp(st, "closed_form")) cfg->closed_form = 1;
+    /* the friction band is stepped by Dormand-Prince 5(4) here: the Python FMU's
+     * closed_form_explicit; its closed_form (scalar exponential band step) is not translated */
+    if (!strcmp(st, "default") || !strcmp(st, "closed_form_explicit")) cfg->closed_form = 1;
     else if (!strcmp(st, "explicit_adaptive")) cfg->closed_form = 0;
     else {
         snprintf(msg, (size_t)len, "stepper = '%s' is not allowed in the native FMU: must be one of "
-                 "default, closed_form, explicit_adaptive", st);
+                 "default (= closed_form_explicit), closed_form_explicit, explicit_adaptive", st);
         return -1;
     }
     const char *names[2] = {"initial_screw_speed", "initial_screw_angle"};

@@ -246,8 +246,8 @@ class SwitchingStepper(Stepper):
         Stepper of the dynamic level; ``default``: each dynamic step explicit (DP5(4)) where
         the communication step is at most :data:`EXPLICIT_STEP_PER_TAU` times the fastest
         carrier time constant at the step's start (τ_k = c_k |ω|/|F|), ROS34PW2 with the tuned
-        options of :data:`prsm_fmu.steppers.options.TUNED_OPTIONS` elsewhere; ``closed_form`` means
-        ``rosenbrock``.
+        options of :data:`prsm_fmu.steppers.options.TUNED_OPTIONS` elsewhere; ``closed_form`` and
+        ``closed_form_explicit`` mean ``rosenbrock``.
     **options
         That stepper's options; ``rtol``, ``atol`` and ``max_substeps`` also set the
         quasi-static closed form's fallback integrator (with ``default``, they and
@@ -271,7 +271,7 @@ class SwitchingStepper(Stepper):
                 "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic, **common),
                 "rosenbrock": make_stepper("rosenbrock", model.dynamic, **tuned, **common)}
         else:
-            name = "rosenbrock" if name == "closed_form" else name
+            name = "rosenbrock" if name in ("closed_form", "closed_form_explicit") else name
             self.dynamic_steppers = {name: make_stepper(name, model.dynamic, **options)}
         self.quasi_static_stepper = ClosedForm(model.quasi_static, **fallback)
         self.name = f"auto({name})"

@@ -33,6 +33,9 @@ Provided steppers (see :func:`make_stepper`), one module each on the shared base
     :class:`ClosedForm` (:mod:`.closed_form`), the model's exact step where it has one, and
     where it has none (the slaved levels' friction band) :class:`ScalarExponential`
     (:mod:`.band`), an exponential Rosenbrock step for one free state plus quadratures.
+``"closed_form_explicit"``
+    :class:`ClosedFormExplicit`: the same with Dormand-Prince 5(4) in the band (the native C
+    FMU's method).
 
 The methods' coefficients are data in :mod:`.tableaux`; the small dense LU of the linearly
 implicit steppers is in :mod:`.linalg`; the options tuned for the PRSM models in
@@ -46,7 +49,7 @@ Model protocol (duck typed, see :class:`OdeModel`): ``n_states``, ``rhs(t, x, u)
 from __future__ import annotations
 
 from .base import OdeModel, StepFailure, Stepper, StepStats
-from .closed_form import ClosedForm
+from .closed_form import ClosedForm, ClosedFormExplicit
 from .explicit import ExplicitAdaptive
 from .band import ScalarExponential
 from .exponential import ExponentialRosenbrock
@@ -73,6 +76,7 @@ __all__ = [
     "ExponentialRosenbrock",
     "ScipyRadau",
     "ClosedForm",
+    "ClosedFormExplicit",
     "ScalarExponential",
     "make_stepper",
     "STEPPER_NAMES",

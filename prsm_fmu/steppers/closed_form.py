@@ -8,11 +8,11 @@ from .base import Stepper, StepStats, _is_finite_sum
 from .explicit import ExplicitAdaptive
 from .band import ScalarExponential
 
-__all__ = ["ClosedForm", "BAND_METHODS"]
+__all__ = ["ClosedForm", "ClosedFormExplicit", "BAND_METHODS"]
 
 #: how :class:`ClosedForm` steps where the closed form declines: ``exponential`` (default,
 #: :class:`ScalarExponential`) or ``explicit`` (:class:`ExplicitAdaptive`, Dormand-Prince 5(4);
-#: the former path, kept for the benchmarks' comparison)
+#: the former path, kept for the benchmarks' comparison and as the native C FMU's method)
 BAND_METHODS = ("exponential", "explicit")
 
 
@@ -70,3 +70,23 @@ class ClosedForm(Stepper):
 
     def reset(self) -> None:
         self.band.reset()
+
+
+class ClosedFormExplicit(ClosedForm):
+    """:class:`ClosedForm` with Dormand-Prince 5(4) where the closed form declines.
+
+    The method the native C FMU runs (``python -m fmu_build --native``), so that the Python FMU
+    can be set to step exactly as it does (stepper ``closed_form_explicit``).
+
+    Parameters
+    ----------
+    model : OdeModel
+        Model with ``closed_form_advance``.
+    **band_options
+        Options of :class:`ExplicitAdaptive` (``rtol``, ``atol``, ``max_substeps`` ...).
+    """
+
+    name = "closed_form_explicit"
+
+    def __init__(self, model: Any, **band_options: Any) -> None:
+        super().__init__(model, band="explicit", **band_options)

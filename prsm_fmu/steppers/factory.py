@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from .base import Stepper
-from .closed_form import ClosedForm
+from .closed_form import ClosedForm, ClosedFormExplicit
 from .explicit import ExplicitAdaptive
 from .exponential import ExponentialRosenbrock
 from .radau import ScipyRadau
@@ -21,6 +21,7 @@ _STEPPERS: dict[str, type[Stepper]] = {
     "exponential": ExponentialRosenbrock,
     "radau": ScipyRadau,
     "closed_form": ClosedForm,
+    "closed_form_explicit": ClosedFormExplicit,
 }
 
 #: names accepted by :func:`make_stepper`
@@ -32,7 +33,7 @@ def make_stepper(name: str, model: Any, **options: Any) -> Stepper:
 
     Parameters
     ----------
-    name : {"rk4", "explicit_adaptive", "rosenbrock", "exponential", "radau", "closed_form"}
+    name : {"rk4", "explicit_adaptive", "rosenbrock", "exponential", "radau", "closed_form", "closed_form_explicit"}
         Stepper kind.
     model : OdeModel
         Model to integrate.  A model with a ``stepper_factory(name, **options)`` (the
