@@ -242,3 +242,55 @@ def test_stiff_carriers_settle_on_their_equilibrium_at_10_ms_steps():
         assert all(math.isfinite(v) for v in x)
     for k, s in enumerate(model.mechanism.stages):
         assert x[2 + k] / x[1] == pytest.approx(s.zeta_geometric, rel=1e-6)
+
+
+# ---- φ-functions of clustered, repeated, zero and large blocks ---------------------------------
+
+def _phi_by_expm(z, v, k):
+    """φ_k(Z) v from scipy's expm of the augmented matrix [[Z, v e_1^T], [0, N]] (N the k×k
+    nilpotent shift; Al-Mohy & Higham, SIAM J. Sci. Comput. 33 (2011) 488, Thm 2.1): its
+    column n + k - 1 holds φ_k(Z) v above — an independent reference (LAPACK Padé)."""
+    import numpy as np
+    from scipy.linalg import expm
+
+    n = len(z)
+    m = np.zeros((n + k, n + k))
+    m[:n, :n] = z
+    m[:n, n] = v
+    for j in range(k - 1):
+        m[n + j, n + j + 1] = 1.0
+    return list(expm(m)[:n, n + k - 1])
+
+
+@pytest.mark.parametrize("z", [
+    [[0.0, 0.0], [0.0, 0.0]],                                   # zero block
+    [[-0.3, 0.2], [0.1, -0.3]],                                 # eigenvalues -0.3 ± 0.14
+    [[-0.5, 0.0], [0.0, -0.5]],                                 # repeated
+    [[-0.5, 1e-9], [0.0, -0.5]],                                # repeated, defective (Jordan)
+    [[1e-3, -2e-3, 1e-4], [5e-4, -1e-3, 2e-4], [3e-4, 1e-4, 2e-4]],   # clustered near 0
+    [[-0.4, 0.3, 0.2], [0.1, -0.4, 0.1], [0.2, 0.2, -0.4]],     # norm 0.9, clustered pair
+    [[-300.0, 250.0], [250.0, -300.0]],                         # large norm, well separated
+    [[-120.0, 0.0, 1.0], [0.0, -120.0, 0.5], [2.0, 0.1, -120.0]],     # large norm, clustered
+])
+def test_phi_matches_the_augmented_matrix_exponential(z):
+    v = [1.0, -2.0, 0.5][:len(z)]
+    got = prepare(z).apply(v, (1, 2, 3, 4))
+    for k, g in zip((1, 2, 3, 4), got):
+        ref = _phi_by_expm(z, v, k)
+        scale = max(abs(r) for r in ref)
+        assert max(abs(a - b) for a, b in zip(g, ref)) <= 1e-13 * scale, (k, g, ref)
+
+
+@pytest.mark.parametrize("lam,c", [(-0.25, 0.5), (-40.0, 300.0), (0.0, 1e3)])
+def test_phi_of_a_jordan_block_equals_its_closed_form(lam, c):
+    # Z = [[λ, c], [0, λ]] = λI + cN with N² = 0: φ_k(Z) = φ_k(λ) I + c φ_k'(λ) N, and
+    # φ_k' = φ_k - k φ_{k+1} (differentiate Σ z^m/(m+k)! term by term: the coefficient of z^m
+    # is (m+1)/(m+k+1)! on both sides).  φ_k(λ) from the rational series above.
+    z = [[lam, c], [0.0, lam]]
+    v = [0.7, -1.3]
+    got = prepare(z).apply(v, (1, 2, 3, 4))
+    for k, g in zip((1, 2, 3, 4), got):
+        pk, pk1 = _phi_series(lam, k), _phi_series(lam, k + 1)
+        ref = [pk * v[0] + c * (pk - k * pk1) * v[1], pk * v[1]]
+        scale = max(abs(r) for r in ref)
+        assert max(abs(a - b) for a, b in zip(g, ref)) <= 1e-12 * scale, (k, g, ref)
