@@ -198,25 +198,90 @@ def test_adaptive_run_meets_its_tolerance_on_a_stiff_forced_problem():
         assert max(abs(a - b) / abs(b) for a, b in zip(x, ref)) <= 10 * rtol
 
 
+class FrozenJacobian:
+    """A model whose ``jacobian`` always returns the exact one at the initial state: a
+    deliberately stale Jacobian at every later point."""
+
+    def __init__(self, model) -> None:
+        self.inner = model
+        self.n_states, self.state_scale = model.n_states, model.state_scale
+        self.rhs, self.x0, self.exact = model.rhs, model.x0, model.exact
+        self.frozen = _fd_jacobian(model, model.x0())
+
+    def jacobian(self, t, x, u):
+        return self.frozen
+
+
+def _fd_jacobian(model, x):
+    """Central differences (the test's own: step 1e-6, error ~1e-12 for these quadratics)."""
+    cols = []
+    for j in range(len(x)):
+        xp, xm = list(x), list(x)
+        xp[j] += 1e-6
+        xm[j] -= 1e-6
+        cols.append([(a - b) / 2e-6 for a, b in zip(model.rhs(0.0, xp, ()), model.rhs(0.0, xm, ()))])
+    return [[cols[j][i] for j in range(len(x))] for i in range(len(x))]
+
+
+@pytest.mark.parametrize("model,t0", [(Forced(10.0), 0.5), (Forced(1e4), 0.5), (Riccati(), 0.7)])
+@pytest.mark.parametrize("h", [0.02, 0.1])
+def test_a_stale_jacobians_local_error_stays_below_the_estimate(model, t0, h):
+    # one step of size h from the exact state at t0 with the Jacobian of t = 0 (Riccati: A = -2
+    # where J = -2/(1.7) = -1.18; Forced: A[1][0] = 2 where 2y = 2e^{-0.5} = 1.21); with
+    # rtol = 0, atol = 1 and unit scales the estimate is the RMS of the correction, and the
+    # W-type argument (exponential.py's docstring) makes the local error about half of it
+    frozen = FrozenJacobian(model)
+    st = ExponentialRosenbrock(frozen, rtol=0.0, atol=1.0, jacobian="analytic",
+                               fixed_substeps=1)
+    x1, stats = st.advance(t0, model.exact(t0), (), h)
+    e = [a - b for a, b in zip(x1, model.exact(t0 + h))]
+    rms = math.sqrt(sum(v * v for v in e) / len(e))
+    assert 0.0 < rms <= stats.error_estimate
+
+
+@pytest.mark.parametrize("rtol", [1e-5, 1e-8])
+def test_kept_jacobian_run_meets_the_tolerance_and_saves_jacobians(rtol):
+    # Jacobian reuse on (drift allowance 0.3, age 50): fewer Jacobians than accepted steps,
+    # and the tolerance still met (the stale-Jacobian retry and the W-type estimate)
+    m = Forced(1e4)
+    st = ExponentialRosenbrock(m, rtol=rtol, atol=rtol * 1e-3, jacobian="fd",
+                               jacobian_drift=0.3, jacobian_age=50)
+    x, t, jacs, steps = m.x0(), 0.0, 0, 0
+    for _ in range(10):
+        x, stats = st.advance(t, x, (), 0.1)
+        t += 0.1
+        jacs += stats.jacobian_calls
+        steps += stats.substeps
+    assert jacs < steps
+    ref = m.exact(1.0)
+    assert max(abs(a - b) / abs(b) for a, b in zip(x, ref)) <= 10 * rtol
+
+
 def test_continuing_advance_keeps_its_step_size_and_a_changed_input_does_not():
     # Riccati from x = 1 over 4 steps of 0.05: the second advance continues the first (same
     # state, inputs, time), so it starts at the controller's last proposal
     st = ExponentialRosenbrock(Riccati(), rtol=1e-9, atol=1e-12)
     x1, s1 = st.advance(0.0, [1.0], (), 0.05)
-    h_first, cont = st.get_memory()
+    h_first, cont, jrec = st.get_memory()
     assert cont is not None and cont[0] == 0.05 and cont[1] == tuple(x1)
     x2, s2 = st.advance(0.05, x1, (), 0.05)
     assert s2.rejected == 0 and s2.substeps <= s1.substeps
-    st.set_memory((h_first, cont))
+    st.set_memory((h_first, cont, jrec))
     # another state: no continuation (the first-step proposal is used)
     assert st._continues(0.05, [x1[0] * (1 + 1e-12)], (), 0.05) is None
     assert st._continues(0.05, x1, (1.0,), 0.05) is None
     assert st._continues(0.05, x1, (), 0.05) == cont[3]
 
 
-@pytest.mark.parametrize("bad", [(1.0,), (1.0, 2.0), (None, (0.0, (1.0,), (), -1.0)),
-                                 (None, (0.0, (1.0, 2.0), (), 1.0)),
-                                 (None, (0.0, (math.nan,), (), 1.0))])
+@pytest.mark.parametrize("bad", [(1.0,), (1.0, 2.0), (None, None), (None, (0.0, (1.0,), (), -1.0), None),
+                                 (None, (0.0, (1.0, 2.0), (), 1.0), None),
+                                 (None, (0.0, (math.nan,), (), 1.0), None),
+                                 # the kept Jacobian (x_J, u_J, age, A, B): Riccati has one
+                                 # state d and no quadrature state, so A has 1 entry, B none
+                                 (None, None, ((1.0,), (), 0.0, (1.0, 2.0), ())),
+                                 (None, None, ((1.0,), (), 1.5, (-2.0,), ())),
+                                 (None, None, ((1.0,), (), 0.0, (math.inf,), ())),
+                                 (None, None, ((1.0,), (), 0, (-2.0,), ()))])
 def test_bad_memory_is_refused(bad):
     st = ExponentialRosenbrock(Riccati())
     with pytest.raises(ValueError, match="memory"):
@@ -242,3 +307,55 @@ def test_stiff_carriers_settle_on_their_equilibrium_at_10_ms_steps():
         assert all(math.isfinite(v) for v in x)
     for k, s in enumerate(model.mechanism.stages):
         assert x[2 + k] / x[1] == pytest.approx(s.zeta_geometric, rel=1e-6)
+
+
+# ---- φ-functions of clustered, repeated, zero and large blocks ---------------------------------
+
+def _phi_by_expm(z, v, k):
+    """φ_k(Z) v from scipy's expm of the augmented matrix [[Z, v e_1^T], [0, N]] (N the k×k
+    nilpotent shift; Al-Mohy & Higham, SIAM J. Sci. Comput. 33 (2011) 488, Thm 2.1): its
+    column n + k - 1 holds φ_k(Z) v above — an independent reference (LAPACK Padé)."""
+    import numpy as np
+    from scipy.linalg import expm
+
+    n = len(z)
+    m = np.zeros((n + k, n + k))
+    m[:n, :n] = z
+    m[:n, n] = v
+    for j in range(k - 1):
+        m[n + j, n + j + 1] = 1.0
+    return list(expm(m)[:n, n + k - 1])
+
+
+@pytest.mark.parametrize("z", [
+    [[0.0, 0.0], [0.0, 0.0]],                                   # zero block
+    [[-0.3, 0.2], [0.1, -0.3]],                                 # eigenvalues -0.3 ± 0.14
+    [[-0.5, 0.0], [0.0, -0.5]],                                 # repeated
+    [[-0.5, 1e-9], [0.0, -0.5]],                                # repeated, defective (Jordan)
+    [[1e-3, -2e-3, 1e-4], [5e-4, -1e-3, 2e-4], [3e-4, 1e-4, 2e-4]],   # clustered near 0
+    [[-0.4, 0.3, 0.2], [0.1, -0.4, 0.1], [0.2, 0.2, -0.4]],     # norm 0.9, clustered pair
+    [[-300.0, 250.0], [250.0, -300.0]],                         # large norm, well separated
+    [[-120.0, 0.0, 1.0], [0.0, -120.0, 0.5], [2.0, 0.1, -120.0]],     # large norm, clustered
+])
+def test_phi_matches_the_augmented_matrix_exponential(z):
+    v = [1.0, -2.0, 0.5][:len(z)]
+    got = prepare(z).apply(v, (1, 2, 3, 4))
+    for k, g in zip((1, 2, 3, 4), got):
+        ref = _phi_by_expm(z, v, k)
+        scale = max(abs(r) for r in ref)
+        assert max(abs(a - b) for a, b in zip(g, ref)) <= 1e-13 * scale, (k, g, ref)
+
+
+@pytest.mark.parametrize("lam,c", [(-0.25, 0.5), (-40.0, 300.0), (0.0, 1e3)])
+def test_phi_of_a_jordan_block_equals_its_closed_form(lam, c):
+    # Z = [[λ, c], [0, λ]] = λI + cN with N² = 0: φ_k(Z) = φ_k(λ) I + c φ_k'(λ) N, and
+    # φ_k' = φ_k - k φ_{k+1} (differentiate Σ z^m/(m+k)! term by term: the coefficient of z^m
+    # is (m+1)/(m+k+1)! on both sides).  φ_k(λ) from the rational series above.
+    z = [[lam, c], [0.0, lam]]
+    v = [0.7, -1.3]
+    got = prepare(z).apply(v, (1, 2, 3, 4))
+    for k, g in zip((1, 2, 3, 4), got):
+        pk, pk1 = _phi_series(lam, k), _phi_series(lam, k + 1)
+        ref = [pk * v[0] + c * (pk - k * pk1) * v[1], pk * v[1]]
+        scale = max(abs(r) for r in ref)
+        assert max(abs(a - b) for a, b in zip(g, ref)) <= 1e-12 * scale, (k, g, ref)

@@ -33,8 +33,24 @@ class ExponentialRosenbrock(AdaptiveBase):
     size, and the carriers' fast relaxation of a PRSM model (time constants ~10 µs, far below a
     1 ms communication step) costs no step-size reduction; steps are limited by the
     non-linearity only.  Each internal step costs one rhs at its start, the Jacobian, and one
-    rhs at ``U``; a rejected step costs one rhs (the retry re-uses both).  The method needs the
-    exact Jacobian for order 3 (it is not a W-method): a fresh one at every accepted point.
+    rhs at ``U``; a rejected step costs one rhs (the retry re-uses both).
+
+    Jacobian reuse (``jacobian_drift > 0``): a Jacobian is kept for later points while fewer
+    than ``jacobian_age`` steps were accepted with it and every state ``d`` and input is within
+    ``jacobian_drift`` (relative) of where it was taken; a step rejected with a kept Jacobian
+    is retried at the same size with a fresh one.  With ``A != f'(x_n)`` the scheme is an
+    exponential W-type step and exprb32's order drops, but the error control still holds:
+    ``g(U) = f(U) - f(x_n) - A (U - x_n)`` then contains ``(J - A)(U - x_n) = h (J - A)
+    f(x_n) + O(h^2)``; ``U`` misses the exact flow's ``h^2/2 (J - A) f`` and the correction
+    ``2h φ_3 g(U)`` adds ``h^2/3 (J - A) f`` of it (``φ_3(0) = 1/6``), so the result keeps
+    ``h^2/6 (J - A) f`` while the estimate (the correction itself) reports ``h^2/3 (J - A) f``:
+    twice the error the staleness causes (tests/test_exponential.py: problems with known
+    solutions stepped with one Jacobian for the whole run meet their tolerance).  The
+    default ``jacobian_drift = 0`` takes a fresh Jacobian at every accepted point: measured
+    on benchmarks/step_cost.py at rtol 1e-7, a drift of 0.05 raised the error from 8.7e-9 to
+    7.3e-8 (the result's error then reaches the estimate's level instead of staying ~10x
+    below it) and the stop-and-go scenario's cost from 31 to 40 rhs per 1 ms step, and a
+    drift of 1e-3 saved 0.3 rhs per step (the speeds move more than that within a substep).
 
     Block structure: the states that no rhs component depends on (``quadrature_states``: the
     screw angle and the work integrals) have zero Jacobian columns, so with the other states
@@ -52,7 +68,8 @@ class ExponentialRosenbrock(AdaptiveBase):
     the next advance that starts where the last one ended with the same state and inputs (a
     continued integration, e.g. constant inputs), the proposal after its last step together
     with that end point: such an advance continues with the step size the controller had
-    reached instead of starting over.  Without memory the first internal step tries the whole
+    reached instead of starting over; and the kept Jacobian with the point it was taken at
+    (all plain floats, checked by :meth:`set_memory`), so a restored memory repeats the run.  Without memory the first internal step tries the whole
     communication step (a rejection costs one rhs).
 
     Error control, step landing and failures as in :class:`ExplicitAdaptive`; non-finite
@@ -68,6 +85,11 @@ class ExponentialRosenbrock(AdaptiveBase):
         Jacobian source.
     safety, fac_min, fac_max : float, optional
         Controller safety factor and limits of the step-size ratio.
+    jacobian_age : int, optional
+        Accepted steps after which a kept Jacobian is replaced (with ``jacobian_drift > 0``).
+    jacobian_drift : float, optional
+        Relative change of the states ``d`` and inputs up to which a Jacobian is kept [-];
+        0 (default): a fresh one at every accepted point.
     """
 
     name = "exponential"
@@ -87,8 +109,18 @@ class ExponentialRosenbrock(AdaptiveBase):
         safety: float = 0.9,
         fac_min: float = 0.2,
         fac_max: float = 5.0,
+        jacobian_age: int = 20,
+        jacobian_drift: float = 0.0,
     ) -> None:
         super().__init__(model, rtol, atol, h_min, max_substeps, fixed_substeps, safety, fac_min, fac_max)
+        if isinstance(jacobian_age, bool) or not isinstance(jacobian_age, int) or jacobian_age < 1:
+            raise ValueError(f"jacobian_age = {jacobian_age!r} is out of range: must be an "
+                             "integer >= 1 (accepted steps)")
+        if not (0.0 <= jacobian_drift < _INF):
+            raise ValueError(f"jacobian_drift = {jacobian_drift!r} is out of range: must be a "
+                             "finite number >= 0 (relative change)")
+        self.jacobian_age = jacobian_age
+        self.jacobian_drift = float(jacobian_drift)
         has_jac = callable(getattr(model, "jacobian", None))
         if jacobian == "auto":
             self._analytic = has_jac
@@ -113,43 +145,99 @@ class ExponentialRosenbrock(AdaptiveBase):
         self._get_d = getter(self._dyn)
         self._get_q = getter(self._quad) if self._quad else (lambda v: ())
         self._cont: tuple | None = None
+        #: the kept Jacobian: (x_J, u_J, age, A flat, B flat) in plain floats, or None
+        self._jrec: tuple | None = None
+        self._jac_kept: tuple | None = None      # (A, B) as rows, built from _jrec
+        self._phi_cache: tuple = (None, 0.0, None)
 
     # --- memory ---------------------------------------------------------------------------
 
     def get_memory(self) -> tuple:
-        """Return ``(h_proposal, continuation)``: the first-step proposal [s] for an advance
-        after an input change (None before the first adaptive advance), and ``(t_end, x_end,
-        u, h_next)`` of the last advance (None if there is none): its end time [s], state and
-        inputs, and the proposal [s] after its last step, used by an advance that continues it."""
-        return (self._h_prop, self._cont)
+        """Return ``(h_proposal, continuation, jacobian)``: the first-step proposal [s] for an
+        advance after an input change (None before the first adaptive advance); ``(t_end,
+        x_end, u, h_next)`` of the last advance (None if there is none): its end time [s],
+        state and inputs, and the proposal [s] after its last step, used by an advance that
+        continues it; and the kept Jacobian ``(x_J, u_J, age, A, B)`` (None if there is none):
+        the state and inputs it was taken at, the accepted steps [-] made with it, and its
+        blocks ``A`` (rows and columns ``d``) and ``B`` (rows ``q``, columns ``d``) flattened
+        row by row.  All plain floats in tuples."""
+        return (self._h_prop, self._cont, self._jrec)
 
     def set_memory(self, m: tuple) -> None:
-        """Restore ``(h_proposal, continuation)`` from :meth:`get_memory`."""
+        """Restore ``(h_proposal, continuation, jacobian)`` from :meth:`get_memory` (checked
+        first: a refused memory changes nothing)."""
         m = tuple(m)
-        if len(m) != 2:
-            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation), got {m!r}")
-        cont = m[1]
+        if len(m) != 3:
+            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation, "
+                             f"jacobian), got {m!r}")
+        cont, jrec = m[1], m[2]
+
+        def floats(v: Any, n: int | None) -> bool:
+            return (isinstance(v, tuple) and (n is None or len(v) == n)
+                    and all(isinstance(e, float) and math.isfinite(e) for e in v))
+
+        n = self.n_states
         if cont is not None:
             ok = isinstance(cont, tuple) and len(cont) == 4
             if ok:
                 t_end, x_end, u, h_next = cont
-                ok = (isinstance(t_end, float) and math.isfinite(t_end)
-                      and isinstance(x_end, tuple) and len(x_end) == self.n_states
-                      and all(isinstance(v, float) and math.isfinite(v) for v in x_end)
-                      and isinstance(u, tuple)
-                      and all(isinstance(v, float) and math.isfinite(v) for v in u)
-                      and isinstance(h_next, float) and 0.0 < h_next < _INF)
+                ok = (isinstance(t_end, float) and math.isfinite(t_end) and floats(x_end, n)
+                      and floats(u, None) and isinstance(h_next, float) and 0.0 < h_next < _INF)
             if not ok:
                 raise ValueError(f"{self.name}: memory's continuation must be None or (t_end, "
-                                 f"x_end, u, h_next) with {self.n_states} finite states, finite "
+                                 f"x_end, u, h_next) with {n} finite states, finite "
                                  f"inputs and h_next > 0 [s], got {cont!r}")
+        nd, nq = len(self._dyn), len(self._quad)
+        if jrec is not None:
+            ok = isinstance(jrec, tuple) and len(jrec) == 5
+            if ok:
+                xj, uj, age, a, b = jrec
+                ok = (floats(xj, n) and floats(uj, None) and isinstance(age, float)
+                      and age >= 0.0 and age == int(age)
+                      and floats(a, nd * nd) and floats(b, nd * nq))
+            if not ok:
+                raise ValueError(f"{self.name}: memory's jacobian must be None or (x_J, u_J, "
+                                 f"age, A, B) with {n} finite states, finite inputs, a whole "
+                                 f"age >= 0 and {nd * nd} + {nd * nq} finite entries, got "
+                                 f"{jrec!r}")
         super().set_memory(m[:1])
         self._cont = cont
+        self._set_jrec(jrec)
+
+    def _set_jrec(self, jrec: tuple | None) -> None:
+        self._jrec = jrec
+        if jrec is None:
+            self._jac_kept = None
+            return
+        nd = len(self._dyn)
+        a, b = jrec[3], jrec[4]
+        self._jac_kept = ([list(a[i * nd:(i + 1) * nd]) for i in range(nd)],
+                          [list(b[i * nd:(i + 1) * nd]) for i in range(len(self._quad))])
 
     def reset(self) -> None:
-        """Forget the step-size proposals."""
+        """Forget the step-size proposals and the kept Jacobian."""
         super().reset()
         self._cont = None
+        self._set_jrec(None)
+
+    def _fresh_enough(self, x: Sequence[float], u: tuple, age: int, xj: Sequence[float],
+                      uj: tuple) -> bool:
+        """Whether a Jacobian taken at ``(xj, uj)`` and used for ``age`` accepted steps may
+        serve at ``(x, u)``: fewer than ``jacobian_age`` steps, and every state ``d`` and
+        every input within ``jacobian_drift`` of it, relative to ``max(|value|, state_scale)``
+        (inputs: ``max(|u|, |u_J|)``)."""
+        if age >= self.jacobian_age or len(u) != len(uj):
+            return False
+        tol = self.jacobian_drift
+        scale = self.state_scale
+        for i in self._dyn:
+            a, b = x[i], xj[i]
+            if abs(a - b) > tol * max(abs(b), scale[i]):
+                return False
+        for a, b in zip(u, uj):
+            if abs(a - b) > tol * max(abs(a), abs(b)):
+                return False
+        return True
 
     def _continues(self, t: float, x: Sequence[float], u: tuple, h: float) -> float | None:
         """The last advance's final proposal if this one continues it (same end time, state
@@ -196,7 +284,12 @@ class ExponentialRosenbrock(AdaptiveBase):
         n = self.n_states
         get_d, get_q = self._get_d, self._get_q
         try:
-            ph = prepare([[hs * v for v in row] for row in a])
+            c = self._phi_cache
+            if c[0] is a and c[1] == hs:
+                ph = c[2]
+            else:
+                ph = prepare([[hs * v for v in row] for row in a])
+                self._phi_cache = (a, hs, ph)
             xd, fd = get_d(x), get_d(f0)
             p1, p2 = ph.apply(fd, (1, 2))
         except (OverflowError, ZeroDivisionError):
@@ -247,11 +340,19 @@ class ExponentialRosenbrock(AdaptiveBase):
             hs = self._continues(t, x, u, h)
             if hs is None:
                 hs = self._h_prop if self._h_prop is not None else h
+        u = tuple(u)
         tau = 0.0
         y = x
         attempts = 0
         just_rejected = False
-        f0 = jac = None
+        f0 = None
+        # the Jacobian in use, where it was taken and the accepted steps made with it; with
+        # fixed substeps (no error control) a fresh one at every point
+        jac = None
+        rec = self._jrec
+        if fixed is None and rec is not None:
+            jac, xj, uj, age = self._jac_kept, rec[0], rec[1], int(rec[2])
+        fresh = False
         h_mem = None
         reason = ""
         i_fixed = 0
@@ -271,8 +372,8 @@ class ExponentialRosenbrock(AdaptiveBase):
                         f"more than max_substeps = {self.max_substeps} internal steps (accepted + rejected)",
                         ti, h_step, t, h,
                     )
-            if f0 is None:
-                try:
+            try:
+                if f0 is None:
                     f0 = f(ti, y, u)
                     stats.rhs_calls += 1
                     if len(f0) != self.n_states or not _is_finite_sum(f0):
@@ -280,11 +381,13 @@ class ExponentialRosenbrock(AdaptiveBase):
                             "non-finite value (or wrong length) in the rhs at an accepted point",
                             ti, h_step, t, h,
                         )
+                if jac is None or not (fresh or self._fresh_enough(y, u, age, xj, uj)):
                     jac = self._jac(f, ti, y, f0, u, stats)
-                except (ArithmeticError, ValueError) as exc:
-                    raise self._fail(f"rhs or jacobian raised {exc!r}", ti, h_step, t, h) from exc
-                if not _is_finite_sum([sum(row) for part in jac for row in part]):
-                    raise self._fail("non-finite value in the Jacobian", ti, h_step, t, h)
+                    xj, uj, age, fresh = tuple(y), u, 0, True
+                    if not _is_finite_sum([sum(row) for part in jac for row in part]):
+                        raise self._fail("non-finite value in the Jacobian", ti, h_step, t, h)
+            except (ArithmeticError, ValueError) as exc:
+                raise self._fail(f"rhs or jacobian raised {exc!r}", ti, h_step, t, h) from exc
             try:
                 y_new, err, bad = self._trial(f, ti, y, f0, jac, h_step, u)
             except (ArithmeticError, ValueError) as exc:
@@ -325,14 +428,29 @@ class ExponentialRosenbrock(AdaptiveBase):
                 if h_mem is None:
                     h_mem = h_next
                 y = y_new
-                f0 = jac = None
+                f0 = None
+                age += 1
+                fresh = False
                 just_rejected = False
                 if last:
                     self._h_prop = h_mem
                     self._cont = (t + h, tuple(y), tuple(float(v) for v in u), h_next)
+                    if rec is None or jac is not self._jac_kept:
+                        a, b = jac
+                        rec = (xj, tuple(float(v) for v in uj), 0.0,
+                               tuple([v for row in a for v in row]),
+                               tuple([v for row in b for v in row]))
+                        self._jac_kept = jac
+                    self._jrec = rec[:2] + (float(age),) + rec[3:]
                     return y, stats
                 tau += h_step
                 hs = h_new
+            elif not fresh:
+                # rejected with a Jacobian taken elsewhere: retry the same step with a fresh
+                # one (the estimate may have seen the Jacobian's error, not the step's)
+                stats.rejected += 1
+                jac = None
+                hs = h_step
             else:
                 stats.rejected += 1
                 just_rejected = True

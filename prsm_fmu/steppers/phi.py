@@ -17,7 +17,11 @@ like ``eps (||Z|| / δ)^j`` with ``δ`` the smallest distance between eigenvalue
 ``[[Z, v e_1^T], [0, N]]`` (``N`` the nilpotent shift; Al-Mohy & Higham, SIAM J. Sci. Comput.
 33 (2011) 488, Thm 2.1) by ``scipy.linalg.expm``: exact in any case, about ten times slower.
 Complex eigenvalues are handled with complex arithmetic (the results' imaginary parts, rounding
-noise, are dropped).
+noise, are dropped).  A matrix of small norm, ``||Z||_inf <= TAYLOR_NORM`` (clustered
+eigenvalues or not: e.g. a PRSM's speed block in saturated friction, whose eigenvalues all sit
+near 0), skips the eigenvalues: ``φ_k(Z) v`` is then summed as its Taylor series
+``Σ_m Z^m v / (m + k)!`` in matrix-vector products (about 20 terms at norm 1), so the
+augmented-matrix exponential is left only for clustered eigenvalues of a larger matrix.
 """
 
 from __future__ import annotations
@@ -27,12 +31,15 @@ import math
 from operator import mul
 from typing import Sequence
 
-__all__ = ["phi_scalar", "prepare", "CLUSTER", "Phi"]
+__all__ = ["phi_scalar", "prepare", "CLUSTER", "TAYLOR_NORM", "Phi"]
 
 #: relative distance of eigenvalues below which the augmented-matrix exponential is used
 CLUSTER = 1e-2
 
-_INV_FACT = tuple(1.0 / math.factorial(k) for k in range(40))
+#: ``||Z||_inf`` up to which ``φ_k(Z) v`` is summed as its Taylor series (matrix-vector products)
+TAYLOR_NORM = 1.0
+
+_INV_FACT = tuple(1.0 / math.factorial(k) for k in range(50))
 
 
 def phi_scalar(z: complex | float, kmax: int) -> list:
@@ -164,10 +171,10 @@ class Phi:
     Attributes
     ----------
     nodes : tuple
-        The eigenvalues of ``Z`` in Leja order (empty on the augmented-matrix path).
+        The eigenvalues of ``Z`` in Leja order (empty on the Taylor and augmented-matrix paths).
     """
 
-    __slots__ = ("z", "nodes", "coef", "complex_", "_aug")
+    __slots__ = ("z", "nodes", "coef", "complex_", "_aug", "_taylor")
 
     def __init__(self, z: list[list[float]]) -> None:
         self.z = z
@@ -175,6 +182,12 @@ class Phi:
         norm = max([sum(map(abs, row)) for row in z])
         if not math.isfinite(norm):
             raise OverflowError("non-finite matrix entries")
+        self._taylor = n > 1 and norm <= TAYLOR_NORM
+        self._aug = False
+        self.complex_ = False
+        self.nodes = self.coef = ()
+        if self._taylor:
+            return
         ev = _eigenvalues(z)
         # Leja order: largest modulus first, then the farthest from those taken
         ev.sort(key=abs, reverse=True)
@@ -219,6 +232,8 @@ class Phi:
 
     def apply(self, v: Sequence[float], ks: Sequence[int]) -> list[list[float]]:
         """``[φ_k(Z) v for k in ks]`` for ``k`` in 1..4 (lists of float)."""
+        if self._taylor:
+            return _taylor(self.z, v, ks)
         if self._aug:
             return _augmented(self.z, v, ks)
         z = self.z
@@ -272,4 +287,25 @@ def _augmented(z: list[list[float]], v: Sequence[float], ks: Sequence[int]) -> l
     for k in ks:
         col = e[:n, :n] @ np.asarray(v, dtype=float) if k == 0 else e[:n, n + k - 1]
         out.append([float(a) for a in col])
+    return out
+
+
+def _taylor(z: list[list[float]], v: Sequence[float], ks: Sequence[int]) -> list[list[float]]:
+    """``φ_k(Z) v = Σ_m Z^m v / (m + k)!`` for ``||Z||_inf <= 1``, summed in matrix-vector
+    products until a term falls below ``1e-17 ||v|| / (kmax + 1)!`` (all terms have the sign
+    pattern of ``Z^m v``, no cancellation beyond that of ``Z^m v`` itself; ``||φ_k(Z)|| >=
+    1/k! - Σ_{m>=1} 1/(m+k)! > 0``, so the bound is relative to the result)."""
+    kmax = max(ks)
+    w = list(v)
+    out = [[c * _INV_FACT[k] for c in w] for k in ks]
+    tiny = 1e-17 * max(map(abs, w)) * _INV_FACT[kmax + 1]
+    for m in range(1, 40):
+        w = [sum(map(mul, row, w)) for row in z]
+        big = max(map(abs, w))
+        for acc, k in zip(out, ks):
+            c = _INV_FACT[m + k]
+            for i, wi in enumerate(w):
+                acc[i] += c * wi
+        if big * _INV_FACT[m + 1] <= tiny:
+            break
     return out
