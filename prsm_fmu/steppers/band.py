@@ -75,6 +75,7 @@ from typing import Any, Callable
 
 from .base import StepStats, _INF, _SQRT_EPS, _is_finite_sum, _model_quadrature
 from .control import AdaptiveBase
+from .phi import phi_scalar
 
 __all__ = ["ScalarExponential", "phi_functions"]
 
@@ -87,16 +88,13 @@ _G5W2 = (322.0 - 13.0 * math.sqrt(70.0)) / 900.0
 _GAUSS = (((-_G5X2, -_G5X1, 0.0, _G5X1, _G5X2), (_G5W2, _G5W1, 128.0 / 225.0, _G5W1, _G5W2)),
           ((-math.sqrt(0.6), 0.0, math.sqrt(0.6)), (5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0)))
 
-#: 1/k! for k = 0..25 (the series of the φ functions)
-_INV_FACT = tuple(1.0 / math.factorial(k) for k in range(26))
-
 
 def phi_functions(z: float) -> tuple[float, float, float, float]:
     """φ1(z) … φ4(z) of the exponential integrators, accurate for every real z.
 
-    φ_k(z) = Σ_(n≥0) z^n / (n + k)!, i.e. φ1 = (e^z − 1)/z, φ_(k+1) = (φ_k − 1/k!)/z.  For
-    |z| < 1 the series (20 terms, truncation below 1e-19 relative); elsewhere the recursion
-    from ``expm1`` (it loses at most a few bits there).
+    φ_k(z) = Σ_(n≥0) z^n / (n + k)!, i.e. φ1 = (e^z − 1)/z, φ_(k+1) = (φ_k − 1/k!)/z.  Scalar
+    case of :func:`prsm_fmu.steppers.phi.phi_scalar` (its series for |z| < 1, the recursion
+    from e^z elsewhere).
 
     Parameters
     ----------
@@ -113,19 +111,7 @@ def phi_functions(z: float) -> tuple[float, float, float, float]:
     OverflowError
         If e^z overflows (z > ~709).
     """
-    if abs(z) < 1.0:
-        out = []
-        for k in (1, 2, 3, 4):
-            s = 0.0
-            for n in range(20, -1, -1):
-                s = s * z + _INV_FACT[n + k]
-            out.append(s)
-        return out[0], out[1], out[2], out[3]
-    p1 = math.expm1(z) / z
-    p2 = (p1 - 1.0) / z
-    p3 = (p2 - 0.5) / z
-    p4 = (p3 - 1.0 / 6.0) / z
-    return p1, p2, p3, p4
+    return tuple(phi_scalar(z, 4)[1:])
 
 
 class ScalarExponential(AdaptiveBase):

@@ -175,6 +175,21 @@ def _model_quadrature(model: Any, n: int) -> tuple[int, ...]:
     return tuple(sorted(idx))
 
 
+def _analytic_jacobian(model: Any, jacobian: str) -> bool:
+    """Whether a linearly implicit or exponential stepper uses the model's own Jacobian
+    (``jacobian`` "analytic", or "auto" and the model has one) or forward differences ("fd")."""
+    has_jac = callable(getattr(model, "jacobian", None))
+    if jacobian == "auto":
+        return has_jac
+    if jacobian == "analytic":
+        if not has_jac:
+            raise ValueError('jacobian = "analytic" but the model has no callable jacobian(t, x, u)')
+        return True
+    if jacobian == "fd":
+        return False
+    raise ValueError(f"jacobian = {jacobian!r} is out of range: allowed are 'auto', 'fd', 'analytic'")
+
+
 def _first_nonfinite(vectors: Sequence[Sequence[float]]) -> int:
     """Index of the first vector holding a non-finite value, -1 if none."""
     for i, v in enumerate(vectors):

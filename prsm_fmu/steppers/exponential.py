@@ -7,7 +7,7 @@ import math
 from operator import mul
 from typing import Any, Callable, Sequence
 
-from .base import StepStats, _INF, _SQRT_EPS, _bad_text, _is_finite_sum, _model_quadrature
+from .base import StepStats, _INF, _SQRT_EPS, _analytic_jacobian, _bad_text, _is_finite_sum, _model_quadrature
 from .control import AdaptiveBase
 from .linalg import getter
 from .phi import prepare
@@ -121,19 +121,7 @@ class ExponentialRosenbrock(AdaptiveBase):
                              "finite number >= 0 (relative change)")
         self.jacobian_age = jacobian_age
         self.jacobian_drift = float(jacobian_drift)
-        has_jac = callable(getattr(model, "jacobian", None))
-        if jacobian == "auto":
-            self._analytic = has_jac
-        elif jacobian == "analytic":
-            if not has_jac:
-                raise ValueError('jacobian = "analytic" but the model has no callable jacobian(t, x, u)')
-            self._analytic = True
-        elif jacobian == "fd":
-            self._analytic = False
-        else:
-            raise ValueError(
-                f"jacobian = {jacobian!r} is out of range: allowed are 'auto', 'fd', 'analytic'"
-            )
+        self._analytic = _analytic_jacobian(model, jacobian)
         self.jacobian = "analytic" if self._analytic else "fd"
         n = self.n_states
         self._quad = _model_quadrature(model, n)

@@ -7,7 +7,7 @@ import math
 from operator import mul
 from typing import Any, Callable, Sequence
 
-from .base import (StepStats, _INF, _SQRT_EPS, _bad_text, _check_tol, _is_finite_sum,
+from .base import (StepStats, _INF, _analytic_jacobian, _SQRT_EPS, _bad_text, _check_tol, _is_finite_sum,
                    _model_quadrature)
 from .control import AdaptiveBase
 from .linalg import SMALL_LU, getter, lu_factor, lu_solve
@@ -142,19 +142,7 @@ class Rosenbrock(AdaptiveBase):
         self.jacobian_reuse = _check_tol("jacobian_reuse", jacobian_reuse, strictly_positive=False)
         self.first_step_stiffness = _check_tol("first_step_stiffness", first_step_stiffness,
                                                strictly_positive=False)
-        has_jac = callable(getattr(model, "jacobian", None))
-        if jacobian == "auto":
-            self._analytic = has_jac
-        elif jacobian == "analytic":
-            if not has_jac:
-                raise ValueError('jacobian = "analytic" but the model has no callable jacobian(t, x, u)')
-            self._analytic = True
-        elif jacobian == "fd":
-            self._analytic = False
-        else:
-            raise ValueError(
-                f"jacobian = {jacobian!r} is out of range: allowed are 'auto', 'fd', 'analytic'"
-            )
+        self._analytic = _analytic_jacobian(model, jacobian)
         self.jacobian = "analytic" if self._analytic else "fd"
         n = self.n_states
         self._quad = _model_quadrature(model, n)
