@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, Protocol, Sequence
+from typing import Any, Callable, Protocol, Sequence
 
 __all__ = ["OdeModel", "StepStats", "StepFailure", "Stepper"]
 
@@ -188,6 +188,40 @@ def _analytic_jacobian(model: Any, jacobian: str) -> bool:
     if jacobian == "fd":
         return False
     raise ValueError(f"jacobian = {jacobian!r} is out of range: allowed are 'auto', 'fd', 'analytic'")
+
+
+def _block_jacobian(stepper: Any, f: Callable, t: float, x: list[float], f0: list[float],
+                    u: tuple, stats: "StepStats") -> tuple:
+    """Jacobian at (t, x) as ``(J_dd, J_qd)`` for a stepper with ``_analytic``, ``_dyn`` and
+    ``_quad``: the rows of the non-quadrature states ``d`` and of the quadrature states ``q``,
+    both restricted to the columns ``d`` (the columns ``q`` are zero by declaration).  Without
+    quadrature states ``J_dd`` is the full Jacobian and ``J_qd`` is empty.  Forward differences
+    re-use ``f0 = f(t, x)`` and cost one rhs call per column ``d`` (increment
+    ``sqrt(eps) max(|x_i|, state_scale_i)``)."""
+    n = stepper.n_states
+    dyn, quad = stepper._dyn, stepper._quad
+    stats.jacobian_calls += 1
+    if stepper._analytic:
+        jac = stepper.model.jacobian(t, x, u)
+        if len(jac) != n or any(len(row) != n for row in jac):
+            raise ValueError(f"model.jacobian must return {n} rows of {n} entries")
+        if not quad:
+            return jac, ()
+        return ([[jac[i][j] for j in dyn] for i in dyn],
+                [[jac[i][j] for j in dyn] for i in quad])
+    cols = []
+    scale = stepper.state_scale
+    for i in dyn:
+        xi = x[i]
+        xp = list(x)
+        xp[i] = xi + _SQRT_EPS * max(abs(xi), scale[i])
+        inv = 1.0 / (xp[i] - xi)  # the increment actually represented
+        fp = f(t, xp, u)
+        stats.rhs_calls += 1
+        cols.append([(p - q) * inv for p, q in zip(fp, f0)])
+    if not quad:
+        return list(zip(*cols)), ()
+    return [[c[i] for c in cols] for i in dyn], [[c[i] for c in cols] for i in quad]
 
 
 def _first_nonfinite(vectors: Sequence[Sequence[float]]) -> int:

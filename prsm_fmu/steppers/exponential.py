@@ -7,7 +7,7 @@ import math
 from operator import mul
 from typing import Any, Callable, Sequence
 
-from .base import StepStats, _INF, _SQRT_EPS, _analytic_jacobian, _bad_text, _is_finite_sum, _model_quadrature
+from .base import StepStats, _INF, _analytic_jacobian, _block_jacobian, _bad_text, _is_finite_sum, _model_quadrature
 from .control import AdaptiveBase
 from .linalg import getter
 from .phi import prepare
@@ -240,27 +240,8 @@ class ExponentialRosenbrock(AdaptiveBase):
     def _jac(self, f: Callable, t: float, x: list[float], f0: list[float], u: tuple,
              stats: StepStats) -> tuple:
         """``(A, B)``: the Jacobian's rows ``d`` and ``q`` restricted to the columns ``d`` (the
-        columns ``q`` are zero); forward differences cost one rhs per column ``d``."""
-        dyn, quad = self._dyn, self._quad
-        stats.jacobian_calls += 1
-        if self._analytic:
-            n = self.n_states
-            jac = self.model.jacobian(t, x, u)
-            if len(jac) != n or any(len(row) != n for row in jac):
-                raise ValueError(f"model.jacobian must return {n} rows of {n} entries")
-            return ([[jac[i][j] for j in dyn] for i in dyn],
-                    [[jac[i][j] for j in dyn] for i in quad])
-        cols = []
-        scale = self.state_scale
-        for i in dyn:
-            xi = x[i]
-            xp = list(x)
-            xp[i] = xi + _SQRT_EPS * max(abs(xi), scale[i])
-            inv = 1.0 / (xp[i] - xi)  # the increment actually represented
-            fp = f(t, xp, u)
-            stats.rhs_calls += 1
-            cols.append([(p - q) * inv for p, q in zip(fp, f0)])
-        return [[c[i] for c in cols] for i in dyn], [[c[i] for c in cols] for i in quad]
+        columns ``q`` are zero; :func:`.base._block_jacobian`)."""
+        return _block_jacobian(self, f, t, x, f0, u, stats)
 
     # --- one trial step ---------------------------------------------------------------------
 

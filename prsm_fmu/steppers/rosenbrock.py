@@ -7,7 +7,7 @@ import math
 from operator import mul
 from typing import Any, Callable, Sequence
 
-from .base import (StepStats, _INF, _analytic_jacobian, _SQRT_EPS, _bad_text, _check_tol, _is_finite_sum,
+from .base import (StepStats, _INF, _analytic_jacobian, _block_jacobian, _bad_text, _check_tol, _is_finite_sum,
                    _model_quadrature)
 from .control import AdaptiveBase
 from .linalg import SMALL_LU, getter, lu_factor, lu_solve
@@ -164,40 +164,8 @@ class Rosenbrock(AdaptiveBase):
     def _jac(
         self, f: Callable, t: float, x: list[float], f0: list[float], u: tuple, stats: StepStats
     ) -> tuple:
-        """Jacobian at (t, x) as ``(J_dd, J_qd)``: the rows of the non-quadrature states
-        ``d`` and of the quadrature states ``q``, both restricted to the columns ``d``
-        (the columns ``q`` are zero by declaration).  Without quadrature states ``J_dd``
-        is the full Jacobian and ``J_qd`` is empty.  Forward differences re-use
-        ``f0 = f(t, x)`` and cost one rhs call per column ``d``."""
-        n = self.n_states
-        dyn, quad = self._dyn, self._quad
-        stats.jacobian_calls += 1
-        if self._analytic:
-            jac = self.model.jacobian(t, x, u)
-            if len(jac) != n or any(len(row) != n for row in jac):
-                raise ValueError(f"model.jacobian must return {n} rows of {n} entries")
-            if not quad:
-                return jac, ()
-            return (
-                [[jac[i][j] for j in dyn] for i in dyn],
-                [[jac[i][j] for j in dyn] for i in quad],
-            )
-        cols = []
-        scale = self.state_scale
-        for i in dyn:
-            xi = x[i]
-            xp = list(x)
-            xp[i] = xi + _SQRT_EPS * max(abs(xi), scale[i])
-            inv = 1.0 / (xp[i] - xi)  # the increment actually represented
-            fp = f(t, xp, u)
-            stats.rhs_calls += 1
-            cols.append([(p - q) * inv for p, q in zip(fp, f0)])
-        if not quad:
-            return list(zip(*cols)), ()
-        return (
-            [[c[i] for c in cols] for i in dyn],
-            [[c[i] for c in cols] for i in quad],
-        )
+        """Jacobian at (t, x) as ``(J_dd, J_qd)`` (:func:`.base._block_jacobian`)."""
+        return _block_jacobian(self, f, t, x, f0, u, stats)
 
     def _drift(self, y: Sequence[float], y_jac: Sequence[float]) -> float:
         """Largest relative change of a state ``d`` from ``y_jac`` to ``y`` (relative to
