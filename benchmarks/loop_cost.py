@@ -15,9 +15,15 @@ medians over the rounds:
 Configurations: the default loop (every output recorded, the motor's RK4 reference
 integrator); the same loop recording only the scene's outputs (``outputs`` of the scene file,
 plus ``prsm.step_rhs_calls`` for the count above): the blocks then read only what is recorded
-or connected (the FMU 7 of its 34 variables); and the motor's exact exponential step
-(``Motor(integrator="exponential")``).  Each configuration's largest difference of any
-recorded output from the default's, relative to the output's largest magnitude (DESIGN.md §5).
+or connected (the FMU 7 of its 34 variables); the motor's exact exponential step
+(``Motor(integrator="exponential")``); the Python FMU with ``stepper = "closed_form_explicit"``
+(the native FMU's method: Dormand–Prince 5(4) in the friction band); and the native C FMU
+(``python -m fmu_build --native PRSM2``, left out with the reason when it cannot be built),
+with every output recorded and with the scene's outputs only.  Each configuration's largest
+difference of any recorded output from the default's, relative to the output's largest
+magnitude (DESIGN.md §5), and the native FMU's from the Python FMU's at the same method.
+The target is judged for the default and for the cheapest configuration whose outputs agree
+with the default's within ``SAME_RESULT`` (1e-5; the PRSM FMU's tolerance is 1e-6).
 
 Which motor integrator is closer to the truth: the loop is also run once with an independent
 reference motor (the motor ODE of system_models/motor.py's docstring under the same inputs,
@@ -28,8 +34,8 @@ single step from the reference loop's states and inputs (local error, motor stat
 
 The issue's target for the loop is ≤ 0.35 CPU s per simulated second (floor ≤ 0.7).
 
-Run: ``python benchmarks/loop_cost.py [--scene position_step] [--rounds 3]`` (builds the FMU in
-a child process first; about a minute).
+Run: ``python benchmarks/loop_cost.py [--scene position_step] [--rounds 3]`` (builds the FMUs in
+child processes first; about a minute).
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -53,10 +60,19 @@ from system_models.motor import Motor  # noqa: E402
 from system_models.scenes import load_scene  # noqa: E402
 
 PARTS = ("prsm", "motor", "controller", "load", "master+recording")
-#: label -> (motor integrator, record only the scene's outputs)
-CONFIGS = {"default (motor RK4)": ("rk4", False), "scene outputs only": ("rk4", True),
-           "motor exponential": ("exponential", False)}
+#: label -> (motor integrator, record only the scene's outputs, FMU: "python" (pythonfmu, the
+#: scene's parameters), "python-explicit" (the same with stepper closed_form_explicit, the
+#: native FMU's method) or "native" (the C FMU, ``python -m fmu_build --native``))
+CONFIGS = {"default (motor RK4)": ("rk4", False, "python"),
+           "scene outputs only": ("rk4", True, "python"),
+           "motor exponential": ("exponential", False, "python"),
+           "closed_form_explicit": ("rk4", False, "python-explicit"),
+           "native FMU": ("rk4", False, "native"),
+           "native FMU, scene outputs": ("rk4", True, "native")}
 TARGET, FLOOR = 0.35, 0.7
+#: a configuration counts for the target when every recorded output agrees with the default's
+#: within this fraction of the output's largest magnitude (the PRSM FMU's tolerance is 1e-6)
+SAME_RESULT = 1e-5
 
 
 class ReferenceMotor(Motor):
@@ -103,13 +119,27 @@ class ReferenceMotor(Motor):
         self.x = ref
 
 
-def build_fmu(dest: Path) -> Path:
-    """PRSM2.fmu built in a child process (a process must not load an FMU it built)."""
+def build_fmu(dest: Path, native: bool = False) -> Path | None:
+    """PRSM2.fmu (``native``: PRSM2-native.fmu, None if it cannot be built here, e.g. without
+    gcc) built in a child process (a process must not load an FMU it built)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [env.get("PYTHONPATH")] if p])
-    subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest)], check=True,
-                   env=env, stdout=subprocess.DEVNULL)
-    return dest / "PRSM2.fmu"
+    extra = ["--native"] if native else []
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", *extra, "PRSM2", "--dest",
+                           str(dest)], env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        if native:
+            print(f"native FMU not built (its rows are left out): {proc.stderr.strip()}")
+            return None
+        raise RuntimeError(f"python -m fmu_build PRSM2 failed:\n{proc.stdout}{proc.stderr}")
+    return dest / ("PRSM2-native.fmu" if native else "PRSM2.fmu")
+
+
+def with_stepper(scene, stepper: str):
+    """``scene`` with the PRSM FMU's parameter ``stepper`` set."""
+    prsm = dict(scene.prsm)
+    prsm["parameters"] = dict(prsm.get("parameters", {}), stepper=stepper)
+    return replace(scene, prsm=prsm)
 
 
 def run_once(scene, fmu: Path, integrator: str,
@@ -143,11 +173,18 @@ def reference_run(scene, fmu: Path):
     return system.run(), ref
 
 
+#: the FMU's step diagnostics (rhs calls, substeps, level of the step): they describe the method,
+#: not the motion, and are left out of the output differences
+DIAGNOSTICS = "prsm.step_"
+
+
 def max_difference(a, b, names=None) -> tuple[float, str]:
-    """max over outputs (``names``, default those both record) of max|a − b| / max|b|, and the
-    output where it is reached."""
+    """max over outputs (``names``, default those both record but the step diagnostics) of
+    max|a − b| / max|b|, and the output where it is reached."""
     worst, where = 0.0, ""
-    for name in ([n for n in b.names() if n in a] if names is None else names):
+    if names is None:
+        names = [n for n in b.names() if n in a and not n.startswith(DIAGNOSTICS)]
+    for name in names:
         ref = float(np.max(np.abs(b[name]))) or 1.0
         d = float(np.max(np.abs(a[name] - b[name]))) / ref
         if d > worst:
@@ -161,19 +198,26 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     args = ap.parse_args()
     scene = load_scene(args.scene)
-    samples: dict[str, list[dict[str, float]]] = {c: [] for c in CONFIGS}
-    rhs: dict[str, list[float]] = {c: [] for c in CONFIGS}
-    results = {}
     with tempfile.TemporaryDirectory(prefix="loop_cost_") as tmp:
-        fmu = build_fmu(Path(tmp))
-        run_once(scene, fmu, "rk4")                          # warm-up (imports, FMU unpacking)
+        fmus = {"python": build_fmu(Path(tmp))}
+        fmus["python-explicit"] = fmus["python"]
+        fmus["native"] = build_fmu(Path(tmp), native=True)
+        scenes = {"python": scene, "python-explicit": with_stepper(scene, "closed_form_explicit"),
+                  "native": scene}
+        configs = {k: v for k, v in CONFIGS.items() if fmus[v[2]] is not None}
+        samples: dict[str, list[dict[str, float]]] = {c: [] for c in configs}
+        rhs: dict[str, list[float]] = {c: [] for c in configs}
+        results = {}
+        for which in ("python", "native"):       # warm-up (imports, FMU unpacking)
+            if fmus[which] is not None:
+                run_once(scene, fmus[which], "rk4")
         for _ in range(args.rounds):
-            for label, (integrator, narrow) in CONFIGS.items():     # interleaved rounds
-                cost, r, res = run_once(scene, fmu, integrator, narrow)
+            for label, (integrator, narrow, which) in configs.items():   # interleaved rounds
+                cost, r, res = run_once(scenes[which], fmus[which], integrator, narrow)
                 samples[label].append(cost)
                 rhs[label].append(r)
                 results[label] = res
-        reference, motor = reference_run(scene, fmu)
+        reference, motor = reference_run(scene, fmus["python"])
     print(f"actuator loop, scene {scene.name}: {scene.t_end:g} s simulated in steps of "
           f"{scene.step:g} s, PRSM2 FMU through fmpy; medians of {args.rounds} rounds")
     print(f"{'CPU s per simulated s':<24}{'total':>8}" + "".join(f"{p:>18}" for p in PARTS)
@@ -185,15 +229,26 @@ def main() -> None:
         print(f"{label:<24}{med['total']:>8.3f}{parts}{statistics.median(rhs[label]):>10.1f}")
         print(f"{'  µs per step':<24}{med['total'] * us:>8.1f}"
               + "".join(f"{med[p] * us:>18.1f}" for p in PARTS))
-    default = statistics.median(r["total"] for r in samples["default (motor RK4)"])
-    print(f"loop / real time = {default:.3f} (target <= {TARGET}: "
-          f"{'met' if default <= TARGET else 'NOT met'}; floor <= {FLOOR}: "
-          f"{'met' if default <= FLOOR else 'NOT met'})")
-    labels = list(CONFIGS)
+    labels = list(configs)
+    same = {labels[0]: 0.0}
     for label in labels[1:]:
         d, where = max_difference(results[label], results[labels[0]])
+        same[label] = d
         print(f"{label} against {labels[0]}: largest output difference {d:.2e} of the output's "
               f"maximum ({where})")
+    for a, b in (("native FMU", "closed_form_explicit"),):
+        if a in results:
+            d, where = max_difference(results[a], results[b])
+            print(f"{a} against {b} (the same method): largest output difference {d:.2e} "
+                  f"({where or 'all equal'})")
+    totals = {k: statistics.median(r["total"] for r in rows) for k, rows in samples.items()}
+    for label in (labels[0], min((k for k in labels if same[k] <= SAME_RESULT), key=totals.get)):
+        t = totals[label]
+        print(f"loop / real time, {label} = {t:.3f} (target <= {TARGET}: "
+              f"{'met' if t <= TARGET else 'NOT met'}; floor <= {FLOOR}: "
+              f"{'met' if t <= FLOOR else 'NOT met'})")
+    print(f"  (the second line: the cheapest configuration whose every output agrees with the "
+          f"default's within {SAME_RESULT:g} of the output's maximum)")
     print("against the loop with the reference motor (scipy DOP853, rtol 1e-13), |Δ|/max|y|:")
     for label in (labels[0], labels[2]):
         d, where = max_difference(results[label], reference)

@@ -48,8 +48,10 @@ from prsm_fmu.steppers.tableaux import EXPLICIT_TABLEAUS
 from . import model_description
 from .builder import BuildError, build_fmu, validate
 
-__all__ = ["build_native", "native_name", "STRUCTURAL", "SOURCES", "COMPILE_FLAGS"]
+__all__ = ["build_native", "native_name", "NATIVE_LEVELS", "STRUCTURAL", "SOURCES", "COMPILE_FLAGS"]
 
+#: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
+NATIVE_LEVELS = ("kinematic", "quasi-static")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
 SOURCES = ("prsm_model.c", "prsm_fmi2.c")

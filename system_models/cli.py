@@ -53,10 +53,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="communication step h [s] (default: the scene's)")
     r.add_argument("--out", type=writable_dir, default="out",
                    help="output directory (default: out)")
-    r.add_argument("--prsm", choices=["fmu", "python"], default="fmu",
-                   help="the PRSM as the FMU stepped by fmpy (default) or as the plain Python model")
+    r.add_argument("--prsm", choices=["fmu", "native", "python"], default="fmu",
+                   help="the PRSM as the FMU stepped by fmpy (default), as the native C FMU "
+                        "(kinematic and quasi-static levels; needs gcc to build) or as the plain "
+                        "Python model")
     r.add_argument("--fmu", type=existing_file,
-                   help="the FMU file (default: dist/<mechanism>.fmu, built if missing)")
+                   help="the FMU file (default: dist/<mechanism>.fmu, or "
+                        "dist/<mechanism>-native.fmu with --prsm native, built if missing)")
     r.add_argument("--order", choices=["jacobi", "gauss-seidel"], help="coupling order")
     r.add_argument("--extrapolation", type=int_in(0, 1), help="input extrapolation order, 0 or 1")
     r.add_argument("--retry", type=int_in(0, MAX_HALVINGS), metavar="N",
@@ -129,7 +132,7 @@ def _cmd_run(args, ap) -> int:
         facts = check_scene(scene, prsm=args.prsm, fidelity=args.fidelity, step=args.step,
                             order=args.order, extrapolation=args.extrapolation)
         mech = scene.prsm.get("mechanism", "PRSM1" if scene.topology == "geared" else "PRSM2")
-        if args.prsm == "fmu" and args.fmu:
+        if args.prsm != "python" and args.fmu:
             check_fmu_stages(args.fmu, facts["n_stages"], mech)
         check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
@@ -143,16 +146,18 @@ def _cmd_run(args, ap) -> int:
     if args.retry is not None:
         retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
     fmu_path = None
-    if args.prsm == "fmu":
+    if args.prsm != "python":
+        default = f"dist/{mech}{'-native' if args.prsm == 'native' else ''}.fmu"
         try:
-            fmu_path = ensure_fmu(args.fmu or f"dist/{mech}.fmu", rebuild_stale=args.fmu is None)
+            fmu_path = ensure_fmu(args.fmu or default, rebuild_stale=args.fmu is None)
         except FMUError as exc:
             print(f"prsm-ema: {exc}", file=sys.stderr)
             return 1
     print(f"scene {scene.name}: {scene.description}")
     prog = Progress(t_start=scene.t0)
     try:
-        run = run_scene(scene, prsm=args.prsm, fmu_path=fmu_path, fidelity=args.fidelity,
+        run = run_scene(scene, prsm="python" if args.prsm == "python" else "fmu",
+                        fmu_path=fmu_path, fidelity=args.fidelity,
                         step=args.step, order=args.order, extrapolation=args.extrapolation,
                         retry=retry, progress=prog)
     except CoSimulationError as exc:
@@ -168,7 +173,7 @@ def _cmd_run(args, ap) -> int:
     prog.close()
     s = run.summary()
     st = s["stats"]
-    what = f"FMU {fmu_path}" if args.prsm == "fmu" else "plain Python model"
+    what = f"FMU {fmu_path}" if args.prsm != "python" else "plain Python model"
     print(f"PRSM: {what}, fidelity {s['fidelity']}; master: {s['order']}, extrapolation order "
           f"{s['extrapolation']}, h = {s['step']:g} s, {st['macro_steps']} steps "
           f"({st['retries']} retries) in {st['wall_time']:.2f} s")

@@ -182,6 +182,11 @@ CASES: list[tuple[str, list[str], str]] = [
      "--fmu"),
     ("prsm-ema", ["run", "--scene", "position_step", "--prsm", "python", "--out",
                   FILE + "/sub"], "--out"),
+    # the native FMU runs the kinematic and quasi-static levels only (refused before a build)
+    ("prsm-ema", ["run", "--scene", "startup_seed000", "--prsm", "native", "--out", OUT],
+     "--prsm native: fidelity 'dynamic'"),
+    ("prsm-ema", ["run", "--scene", "position_step", "--prsm", "native", "--fidelity", "auto",
+                  "--out", OUT], "--prsm native: fidelity 'auto'"),
 ]
 
 #: lines run through the installed console scripts as well (every script, a few each)
