@@ -6,10 +6,12 @@ binary, loaded through fmpy's ``FMU2Slave`` in this process): the empty one is a
 path (ctypes → C++ → Python and back).  The ratio is the cost the mechanism adds, in units
 of that price.  Target (issue 3): ≤ 5 for the quasi-static level at a 1 ms step.
 
-Scenario: seed 000's two-stage PRSM (``PRSM2``), 1 ms communication steps, the inputs of
-``benchmarks/step_cost.py``'s "moving" scenario (load F(t) = 5000 + 1000 sin(2π·25 t) N, motor
-torque 19.75 F(t)/5000 + sin(2π·40 t) N·m, new values every step; start at 100 rad/s, carriers
-at equilibrium): the screw keeps turning at ≈ 100…116 rad/s.  Each FMU is stepped in rounds of
+Scenarios: seed 000's two-stage PRSM (``PRSM2``), 1 ms communication steps, start at 100 rad/s
+with the carriers at equilibrium; the inputs of ``benchmarks/step_cost.py``'s "moving" scenario
+(load F(t) = 5000 + 1000 sin(2π·25 t) N, motor torque 19.75 F(t)/5000 + sin(2π·40 t) N·m, new
+values every step: the screw keeps turning at ≈ 100…116 rad/s), and the operating point itself
+with the inputs held (19.75 N·m, 5000 N), where the dynamic steppers' error against Radau at
+rtol 1e-12 is printed too (the same stepping in-process).  Each FMU is stepped in rounds of
 ``N_STEPS`` steps; the inputs are set before each step and all Real outputs read after it,
 outside the timed call; every ``doStep`` is timed on its own (perf_counter_ns).  The cost per
 step is the median over ``ROUNDS`` interleaved rounds of the mean over a round.
@@ -68,9 +70,58 @@ def load_force(t: float) -> float:
     return 5000.0 + 1000.0 * math.sin(2 * math.pi * 25 * t)
 
 
-def inputs(t: float) -> tuple[float, float]:
+def moving_inputs(t: float) -> tuple[float, float]:
     f = load_force(t)
     return 19.75 * f / 5000.0 + 1.0 * math.sin(2 * math.pi * 40 * t), f
+
+
+def constant_inputs(t: float) -> tuple[float, float]:
+    """The operating point itself: 19.75 N·m against 5000 N, held (the screw gains 0.6 rad/s
+    in 0.1 s)."""
+    return 19.75, 5000.0
+
+
+#: scenario name -> inputs (torque [N·m], load [N]) held over the step that starts at t [s]
+SCENARIOS = {"moving": moving_inputs, "constant": constant_inputs}
+#: the dynamic level's steppers compared: row label -> FMU parameter ``stepper``
+DYNAMIC = {"dynamic": "rosenbrock", "dyn exponential": "exponential"}
+
+
+def constant_input_errors(n_steps: int = 100) -> dict[str, tuple[float, float]]:
+    """At the constant inputs, the dynamic level stepped as the FMU steps it (its model and
+    stepper options, in-process: tests/test_fmu.py checks the FMU's outputs equal them), 1 ms
+    steps from 100 rad/s with the carriers at equilibrium: row label -> (largest |y − y_ref| /
+    max|y_ref| over the FMU's outputs of benchmarks/step_cost.py and the steps, rhs calls per
+    step), against Radau at rtol 1e-12 along the same trajectory."""
+    from prsm_fmu import presets
+    from prsm_fmu.models import make_model
+    from prsm_fmu.simulate import tuned_stepper_options
+    from prsm_fmu.steppers import make_stepper
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from step_cost import OUTPUTS
+
+    model = make_model(presets.load("seed000_two_stage"), "dynamic", "torque")
+    u = constant_inputs(0.0)
+
+    def trajectory(name: str, opts: dict) -> tuple[list[dict], float]:
+        st = make_stepper(name, model, **opts)
+        x = model.initial_state(u, screw_speed=100.0, carrier_ratio=None)
+        out, rhs = [], 0
+        for i in range(n_steps):
+            x, stats = st.advance(i * H, x, u, H)
+            rhs += stats.rhs_calls
+            out.append(model.outputs((i + 1) * H, x, u))
+        return out, rhs / n_steps
+
+    ref, _ = trajectory("radau", {"rtol": 1e-12, "atol": 1e-14})
+    errors = {}
+    for label, stepper in DYNAMIC.items():
+        out, rhs = trajectory(stepper, tuned_stepper_options(stepper, 1e-6, 1e-8))
+        err = max(max(abs(a[n] - r[n]) for a, r in zip(out, ref))
+                  / (max(abs(r[n]) for r in ref) or 1.0) for n in OUTPUTS)
+        errors[label] = (err, rhs)
+    return errors
 
 
 def build(dest: Path) -> tuple[Path, Path]:
@@ -92,7 +143,8 @@ def build(dest: Path) -> tuple[Path, Path]:
 class Instance:
     """An initialized FMU instance with its step loop."""
 
-    def __init__(self, fmu: Path, start: dict | None = None) -> None:
+    def __init__(self, fmu: Path, start: dict | None = None, inputs=moving_inputs) -> None:
+        self.inputs = inputs
         md = read_model_description(str(fmu))
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         types = {v.name: v.type for v in md.modelVariables}
@@ -118,7 +170,7 @@ class Instance:
 
     def run(self, n: int) -> tuple[float, float, float]:
         """n steps; (mean doStep [s], mean doStep + getReal(all outputs) [s], rhs calls/step)."""
-        fmu, u, out = self.fmu, self.u, self.out
+        fmu, u, out, inputs = self.fmu, self.u, self.out, self.inputs
         clock = time.perf_counter_ns
         step_ns = get_ns = 0
         rhs = 0
@@ -143,30 +195,35 @@ class Instance:
         self.fmu.freeInstance()
 
 
+def measure(empty_fmu: Path, prsm_fmu: Path, inputs) -> dict[str, tuple[float, float, float]]:
+    """Row label -> (doStep [s], doStep + getReal [s], rhs calls per step), medians of
+    ``ROUNDS`` interleaved rounds of ``N_STEPS`` steps with ``inputs``."""
+    start = {"initial_screw_speed": 100.0, "initial_carrier_equilibrium": True}
+    instances = {"empty": Instance(empty_fmu),
+                 "quasi-static": Instance(prsm_fmu, dict(start, fidelity="quasi-static"), inputs)}
+    for label, stepper in DYNAMIC.items():
+        instances[label] = Instance(prsm_fmu, dict(start, fidelity="dynamic", stepper=stepper),
+                                    inputs)
+    for inst in instances.values():
+        inst.run(WARM_UP)
+    samples = {name: [] for name in instances}
+    for _ in range(ROUNDS):
+        for name, inst in instances.items():
+            samples[name].append(inst.run(N_STEPS))
+    for inst in instances.values():
+        inst.free()
+    return {name: tuple(statistics.median(s[i] for s in rows) for i in range(3))
+            for name, rows in samples.items()}
+
+
 def main() -> None:
     with tempfile.TemporaryDirectory(prefix="fmu_step_cost_") as tmp:
         empty_fmu, prsm_fmu = build(Path(tmp))
-        start = {"initial_screw_speed": 100.0, "initial_carrier_equilibrium": True}
-        instances = {
-            "empty": Instance(empty_fmu),
-            "quasi-static": Instance(prsm_fmu, dict(start, fidelity="quasi-static")),
-            "dynamic": Instance(prsm_fmu, dict(start, fidelity="dynamic")),
-            "dyn exponential": Instance(prsm_fmu, dict(start, fidelity="dynamic",
-                                                       stepper="exponential")),
-        }
-        for inst in instances.values():
-            inst.run(WARM_UP)
-        samples = {name: [] for name in instances}
-        for _ in range(ROUNDS):
-            for name, inst in instances.items():
-                samples[name].append(inst.run(N_STEPS))
-        for inst in instances.values():
-            inst.free()
-    cost = {name: tuple(statistics.median(s[i] for s in rows) for i in range(3))
-            for name, rows in samples.items()}
+        costs = {name: measure(empty_fmu, prsm_fmu, inputs) for name, inputs in SCENARIOS.items()}
+    cost = costs["moving"]
     e_step, e_all, _ = cost["empty"]
     print(f"PRSM2 FMU, {N_STEPS} x {ROUNDS} steps of {H * 1e3:g} ms per level "
-          f"(median of round means), fmpy FMU2Slave, pythonfmu 0.7")
+          f"(median of round means), fmpy FMU2Slave, pythonfmu 0.7; inputs changing every step")
     print(f"{'level':<14}{'doStep [us]':>12}{'ratio':>8}{'+getReal [us]':>15}{'ratio':>8}"
           f"{'rhs/step':>10}")
     for name, (step, both, rhs) in cost.items():
@@ -176,9 +233,19 @@ def main() -> None:
     print(f"quasi-static doStep / empty doStep = {ratio:.2f} (target <= 5: "
           f"{'met' if ratio <= 5 else 'NOT met'}); dynamic: {cost['dynamic'][0] / e_step:.2f}")
     qs = cost["quasi-static"][0]
-    for name in ("dynamic", "dyn exponential"):
+    for name in DYNAMIC:
         print(f"{name} doStep / quasi-static doStep = {cost[name][0] / qs:.1f} "
               "(goal <= 5, floor <= 10)")
+    const = costs["constant"]
+    errors = constant_input_errors()
+    qs = const["quasi-static"][0]
+    print(f"at the operating point with the inputs held ({constant_inputs(0.0)[0]:g} N·m, "
+          f"{constant_inputs(0.0)[1]:g} N): quasi-static doStep {qs * 1e6:.2f} us")
+    for name in DYNAMIC:
+        err, rhs = errors[name]
+        print(f"  {name:<16} doStep {const[name][0] * 1e6:8.2f} us, {const[name][2]:.1f} rhs/step, "
+              f"/ quasi-static = {const[name][0] / qs:.1f} (goal <= 5, floor <= 10); error against "
+              f"Radau rtol 1e-12 {err:.1e} ({rhs:.1f} rhs/step in-process)")
 
 
 if __name__ == "__main__":
