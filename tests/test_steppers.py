@@ -874,8 +874,13 @@ def test_jacobian_reuse_changes_nothing_but_the_count_for_a_constant_jacobian():
     for (a, sa), (b, sb) in zip(ref, reuse):
         assert a == b  # the same Jacobian, so the same steps bit for bit
         assert (sa.substeps, sa.rejected) == (sb.substeps, sb.rejected)
-        # one per advance, plus one after a rejection at a point whose Jacobian is older
-        assert sb.jacobian_calls <= 1 + sb.rejected < sa.jacobian_calls
+        # one per advance, plus one after a rejection at a point whose Jacobian is older;
+        # fewer than a fresh one per step wherever the advance took several steps (the later
+        # advances continue the earlier ones with nothing changed: one step each)
+        assert sb.jacobian_calls <= 1 + sb.rejected
+        if sa.substeps > 1:
+            assert sb.jacobian_calls < sa.jacobian_calls
+    assert ref[0][1].substeps > 1            # the transient: several steps in the first advance
     ex = m.exact(5 * 2e-3, y0)
     assert max(abs(p - q) for p, q in zip(reuse[-1][0], ex)) <= 1e-8
 
@@ -960,6 +965,61 @@ def test_first_step_bound_caps_the_first_step_of_every_advance():
     trials.clear()
     s.advance(t, x, (1.0,), H)
     assert trials[0] == (t, H / s.fac_max)
+
+
+def test_an_advance_that_continues_the_last_one_is_not_bounded():
+    """Nothing changed since the last advance (its end time, state and inputs): no input
+    change, no transient, so no first-step bound: the advance starts with the step the last
+    one proposed, and a change of the input (or of the state, or the time) brings the bound
+    back.  Exact solution x(t) = u + (x0 − u) e^(−L t) of FastInput (L = 1e4 1/s)."""
+    m = FastInput()
+    c = 2.0
+    s = Rosenbrock(m, rtol=1e-6, atol=1e-9, first_step_stiffness=c)
+    trials = []
+    trial = s._trial
+
+    def record(f, t, x, f0, fac, hs, u):
+        trials.append((t, hs))
+        return trial(f, t, x, f0, fac, hs, u)
+
+    s._trial = record
+    x, t, H, u = [1.5], 0.0, 1e-3, (1.0,)
+    x, _ = s.advance(t, x, u, H)          # the transient: 10 time constants in one advance
+    t += H
+    substeps = []
+    for _ in range(4):                    # held input, at equilibrium to ~e^-10
+        proposed = s.get_memory()[1][3]
+        trials.clear()
+        x0 = x[0]
+        x, st = s.advance(t, x, u, H)
+        # the first step is the last advance's proposal, however it compares with the bound
+        assert trials[0] == (t, min(proposed, H))
+        # within the tolerance: rtol |x| + atol = 1e-6 · 1 + 1e-9
+        assert abs(x[0] - (u[0] + (x0 - u[0]) * math.exp(-m.L * H))) <= 1e-6 + 1e-9
+        substeps.append(st.substeps)
+        t += H
+    # bounded, every first step would be c / L = 2e-4 s (5 steps per advance at least);
+    # continuing, the steps grow until one step is the whole advance
+    assert substeps[-1] == 1 and trials[0][1] * m.L > c
+    mem = s.get_memory()
+    assert mem[1] is not None and mem[1][0] == t and mem[1][1] == tuple(x)
+    # a first-step proposal of H: bounded, the first step is max(c / L, H / fac_max) = 2e-4 s
+    mem = (H, mem[1])
+    bounded = max(c / m.L, H / s.fac_max)
+    assert bounded * 1.05 < H <= mem[1][3]     # bounded: several steps; continuing: one
+    s.set_memory(mem)
+    trials.clear()
+    s.advance(t, x, u, H)
+    assert trials[0] == (t, H)                 # nothing changed: the continuation
+    for changed in ((t, x, (1.1,)), (t, [x[0] + 1e-9], u), (t + H, x, u)):
+        s.set_memory(mem)
+        trials.clear()
+        s.advance(changed[0], changed[1], changed[2], H)
+        assert trials[0] == (changed[0], bounded), changed
+    s.set_memory(mem)
+    with pytest.raises(ValueError, match="continuation"):
+        s.set_memory((H, (t, (1.0, 2.0), u, H)))       # two states for a one-state model
+    assert s.get_memory() == mem                        # refused: nothing changed
 
 
 # ----------------------------------------------------------------------------------

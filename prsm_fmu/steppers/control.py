@@ -10,6 +10,9 @@ from .base import Stepper, _INF, _check_count, _check_tol, _model_mask, _model_s
 
 __all__ = ["AdaptiveBase"]
 
+#: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
+_TIME_MATCH = 4e-16
+
 
 class AdaptiveBase(Stepper):
     """Common tolerance handling, error norm and step-size controller."""
@@ -74,6 +77,45 @@ class AdaptiveBase(Stepper):
     def reset(self) -> None:
         """Forget the step-size proposal."""
         self._h_prop = None
+
+    # --- continuation: an advance that starts where the last one ended, inputs unchanged ---
+
+    def _continues(self, t: float, x: Sequence[float], u: tuple, h: float) -> float | None:
+        """The last advance's final proposal [s] if this one continues it (its end time, state
+        and inputs), else None (also before the first advance).  Reads ``self._cont``, the
+        ``(t_end, x_end, u, h_next)`` that :meth:`_continuation` made."""
+        c = getattr(self, "_cont", None)
+        if c is None or abs(t - c[0]) > _TIME_MATCH * max(abs(t), h) or c[2] != tuple(u):
+            return None
+        return c[3] if c[1] == tuple(x) else None
+
+    @staticmethod
+    def _continuation(t_end: float, x: Sequence[float], u: Sequence[float],
+                      h_next: float) -> tuple:
+        """The record :meth:`_continues` compares with: end time [s], state and inputs of an
+        advance, and the step [s] proposed after its last step, as plain floats."""
+        return (t_end, tuple(x), tuple(float(v) for v in u), h_next)
+
+    def _check_continuation(self, cont: Any) -> None:
+        """Refuse a memory's continuation that is neither None nor ``(t_end, x_end, u,
+        h_next)`` with finite floats and ``h_next > 0`` [s]."""
+        if cont is None:
+            return
+
+        def floats(v: Any, n: int | None) -> bool:
+            return (isinstance(v, tuple) and (n is None or len(v) == n)
+                    and all(isinstance(e, float) and math.isfinite(e) for e in v))
+
+        ok = isinstance(cont, tuple) and len(cont) == 4
+        if ok:
+            t_end, x_end, u, h_next = cont
+            ok = (isinstance(t_end, float) and math.isfinite(t_end)
+                  and floats(x_end, self.n_states) and floats(u, None)
+                  and isinstance(h_next, float) and 0.0 < h_next < _INF)
+        if not ok:
+            raise ValueError(f"{self.name}: memory's continuation must be None or (t_end, "
+                             f"x_end, u, h_next) with {self.n_states} finite states, finite "
+                             f"inputs and h_next > 0 [s], got {cont!r}")
 
     # --- helpers --------------------------------------------------------------------
 

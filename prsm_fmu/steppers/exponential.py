@@ -14,9 +14,6 @@ from .phi import prepare
 
 __all__ = ["ExponentialRosenbrock"]
 
-#: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
-_TIME_MATCH = 4e-16
-
 
 class ExponentialRosenbrock(AdaptiveBase):
     """Exponential Rosenbrock method exprb32 (order 3, embedded order 2) with error control.
@@ -165,16 +162,7 @@ class ExponentialRosenbrock(AdaptiveBase):
                     and all(isinstance(e, float) and math.isfinite(e) for e in v))
 
         n = self.n_states
-        if cont is not None:
-            ok = isinstance(cont, tuple) and len(cont) == 4
-            if ok:
-                t_end, x_end, u, h_next = cont
-                ok = (isinstance(t_end, float) and math.isfinite(t_end) and floats(x_end, n)
-                      and floats(u, None) and isinstance(h_next, float) and 0.0 < h_next < _INF)
-            if not ok:
-                raise ValueError(f"{self.name}: memory's continuation must be None or (t_end, "
-                                 f"x_end, u, h_next) with {n} finite states, finite "
-                                 f"inputs and h_next > 0 [s], got {cont!r}")
+        self._check_continuation(cont)
         nd, nq = len(self._dyn), len(self._quad)
         if jrec is not None:
             ok = isinstance(jrec, tuple) and len(jrec) == 5
@@ -226,14 +214,6 @@ class ExponentialRosenbrock(AdaptiveBase):
             if abs(a - b) > tol * max(abs(a), abs(b)):
                 return False
         return True
-
-    def _continues(self, t: float, x: Sequence[float], u: tuple, h: float) -> float | None:
-        """The last advance's final proposal if this one continues it (same end time, state
-        and inputs), else None."""
-        c = self._cont
-        if c is None or abs(t - c[0]) > _TIME_MATCH * max(abs(t), h) or c[2] != tuple(u):
-            return None
-        return c[3] if c[1] == tuple(x) else None
 
     # --- Jacobian ---------------------------------------------------------------------------
 
@@ -403,7 +383,7 @@ class ExponentialRosenbrock(AdaptiveBase):
                 just_rejected = False
                 if last:
                     self._h_prop = h_mem
-                    self._cont = (t + h, tuple(y), tuple(float(v) for v in u), h_next)
+                    self._cont = self._continuation(t + h, y, u, h_next)
                     if rec is None or jac is not self._jac_kept:
                         a, b = jac
                         rec = (xj, tuple(float(v) for v in uj), 0.0,

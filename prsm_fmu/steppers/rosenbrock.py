@@ -158,6 +158,35 @@ class Rosenbrock(AdaptiveBase):
         self._solve_d = lu_solve if self._small is None else self._small[1]
         self._atol_d = [self._atol_w[i] for i in self._dyn]
         self._atol_q = [self._atol_w[i] for i in self._quad]
+        self._cont: tuple | None = None
+
+    # --- memory: the first-step proposal and the continuation -------------------------
+
+    def get_memory(self) -> tuple:
+        """Return ``(h_proposal, continuation)``: the first-step proposal [s] for an advance
+        after an input change (None before the first adaptive advance), and ``(t_end, x_end,
+        u, h_next)`` of the last advance (None if there is none): its end time [s], state and
+        inputs and the step [s] proposed after its last step, which an advance that continues
+        it (same start, state and inputs: nothing changed) starts with, without the
+        first-step bound.  Plain floats in tuples."""
+        return (self._h_prop, self._cont)
+
+    def set_memory(self, m: tuple) -> None:
+        """Restore ``(h_proposal, continuation)`` from :meth:`get_memory` (``(h_proposal,)``
+        alone is accepted: no continuation); checked first, a refused memory changes
+        nothing."""
+        m = tuple(m)
+        if len(m) not in (1, 2):
+            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation), got {m!r}")
+        cont = m[1] if len(m) == 2 else None
+        self._check_continuation(cont)
+        super().set_memory(m[:1])
+        self._cont = cont
+
+    def reset(self) -> None:
+        """Forget the step-size proposal and the continuation."""
+        super().reset()
+        self._cont = None
 
     # --- Jacobian and iteration matrix --------------------------------------------------
 
@@ -330,10 +359,15 @@ class Rosenbrock(AdaptiveBase):
         f = self.model.rhs
         stats = StepStats()
         fixed = self.fixed_substeps
+        h_cont = None
         if fixed is not None:
             hs = h / fixed
         else:
-            hs = self._h_prop
+            # an advance that continues the last one (nothing changed) starts with the step
+            # its last step proposed: no input change, so no transient to bound the first
+            # step for
+            h_cont = self._continues(t, x, u, h)
+            hs = self._h_prop if h_cont is None else h_cont
         tau = 0.0
         y = x
         attempts = 0
@@ -365,7 +399,7 @@ class Rosenbrock(AdaptiveBase):
                         y_jac = y
                 except (ArithmeticError, ValueError) as exc:
                     raise self._fail(f"rhs or jacobian raised {exc!r}", ti, hs or h, t, h) from exc
-                if fixed is None and tau == 0.0:
+                if fixed is None and tau == 0.0 and h_cont is None:
                     # first step of the advance, right after the master may have changed
                     # the inputs: at most the bound on h ||J||, if one is set
                     limit = self.first_step_stiffness
@@ -445,6 +479,8 @@ class Rosenbrock(AdaptiveBase):
                 just_rejected = False
                 if last:
                     self._h_prop = h_mem
+                    h_next = max(h_new, hs) if h_new >= h_step else h_new
+                    self._cont = self._continuation(t + h, y, u, h_next)
                     return y, stats
                 tau += h_step
                 hs = h_new
