@@ -1004,7 +1004,7 @@ def test_an_advance_that_continues_the_last_one_is_not_bounded():
     mem = s.get_memory()
     assert mem[1] is not None and mem[1][0] == t and mem[1][1] == tuple(x)
     # a first-step proposal of H: bounded, the first step is max(c / L, H / fac_max) = 2e-4 s
-    mem = (H, mem[1])
+    mem = (H, mem[1], mem[2])
     bounded = max(c / m.L, H / s.fac_max)
     assert bounded * 1.05 < H <= mem[1][3]     # bounded: several steps; continuing: one
     s.set_memory(mem)
@@ -1018,8 +1018,34 @@ def test_an_advance_that_continues_the_last_one_is_not_bounded():
         assert trials[0] == (changed[0], bounded), changed
     s.set_memory(mem)
     with pytest.raises(ValueError, match="continuation"):
-        s.set_memory((H, (t, (1.0, 2.0), u, H)))       # two states for a one-state model
+        s.set_memory((H, (t, (1.0, 2.0), u, H), None))  # two states for a one-state model
+    with pytest.raises(ValueError, match="jacobian"):
+        s.set_memory((H, mem[1], ((1.0,), 1e4, (float("nan"),), ())))
     assert s.get_memory() == mem                        # refused: nothing changed
+
+
+def test_a_continuing_advance_reuses_the_last_jacobian_within_the_reuse_bound():
+    """With ``jacobian_reuse`` set, an advance that continues the last one starts with the
+    Jacobian that advance ended with: FastInput's Jacobian −L is constant, so at a held input
+    the continuing advances evaluate none (one rhs for the first stage, three for the others
+    of the one ROS34PW2 step), and the result is the exact relaxation within the tolerance."""
+    m = FastInput()
+    s = Rosenbrock(m, rtol=1e-6, atol=1e-9, jacobian="fd", jacobian_reuse=0.1,
+                   first_step_stiffness=2.0)
+    x, t, H, u = [1.5], 0.0, 1e-3, (1.0,)
+    stats = []
+    for _ in range(8):
+        x0 = x[0]
+        x, st = s.advance(t, x, u, H)
+        assert abs(x[0] - (u[0] + (x0 - u[0]) * math.exp(-m.L * H))) <= 1e-6 + 1e-9
+        stats.append(st)
+        t += H
+    assert stats[0].jacobian_calls >= 1
+    assert stats[-1].substeps == 1 and stats[-1].jacobian_calls == 0
+    assert stats[-1].rhs_calls == 4
+    # an input change: a fresh Jacobian again (the kept one belongs to the old input)
+    x, st = s.advance(t, x, (1.2,), H)
+    assert st.jacobian_calls >= 1
 
 
 # ----------------------------------------------------------------------------------
@@ -1037,6 +1063,7 @@ def _memory_cases():
         Rosenbrock(cycj, rtol=1e-6),
         Rosenbrock(cyc, rtol=1e-5, jacobian="fd"),
         Rosenbrock(cycj, fixed_substeps=4),
+        Rosenbrock(cyc, rtol=1e-6, jacobian="fd", jacobian_reuse=0.1),
         ExponentialRosenbrock(cyc, rtol=1e-6),
         ExponentialRosenbrock(cycj, fixed_substeps=4),
         ScipyRadau(cycj),

@@ -98,7 +98,11 @@ class Rosenbrock(AdaptiveBase):
     ``h ||J|| ~ 5``, at the same cost).  The bound cuts the memory's proposal by at most
     ``fac_max`` (one controller step), so that a mode made extremely stiff by a friction
     band (nanoseconds at zero speed), whose transients are as short as they are small,
-    does not force tiny first steps.
+    does not force tiny first steps.  None of this applies to an advance that continues
+    the last one (its end time, state and inputs: nothing changed, no transient): it
+    starts with the proposal after the last advance's *last* step, unbounded, and (with
+    ``jacobian_reuse``) with the Jacobian that advance ended with, under the same reuse
+    bound as within an advance.
 
     Parameters
     ----------
@@ -159,34 +163,63 @@ class Rosenbrock(AdaptiveBase):
         self._atol_d = [self._atol_w[i] for i in self._dyn]
         self._atol_q = [self._atol_w[i] for i in self._quad]
         self._cont: tuple | None = None
+        self._jrec: tuple | None = None
 
     # --- memory: the first-step proposal and the continuation -------------------------
 
     def get_memory(self) -> tuple:
-        """Return ``(h_proposal, continuation)``: the first-step proposal [s] for an advance
-        after an input change (None before the first adaptive advance), and ``(t_end, x_end,
-        u, h_next)`` of the last advance (None if there is none): its end time [s], state and
-        inputs and the step [s] proposed after its last step, which an advance that continues
-        it (same start, state and inputs: nothing changed) starts with, without the
-        first-step bound.  Plain floats in tuples."""
-        return (self._h_prop, self._cont)
+        """Return ``(h_proposal, continuation, jacobian)``: the first-step proposal [s] for an
+        advance after an input change (None before the first adaptive advance); ``(t_end,
+        x_end, u, h_next)`` of the last advance (None if there is none): its end time [s],
+        state and inputs and the step [s] proposed after its last step, which an advance that
+        continues it (same start, state and inputs: nothing changed) starts with, without the
+        first-step bound; and the Jacobian that advance ended with, kept for such an advance
+        when ``jacobian_reuse`` is set (None otherwise): ``(x_J, ||J_dd||_inf, J_dd, J_qd)``,
+        the state it was taken at, its norm [1/s] and its blocks flattened row by row.  Plain
+        floats in tuples."""
+        return (self._h_prop, self._cont, self._jrec)
 
     def set_memory(self, m: tuple) -> None:
-        """Restore ``(h_proposal, continuation)`` from :meth:`get_memory` (``(h_proposal,)``
-        alone is accepted: no continuation); checked first, a refused memory changes
-        nothing."""
+        """Restore ``(h_proposal, continuation, jacobian)`` from :meth:`get_memory`
+        (``(h_proposal,)`` alone is accepted: nothing to continue); checked first, a refused
+        memory changes nothing."""
         m = tuple(m)
-        if len(m) not in (1, 2):
-            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation), got {m!r}")
-        cont = m[1] if len(m) == 2 else None
+        if len(m) not in (1, 3):
+            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation, "
+                             f"jacobian), got {m!r}")
+        cont, jrec = (m[1], m[2]) if len(m) == 3 else (None, None)
         self._check_continuation(cont)
+        nd, nq, n = len(self._dyn), len(self._quad), self.n_states
+        if jrec is not None:
+            ok = isinstance(jrec, tuple) and len(jrec) == 4
+            if ok:
+                xj, norm, jdd, jqd = jrec
+                ok = (isinstance(xj, tuple) and len(xj) == n and isinstance(norm, float)
+                      and 0.0 <= norm < _INF and isinstance(jdd, tuple) and len(jdd) == nd * nd
+                      and isinstance(jqd, tuple) and len(jqd) == nq * nd
+                      and all(isinstance(v, float) and math.isfinite(v)
+                              for v in xj + jdd + jqd))
+            if not ok:
+                raise ValueError(f"{self.name}: memory's jacobian must be None or (x_J, norm, "
+                                 f"J_dd, J_qd) with {n} finite states, a finite norm >= 0 "
+                                 f"[1/s] and {nd * nd} + {nq * nd} finite entries, got {jrec!r}")
         super().set_memory(m[:1])
         self._cont = cont
+        self._jrec = jrec
 
     def reset(self) -> None:
-        """Forget the step-size proposal and the continuation."""
+        """Forget the step-size proposal, the continuation and the kept Jacobian."""
         super().reset()
         self._cont = None
+        self._jrec = None
+
+    def _kept_jacobian(self) -> tuple:
+        """``(J_dd, J_qd)`` as rows, ``||J_dd||_inf`` [1/s] and ``x_J`` of the kept record."""
+        xj, norm, jdd, jqd = self._jrec
+        nd = len(self._dyn)
+        rows_d = [list(jdd[i * nd:(i + 1) * nd]) for i in range(nd)]
+        rows_q = [list(jqd[i * nd:(i + 1) * nd]) for i in range(len(self._quad))]
+        return (rows_d, rows_q), norm, xj
 
     # --- Jacobian and iteration matrix --------------------------------------------------
 
@@ -375,6 +408,10 @@ class Rosenbrock(AdaptiveBase):
         f0 = jac = None  # rhs value at the current accepted point, Jacobian in use
         jac_norm = 0.0  # ||J_dd||_inf [1/s]
         y_jac = None  # the state at which the Jacobian was evaluated
+        if h_cont is not None and self._jrec is not None:
+            # nothing changed since the last advance: its last Jacobian, if still fresh
+            # enough for the reuse bound below
+            jac, jac_norm, y_jac = self._kept_jacobian()
         h_mem = None  # proposal for the first step of the next advance
         reason = ""
         i_fixed = 0
@@ -481,6 +518,9 @@ class Rosenbrock(AdaptiveBase):
                     self._h_prop = h_mem
                     h_next = max(h_new, hs) if h_new >= h_step else h_new
                     self._cont = self._continuation(t + h, y, u, h_next)
+                    self._jrec = None if jac is None else (
+                        tuple(y_jac), jac_norm, tuple([v for row in jac[0] for v in row]),
+                        tuple([v for row in jac[1] for v in row]))
                     return y, stats
                 tau += h_step
                 hs = h_new
