@@ -16,6 +16,11 @@ from .tableaux import _ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ, ROS_GAMMA
 __all__ = ["Rosenbrock"]
 
 
+#: a continuing advance counts as quiet (fast modes at rest: no first-step bound, the last
+#: advance's Jacobian kept) when its motion changes at most this fraction of the fastest rate
+QUIET = 0.01
+
+
 class Rosenbrock(AdaptiveBase):
     """Linearly implicit L-stable Rosenbrock-W method ROS34PW2 with error control.
 
@@ -229,6 +234,23 @@ class Rosenbrock(AdaptiveBase):
         """Jacobian at (t, x) as ``(J_dd, J_qd)`` (:func:`.base._block_jacobian`)."""
         return _block_jacobian(self, f, t, x, f0, u, stats)
 
+    def _quiet(self, x: Sequence[float], f0: Sequence[float], jac: tuple,
+               jac_norm: float) -> bool:
+        """Whether the fast modes are at rest at ``x``: the motion changes at a rate
+        ``||J_dd f_d|| / ||f_d||`` (norms weighted by the error weights) at most
+        ``QUIET`` times the fastest rate ``||J_dd||_inf`` [1/s].  In a fast transient
+        ``J f`` is the fast mode's λ f (ratio ~1); on the slow manifold it is a slow mode's."""
+        rtol, atol = self.rtol, self._atol_w
+        if not jac_norm:          # not computed (neither reuse nor a first-step bound)
+            jac_norm = max([sum(map(abs, row)) for row in jac[0]], default=0.0)
+        fd = [f0[i] for i in self._dyn]
+        num = den = 0.0
+        for k, (i, row) in enumerate(zip(self._dyn, jac[0])):
+            w = atol[i] + rtol * abs(x[i])
+            num = max(num, abs(sum(map(mul, row, fd))) / w)
+            den = max(den, abs(fd[k]) / w)
+        return num <= QUIET * jac_norm * den
+
     def _drift(self, y: Sequence[float], y_jac: Sequence[float]) -> float:
         """Largest relative change of a state ``d`` from ``y_jac`` to ``y`` (relative to
         ``max(|y_jac_i|, state_scale_i)``)."""
@@ -436,9 +458,21 @@ class Rosenbrock(AdaptiveBase):
                         y_jac = y
                 except (ArithmeticError, ValueError) as exc:
                     raise self._fail(f"rhs or jacobian raised {exc!r}", ti, hs or h, t, h) from exc
+                if h_cont is not None and tau == 0.0 and not self._quiet(y, f0, jac, jac_norm):
+                    # continuing a fast transient: the first-step bound and a fresh
+                    # Jacobian, as after an input change
+                    h_cont = None
+                    hs = self._h_prop
+                    if y_jac is not y:
+                        try:
+                            jac, jac_norm = self._fresh_jac(f, ti, y, f0, u, stats, h, t, h)
+                        except (ArithmeticError, ValueError) as exc:
+                            raise self._fail(f"jacobian raised {exc!r}", ti, h, t, h) from exc
+                        y_jac = y
                 if fixed is None and tau == 0.0 and h_cont is None:
                     # first step of the advance, right after the master may have changed
-                    # the inputs: at most the bound on h ||J||, if one is set
+                    # the inputs (or continuing a fast transient): at most the bound on
+                    # h ||J||, if one is set
                     limit = self.first_step_stiffness
                     if limit and jac_norm and hs is None:
                         hs = limit / jac_norm
