@@ -16,8 +16,8 @@ from .tableaux import _ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ, ROS_GAMMA
 __all__ = ["Rosenbrock"]
 
 
-#: a continuing advance counts as quiet (fast modes at rest: no first-step bound, the last
-#: advance's Jacobian kept) when its motion changes at most this fraction of the fastest rate
+#: a continuing advance counts as quiet (fast modes at rest: no first-step bound) when its
+#: motion changes at most this fraction of the fastest rate
 QUIET = 0.01
 
 
@@ -103,11 +103,13 @@ class Rosenbrock(AdaptiveBase):
     ``h ||J|| ~ 5``, at the same cost).  The bound cuts the memory's proposal by at most
     ``fac_max`` (one controller step), so that a mode made extremely stiff by a friction
     band (nanoseconds at zero speed), whose transients are as short as they are small,
-    does not force tiny first steps.  None of this applies to an advance that continues
-    the last one (its end time, state and inputs: nothing changed, no transient): it
-    starts with the proposal after the last advance's *last* step, unbounded, and (with
-    ``jacobian_reuse``) with the Jacobian that advance ended with, under the same reuse
-    bound as within an advance.
+    does not force tiny first steps.  An advance that continues the last one (its end
+    time, state and inputs: nothing changed) with the fast modes at rest (:meth:`_quiet`)
+    starts instead with the proposal after the last advance's *last* step, unbounded: no
+    input change, no transient.  (Keeping the last advance's Jacobian for it as well was
+    tried and dropped: across many short advances the reuse bound, scaled by the step,
+    never refreshed it, and a stale Jacobian fooled both the quiet test and the error
+    estimate — 3x the error on the 1 µs start-up.)
 
     Parameters
     ----------
@@ -168,63 +170,34 @@ class Rosenbrock(AdaptiveBase):
         self._atol_d = [self._atol_w[i] for i in self._dyn]
         self._atol_q = [self._atol_w[i] for i in self._quad]
         self._cont: tuple | None = None
-        self._jrec: tuple | None = None
 
     # --- memory: the first-step proposal and the continuation -------------------------
 
     def get_memory(self) -> tuple:
-        """Return ``(h_proposal, continuation, jacobian)``: the first-step proposal [s] for an
-        advance after an input change (None before the first adaptive advance); ``(t_end,
-        x_end, u, h_next)`` of the last advance (None if there is none): its end time [s],
-        state and inputs and the step [s] proposed after its last step, which an advance that
-        continues it (same start, state and inputs: nothing changed) starts with, without the
-        first-step bound; and the Jacobian that advance ended with, kept for such an advance
-        when ``jacobian_reuse`` is set (None otherwise): ``(x_J, ||J_dd||_inf, J_dd, J_qd)``,
-        the state it was taken at, its norm [1/s] and its blocks flattened row by row.  Plain
-        floats in tuples."""
-        return (self._h_prop, self._cont, self._jrec)
+        """Return ``(h_proposal, continuation)``: the first-step proposal [s] for an advance
+        after an input change (None before the first adaptive advance), and ``(t_end, x_end,
+        u, h_next)`` of the last advance (None if there is none): its end time [s], state and
+        inputs and the step [s] proposed after its last step, which an advance that continues
+        it (same start, state and inputs: nothing changed) starts with, without the
+        first-step bound.  Plain floats in tuples."""
+        return (self._h_prop, self._cont)
 
     def set_memory(self, m: tuple) -> None:
-        """Restore ``(h_proposal, continuation, jacobian)`` from :meth:`get_memory`
-        (``(h_proposal,)`` alone is accepted: nothing to continue); checked first, a refused
-        memory changes nothing."""
+        """Restore ``(h_proposal, continuation)`` from :meth:`get_memory` (``(h_proposal,)``
+        alone is accepted: no continuation); checked first, a refused memory changes
+        nothing."""
         m = tuple(m)
-        if len(m) not in (1, 3):
-            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation, "
-                             f"jacobian), got {m!r}")
-        cont, jrec = (m[1], m[2]) if len(m) == 3 else (None, None)
+        if len(m) not in (1, 2):
+            raise ValueError(f"{self.name}: memory must be (h_proposal, continuation), got {m!r}")
+        cont = m[1] if len(m) == 2 else None
         self._check_continuation(cont)
-        nd, nq, n = len(self._dyn), len(self._quad), self.n_states
-        if jrec is not None:
-            ok = isinstance(jrec, tuple) and len(jrec) == 4
-            if ok:
-                xj, norm, jdd, jqd = jrec
-                ok = (isinstance(xj, tuple) and len(xj) == n and isinstance(norm, float)
-                      and 0.0 <= norm < _INF and isinstance(jdd, tuple) and len(jdd) == nd * nd
-                      and isinstance(jqd, tuple) and len(jqd) == nq * nd
-                      and all(isinstance(v, float) and math.isfinite(v)
-                              for v in xj + jdd + jqd))
-            if not ok:
-                raise ValueError(f"{self.name}: memory's jacobian must be None or (x_J, norm, "
-                                 f"J_dd, J_qd) with {n} finite states, a finite norm >= 0 "
-                                 f"[1/s] and {nd * nd} + {nq * nd} finite entries, got {jrec!r}")
         super().set_memory(m[:1])
         self._cont = cont
-        self._jrec = jrec
 
     def reset(self) -> None:
-        """Forget the step-size proposal, the continuation and the kept Jacobian."""
+        """Forget the step-size proposal and the continuation."""
         super().reset()
         self._cont = None
-        self._jrec = None
-
-    def _kept_jacobian(self) -> tuple:
-        """``(J_dd, J_qd)`` as rows, ``||J_dd||_inf`` [1/s] and ``x_J`` of the kept record."""
-        xj, norm, jdd, jqd = self._jrec
-        nd = len(self._dyn)
-        rows_d = [list(jdd[i * nd:(i + 1) * nd]) for i in range(nd)]
-        rows_q = [list(jqd[i * nd:(i + 1) * nd]) for i in range(len(self._quad))]
-        return (rows_d, rows_q), norm, xj
 
     # --- Jacobian and iteration matrix --------------------------------------------------
 
@@ -237,9 +210,9 @@ class Rosenbrock(AdaptiveBase):
     def _quiet(self, x: Sequence[float], f0: Sequence[float], jac: tuple,
                jac_norm: float) -> bool:
         """Whether the fast modes are at rest at ``x``: the motion changes at a rate
-        ``||J_dd f_d|| / ||f_d||`` (norms weighted by the error weights) at most
-        ``QUIET`` times the fastest rate ``||J_dd||_inf`` [1/s].  In a fast transient
-        ``J f`` is the fast mode's λ f (ratio ~1); on the slow manifold it is a slow mode's."""
+        ``||J_dd f_d|| / ||f_d||`` (norms weighted by the error weights) at most ``QUIET``
+        times the fastest rate ``||J_dd||_inf`` [1/s].  In a fast transient ``J f`` is the
+        fast mode's λ f (ratio ~1); on the slow manifold it is a slow mode's."""
         rtol, atol = self.rtol, self._atol_w
         if not jac_norm:          # not computed (neither reuse nor a first-step bound)
             jac_norm = max([sum(map(abs, row)) for row in jac[0]], default=0.0)
@@ -430,10 +403,6 @@ class Rosenbrock(AdaptiveBase):
         f0 = jac = None  # rhs value at the current accepted point, Jacobian in use
         jac_norm = 0.0  # ||J_dd||_inf [1/s]
         y_jac = None  # the state at which the Jacobian was evaluated
-        if h_cont is not None and self._jrec is not None:
-            # nothing changed since the last advance: its last Jacobian, if still fresh
-            # enough for the reuse bound below
-            jac, jac_norm, y_jac = self._kept_jacobian()
         h_mem = None  # proposal for the first step of the next advance
         reason = ""
         i_fixed = 0
@@ -459,20 +428,13 @@ class Rosenbrock(AdaptiveBase):
                 except (ArithmeticError, ValueError) as exc:
                     raise self._fail(f"rhs or jacobian raised {exc!r}", ti, hs or h, t, h) from exc
                 if h_cont is not None and tau == 0.0 and not self._quiet(y, f0, jac, jac_norm):
-                    # continuing a fast transient: the first-step bound and a fresh
-                    # Jacobian, as after an input change
+                    # continuing a fast transient: the first-step bound, as after an input
+                    # change (the Jacobian is fresh: taken at this point above)
                     h_cont = None
                     hs = self._h_prop
-                    if y_jac is not y:
-                        try:
-                            jac, jac_norm = self._fresh_jac(f, ti, y, f0, u, stats, h, t, h)
-                        except (ArithmeticError, ValueError) as exc:
-                            raise self._fail(f"jacobian raised {exc!r}", ti, h, t, h) from exc
-                        y_jac = y
                 if fixed is None and tau == 0.0 and h_cont is None:
                     # first step of the advance, right after the master may have changed
-                    # the inputs (or continuing a fast transient): at most the bound on
-                    # h ||J||, if one is set
+                    # the inputs: at most the bound on h ||J||, if one is set
                     limit = self.first_step_stiffness
                     if limit and jac_norm and hs is None:
                         hs = limit / jac_norm
@@ -552,9 +514,6 @@ class Rosenbrock(AdaptiveBase):
                     self._h_prop = h_mem
                     h_next = max(h_new, hs) if h_new >= h_step else h_new
                     self._cont = self._continuation(t + h, y, u, h_next)
-                    self._jrec = None if jac is None else (
-                        tuple(y_jac), jac_norm, tuple([v for row in jac[0] for v in row]),
-                        tuple([v for row in jac[1] for v in row]))
                     return y, stats
                 tau += h_step
                 hs = h_new
