@@ -932,13 +932,8 @@ def test_jacobian_reuse_does_not_trap_the_controller_in_a_friction_band():
     assert max(abs(p - q) / (1.0 + abs(q)) for p, q in zip(*ends)) <= 1e-6
 
 
-def test_first_step_bound_caps_the_first_step_of_every_advance():
-    """h ||J|| <= first_step_stiffness for each advance's first step (an input change
-    starts a fast transient there) unless the memory proposes more than fac_max times
-    that; without memory the first step is the bound."""
-    m = FastInput()
-    c = 2.0
-    s = Rosenbrock(m, rtol=1e-6, atol=1e-9, first_step_stiffness=c)
+def _record_trials(s) -> list:
+    """Record (t, h) of every trial step of the Rosenbrock stepper ``s``."""
     trials = []
     trial = s._trial
 
@@ -947,6 +942,17 @@ def test_first_step_bound_caps_the_first_step_of_every_advance():
         return trial(f, t, x, f0, fac, hs, u)
 
     s._trial = record
+    return trials
+
+
+def test_first_step_bound_caps_the_first_step_of_every_advance():
+    """h ||J|| <= first_step_stiffness for each advance's first step (an input change
+    starts a fast transient there) unless the memory proposes more than fac_max times
+    that; without memory the first step is the bound."""
+    m = FastInput()
+    c = 2.0
+    s = Rosenbrock(m, rtol=1e-6, atol=1e-9, first_step_stiffness=c)
+    trials = _record_trials(s)
     x, t, H = [1.0], 0.0, 1e-3
     for i in range(10):
         u = (1.0 + 0.01 * math.sin(0.7 * i),)
@@ -986,18 +992,6 @@ class SlowFast:
         z1, z2 = x[0] - u[0], x[1] - u[0]
         e1, e2 = math.exp(-t), math.exp(-self.L * t)
         return [u[0] + z1 * e1, u[0] + z1 * self.L / (self.L - 1.0) * (e1 - e2) + z2 * e2]
-
-
-def _record_trials(s):
-    trials = []
-    trial = s._trial
-
-    def record(f, t, x, f0, fac, hs, u):
-        trials.append((t, hs))
-        return trial(f, t, x, f0, fac, hs, u)
-
-    s._trial = record
-    return trials
 
 
 def test_an_advance_that_continues_a_quiet_motion_is_not_bounded():
