@@ -14,6 +14,12 @@ __all__ = ["AdaptiveBase"]
 _TIME_MATCH = 4e-16
 
 
+def _finite_floats(v: Any, n: int | None) -> bool:
+    """Whether ``v`` is a tuple of ``n`` (any number if None) finite floats (a memory's part)."""
+    return (isinstance(v, tuple) and (n is None or len(v) == n)
+            and all(isinstance(e, float) and math.isfinite(e) for e in v))
+
+
 class AdaptiveBase(Stepper):
     """Common tolerance handling, error norm and step-size controller."""
 
@@ -101,11 +107,7 @@ class AdaptiveBase(Stepper):
         h_next)`` with finite floats and ``h_next > 0`` [s]."""
         if cont is None:
             return
-
-        def floats(v: Any, n: int | None) -> bool:
-            return (isinstance(v, tuple) and (n is None or len(v) == n)
-                    and all(isinstance(e, float) and math.isfinite(e) for e in v))
-
+        floats = _finite_floats
         ok = isinstance(cont, tuple) and len(cont) == 4
         if ok:
             t_end, x_end, u, h_next = cont

@@ -8,7 +8,7 @@ from operator import mul
 from typing import Any, Callable, Sequence
 
 from .base import StepStats, _INF, _analytic_jacobian, _block_jacobian, _bad_text, _is_finite_sum, _model_quadrature
-from .control import AdaptiveBase
+from .control import AdaptiveBase, _finite_floats
 from .linalg import getter
 from .phi import prepare
 
@@ -156,11 +156,7 @@ class ExponentialRosenbrock(AdaptiveBase):
             raise ValueError(f"{self.name}: memory must be (h_proposal, continuation, "
                              f"jacobian), got {m!r}")
         cont, jrec = m[1], m[2]
-
-        def floats(v: Any, n: int | None) -> bool:
-            return (isinstance(v, tuple) and (n is None or len(v) == n)
-                    and all(isinstance(e, float) and math.isfinite(e) for e in v))
-
+        floats = _finite_floats
         n = self.n_states
         self._check_continuation(cont)
         nd, nq = len(self._dyn), len(self._quad)
