@@ -1,7 +1,8 @@
-"""Build the native FMU ``<name>-native.fmu``: the kinematic and quasi-static levels in C.
+"""Build the native FMU ``<name>-native.fmu``: the kinematic, quasi-static and dynamic levels in C.
 
-No Python in the FMU: the physics of :mod:`prsm_fmu.mechanics`, :mod:`prsm_fmu.models.slaved`
-and the Dormand-Prince 5(4) fallback of :mod:`prsm_fmu.steppers` translated into C
+No Python in the FMU: the physics of :mod:`prsm_fmu.mechanics`, :mod:`prsm_fmu.models.slaved`,
+the Dormand-Prince 5(4) fallback and the dynamic level's ROS34PW2 of :mod:`prsm_fmu.steppers`
+translated into C
 (``fmu_build/native/*.c``), operation for operation, so that the outputs equal the Python
 FMU's to round-off (tests/test_native_fmu.py: 1e-12).
 
@@ -16,7 +17,7 @@ What this module does:
    initialization with a logged fmi2Error rather than being silently ignored);
 2. computes the geometry-derived constants with the Python package (contact points, normals,
    slip Jacobians of both flanks, c_k, the carrier ratios ζ) and writes them, with the
-   Dormand-Prince tableau of :mod:`prsm_fmu.steppers.tableaux`, into ``prsm_constants.h`` as
+   Dormand-Prince and ROS34PW2 tableaux of :mod:`prsm_fmu.steppers.tableaux`, into ``prsm_constants.h`` as
    exact (hexadecimal) double literals, and the variable table into ``prsm_variables.h``;
 3. marks the parameters the constants are computed from as structural: causality ``local``,
    variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
@@ -43,7 +44,8 @@ from xml.dom.minidom import parseString
 import prsm_fmu
 from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.params import MechanismParams
-from prsm_fmu.steppers.tableaux import EXPLICIT_TABLEAUS
+from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
+                                        EXPLICIT_TABLEAUS, ROS_GAMMA)
 
 from . import model_description
 from .builder import BuildError, build_fmu, validate
@@ -51,11 +53,11 @@ from .builder import BuildError, build_fmu, validate
 __all__ = ["build_native", "native_name", "NATIVE_LEVELS", "STRUCTURAL", "SOURCES", "COMPILE_FLAGS"]
 
 #: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
-NATIVE_LEVELS = ("kinematic", "quasi-static")
+NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
-SOURCES = ("prsm_model.c", "prsm_fmi2.c")
-HEADERS = ("prsm_model.h",)
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_fmi2.c")
+HEADERS = ("prsm_model.h", "prsm_ros.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 #: gcc flags of the Linux binary (no fused multiply-add: the Python model's rounding)
 COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
@@ -166,6 +168,16 @@ static const double PRSM_DP_A[5][5] = {{
 }};
 static const double PRSM_DP_B[5] = {{{", ".join(_hex(v) for v in b_used)}}};
 static const double PRSM_DP_E[6] = {{{", ".join(_hex(v) for v in e)}}};
+
+/* ROS34PW2 in the transformed form (prsm_fmu.steppers.tableaux): gamma; a_ij, c_ij (i > j) and
+   the stage times; the result weights m, the error weights m - m_hat and the quadrature states'
+   weights of both */
+#define PRSM_ROS_GAMMA {_hex(ROS_GAMMA)}
+static const double PRSM_ROS_TRIAL[{len(_ROS_TRIAL)}] = {{{", ".join(_hex(v) for v in _ROS_TRIAL)}}};
+static const double PRSM_ROS_M[4] = {{{", ".join(_hex(v) for v in _ROS_M)}}};
+static const double PRSM_ROS_E[4] = {{{", ".join(_hex(v) for v in _ROS_E)}}};
+static const double PRSM_ROS_WQ[4] = {{{", ".join(_hex(v) for v in _ROS_WQ)}}};
+static const double PRSM_ROS_EQ[4] = {{{", ".join(_hex(v) for v in _ROS_EQ)}}};
 
 #endif
 """
@@ -343,8 +355,8 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     root.set("modelName", identifier)
     root.set("guid", guid)
     root.set("generationTool", f"prsm-fmu fmu_build --native {prsm_fmu.__version__}")
-    root.set("description", root.get("description", "") + "; native C FMU: kinematic and "
-             "quasi-static levels, contact geometry built in")
+    root.set("description", root.get("description", "") + "; native C FMU: kinematic, "
+             "quasi-static and dynamic levels, contact geometry built in")
     cs = root.find("CoSimulation")
     for key, value in (("modelIdentifier", identifier), ("needsExecutionTool", "false"),
                        ("canHandleVariableCommunicationStepSize", "true"),
@@ -457,9 +469,9 @@ SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation, C99, 
 
 Compile for another platform, e.g.
 
-  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_fmi2.c -o {id}.so -lm
-  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_fmi2.c -o {id}.dylib
-  Windows  cl /O2 /fp:precise /LD prsm_model.c prsm_fmi2.c /Fe{id}.dll
+  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.so -lm
+  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.dylib
+  Windows  cl /O2 /fp:precise /LD prsm_model.c prsm_ros.c prsm_fmi2.c /Fe{id}.dll
 
 and put the library under binaries/<platform>/ (linux64, darwin64, win64).  Keep fused
 multiply-add off (-ffp-contract=off; MSVC /fp:precise) and no fast-math: the results then equal

@@ -90,7 +90,7 @@ def check_scene(scene: Scene, prsm: str = "fmu", fidelity: str | None = None,
         if level not in NATIVE_LEVELS:
             raise ValueError(f"--prsm native: fidelity {level!r} is not allowed: must be one of "
                              f"{', '.join(NATIVE_LEVELS)}, the levels the native FMU runs (use "
-                             f"--prsm fmu for {level}, or --fidelity {NATIVE_LEVELS[-1]})")
+                             f"--prsm fmu for {level}, or --fidelity with one of those)")
     if scene.order not in ORDERS:
         raise ValueError(f"{where}: order = {scene.order!r} is not allowed: must be one of "
                          f"{', '.join(ORDERS)}")

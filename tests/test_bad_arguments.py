@@ -182,9 +182,8 @@ CASES: list[tuple[str, list[str], str]] = [
      "--fmu"),
     ("prsm-ema", ["run", "--scene", "position_step", "--prsm", "python", "--out",
                   FILE + "/sub"], "--out"),
-    # the native FMU runs the kinematic and quasi-static levels only (refused before a build)
-    ("prsm-ema", ["run", "--scene", "startup_seed000", "--prsm", "native", "--out", OUT],
-     "--prsm native: fidelity 'dynamic'"),
+    # the native FMU runs the kinematic, quasi-static and dynamic levels (auto is refused
+    # before a build)
     ("prsm-ema", ["run", "--scene", "position_step", "--prsm", "native", "--fidelity", "auto",
                   "--out", OUT], "--prsm native: fidelity 'auto'"),
 ]

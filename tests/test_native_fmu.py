@@ -146,6 +146,34 @@ def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, 
     assert [r[i_calls] for r in nat] == [r[i_calls] for r in py]  # ... the same ones
 
 
+@pytest.mark.parametrize("name,load,start", [
+    ("PRSM2", 3000.0, {}), ("PRSM2", -3000.0, {"tolerance": 1e-8}),
+    # three stages: four unknowns in the iteration matrix (the general LU, not the unrolled one)
+    ("PRSM3", -2000.0, {"initial_carrier_equilibrium": True}),
+    ("PRSM2", 3000.0, {"substeps": 3})])
+def test_dynamic_level_equals_python_fmu_step_for_step(native, name, load, start):
+    """ROS34PW2 in C against the Python FMU's: the same outputs and the same rhs calls in every
+    step of a speed loop that accelerates the screw, reverses it (zero-speed crossing, the
+    friction band) and holds it; adaptive (continuation, Jacobian reuse, rejections) and fixed
+    substeps."""
+    start = {"fidelity": "dynamic", **start}
+    runs = []
+    for host in (Host(name, start=start), native_host(name, start=start)):
+        try:
+            names = all_outputs(host)
+            runs.append(loop(host, 400, load, names)[0])
+        finally:
+            host.free()
+    py, nat = runs
+    assert max_relative_difference(nat, py) <= 1e-12
+    i_speed, i_calls = names.index("screw_speed"), names.index("step_rhs_calls")
+    i_carrier = names.index("stage[1].carrier_speed_ratio")
+    speeds = [r[i_speed] for r in py]
+    assert min(speeds) < -50.0 < 90.0 < max(speeds)              # it reversed
+    assert len({r[i_carrier] for r in py}) > 100                  # the carriers are states
+    assert [r[i_calls] for r in nat] == [r[i_calls] for r in py]  # the same internal steps
+
+
 def test_random_states_both_flanks_both_load_directions_equal_python_fmu(native):
     rnd = random.Random(16)
     flank_signs = set()
@@ -220,8 +248,11 @@ def test_refused_calls_are_logged_and_change_nothing(native):
         raise
 
 
-@pytest.mark.parametrize("start,word", [({"fidelity": "dynamic"}, "fidelity"),
+@pytest.mark.parametrize("start,word", [({"fidelity": "auto"}, "fidelity"),
                                         ({"stepper": "rosenbrock"}, "stepper"),
+                                        # the dynamic level runs ROS34PW2 only
+                                        ({"fidelity": "dynamic", "stepper": "explicit_adaptive"},
+                                         "stepper"),
                                         # the Python FMU's exponential band step is not in C
                                         ({"stepper": "closed_form"}, "stepper"),
                                         ({"mu_screw_roller": 0.9}, "mu_screw_roller"),
@@ -269,11 +300,12 @@ def test_generator_pins_unmodelled_parameters_to_zero_and_refuses_unknown_output
 
 # ---- FMU state -------------------------------------------------------------------------------------
 
-def test_fmu_state_round_trip_is_bit_exact_and_checked_whole(native):
+@pytest.mark.parametrize("fidelity", ["quasi-static", "dynamic"])
+def test_fmu_state_round_trip_is_bit_exact_and_checked_whole(native, fidelity):
     from fmpy.fmi1 import FMICallException
 
-    a = native_host()
-    b = native_host()
+    a = native_host(start={"fidelity": fidelity})
+    b = native_host(start={"fidelity": fidelity})
     try:
         names = all_outputs(a)
         _, lp = loop(a, 140, 3000.0, names)              # state saved before the reversal

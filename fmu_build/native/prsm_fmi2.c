@@ -1,4 +1,5 @@
-/* FMI 2.0 co-simulation interface of the native PRSM FMU (kinematic and quasi-static levels).
+/* FMI 2.0 co-simulation interface of the native PRSM FMU (kinematic, quasi-static and dynamic
+ * levels).
  *
  * The variable table (names, value references, types, start values) is the Python FMU's,
  * generated into prsm_variables.h by fmu_build.native; the physics is prsm_model.c.
@@ -9,9 +10,10 @@
  *  - parameters (causality parameter) can be set before exitInitializationMode; structural
  *    parameters (geometry: causality local, variability constant) cannot be set at all;
  *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
- *    in initialization mode) a value out of range, fidelity dynamic or auto, a stepper other
- *    than default/closed_form/explicit_adaptive, or a value of a parameter this code does not
- *    model (it must stay at its start value, 0);
+ *    in initialization mode) a value out of range, fidelity auto, a stepper the level does not
+ *    run here (kinematic, quasi-static: default, closed_form_explicit, explicit_adaptive;
+ *    dynamic: default, rosenbrock), or a value of a parameter this code does not model (it must
+ *    stay at its start value, 0);
  *  - doStep refuses with fmi2Discard (logged, state unchanged) a non-finite or non-positive
  *    step, non-finite inputs or a failed integration; with fmi2Error a communication point that
  *    is not the FMU's time;
@@ -78,7 +80,7 @@ typedef struct {
     char par_str[N_PAR_STRING > 0 ? N_PAR_STRING : 1][PRSM_STR_LEN];
     double u[2];
     double t;
-    double x[PRSM_NX];
+    double x[PRSM_NX_MAX];
     double u_held[2];
     int stats[3];
     prsm_memory mem;
@@ -123,6 +125,9 @@ static const char *choice(const snapshot *s, int type, int index, const prsm_enu
         if (items[i].value == s->par_int[index]) return items[i].name;
     return "";
 }
+
+/* step_fidelity (configure.LEVEL_CODES): kinematic 0, quasi-static 1, dynamic 2 */
+static int model_level(const prsm_model *m) { return m->kinematic ? 0 : m->dynamic ? 2 : 1; }
 
 static int level_code(const char *fidelity) {
     if (!strcmp(fidelity, "quasi-static") || !strcmp(fidelity, "auto")) return 1;
@@ -171,19 +176,27 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
     const char *fid = choice(s, P_FIDELITY_TYPE, P_FIDELITY, P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
     if (!strcmp(fid, "kinematic")) cfg->kinematic = 1;
     else if (!strcmp(fid, "quasi-static")) cfg->kinematic = 0;
-    else if (!strcmp(fid, "dynamic") || !strcmp(fid, "auto")) {
+    else if (!strcmp(fid, "dynamic")) cfg->dynamic = 1;
+    else if (!strcmp(fid, "auto")) {
         snprintf(msg, (size_t)len, "fidelity = '%s' is not available in the native FMU: it runs "
-                 "kinematic and quasi-static only (use the Python FMU for dynamic and auto)", fid);
+                 "kinematic, quasi-static and dynamic (use the Python FMU for auto)", fid);
         return -1;
     } else {
         snprintf(msg, (size_t)len, "fidelity = '%s' is not allowed: must be one of kinematic, "
-                 "quasi-static (native FMU)", fid);
+                 "quasi-static, dynamic (native FMU)", fid);
         return -1;
     }
     const char *st = choice(s, P_STEPPER_TYPE, P_STEPPER, P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
     /* the friction band is stepped by Dormand-Prince 5(4) here: the Python FMU's
-     * closed_form_explicit; its closed_form (scalar exponential band step) is not translated */
-    if (!strcmp(st, "default") || !strcmp(st, "closed_form_explicit")) cfg->closed_form = 1;
+     * closed_form_explicit; its closed_form (scalar exponential band step) is not translated.
+     * The dynamic level runs the Python FMU's default, ROS34PW2. */
+    if (cfg->dynamic) {
+        if (strcmp(st, "default") && strcmp(st, "rosenbrock")) {
+            snprintf(msg, (size_t)len, "stepper = '%s' is not allowed with fidelity = 'dynamic' in "
+                     "the native FMU: must be one of default (= rosenbrock), rosenbrock", st);
+            return -1;
+        }
+    } else if (!strcmp(st, "default") || !strcmp(st, "closed_form_explicit")) cfg->closed_form = 1;
     else if (!strcmp(st, "explicit_adaptive")) cfg->closed_form = 0;
     else {
         snprintf(msg, (size_t)len, "stepper = '%s' is not allowed in the native FMU: must be one of "
@@ -228,7 +241,7 @@ static void compute_outputs(component *c) {
     prsm_model preview;
     prsm_model *m = &c->model;
     const double *x = c->s.x, *u = c->s.u_held;
-    double x0[PRSM_NX];
+    double x0[PRSM_NX_MAX];
     if (c->s.phase < PH_STEPPING) {      /* before exitInitializationMode: the initial state */
         char msg[600];
         if (build_model(&c->s, &preview, msg, sizeof msg)) {
@@ -237,14 +250,16 @@ static void compute_outputs(component *c) {
             return;
         }
         m = &preview;
-        prsm_initial_state(x0, c->s.par_real[P_INITIAL_SCREW_ANGLE],
-                           c->s.par_real[P_INITIAL_SCREW_SPEED]);
+        prsm_initial_state(m, x0, c->s.par_real[P_INITIAL_SCREW_ANGLE],
+                           c->s.par_real[P_INITIAL_SCREW_SPEED],
+                           c->s.par_bool[P_INITIAL_CARRIER_EQUILIBRIUM]);
         x = x0;
         u = c->s.u;
     }
     prsm_outputs o;
     prsm_outputs_at(m, x, u, &o);
     double omega = x[1], load = u[1], c_out = m->c_out;
+    int ie = m->ie;
     for (int i = 0; i < N_OUT_REAL; i++) {
         int k = OUT_STAGE[i];
         double v;
@@ -266,9 +281,9 @@ static void compute_outputs(component *c) {
         case Q_FRICTION_POWER: v = o.friction_power; break;
         case Q_INPUT_POWER: v = o.motor * omega; break;
         case Q_OUTPUT_POWER: v = load * (c_out * omega); break;
-        case Q_INPUT_WORK: v = x[2]; break;
-        case Q_OUTPUT_WORK: v = x[3]; break;
-        case Q_FRICTION_WORK: v = x[4]; break;
+        case Q_INPUT_WORK: v = x[ie]; break;
+        case Q_OUTPUT_WORK: v = x[ie + 1]; break;
+        case Q_FRICTION_WORK: v = x[ie + 2]; break;
         /* the viscous and differential-sliding terms are pinned to 0 in the native FMU */
         case Q_FRICTION_POWER_COULOMB: v = o.p_coulomb; break;
         case Q_FRICTION_POWER_VISCOUS: v = 0.0; break;
@@ -276,7 +291,7 @@ static void compute_outputs(component *c) {
         case Q_FRICTION_POWER_JOINTS: v = o.p_joints; break;
         case Q_SCREW_FRICTION_TORQUE:
             v = o.motor - load * c_out - m->equivalent_inertia * o.alpha; break;
-        case Q_OVERALL_EFFICIENCY: v = x[2] > 0.0 ? x[3] / x[2] : 0.0; break;
+        case Q_OVERALL_EFFICIENCY: v = x[ie] > 0.0 ? x[ie + 1] / x[ie] : 0.0; break;
         default: v = o.kinetic_energy; break;
         }
         c->y[i] = v;
@@ -543,11 +558,12 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
         log_msg(c, fmi2Error, "initialization failed: %s", msg);
         return fmi2Error;
     }
-    prsm_initial_state(c->s.x, c->s.par_real[P_INITIAL_SCREW_ANGLE], c->s.par_real[P_INITIAL_SCREW_SPEED]);
+    prsm_initial_state(&c->model, c->s.x, c->s.par_real[P_INITIAL_SCREW_ANGLE],
+                       c->s.par_real[P_INITIAL_SCREW_SPEED], c->s.par_bool[P_INITIAL_CARRIER_EQUILIBRIUM]);
     c->s.u_held[0] = c->s.u[0];
     c->s.u_held[1] = c->s.u[1];
     c->s.stats[0] = c->s.stats[1] = 0;
-    c->s.stats[2] = c->model.kinematic ? 0 : 1;
+    c->s.stats[2] = model_level(&c->model);
     memset(&c->s.mem, 0, sizeof c->s.mem);
     c->y_valid = 0;
     c->s.phase = PH_STEPPING;
@@ -602,7 +618,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
                 t, c->s.t);
         return fmi2Error;
     }
-    double x_new[PRSM_NX];
+    double x_new[PRSM_NX_MAX] = {0.0};
     prsm_stats stats;
     char msg[700];
     if (prsm_advance(&c->model, &c->s.mem, t, c->s.x, u, h, x_new, &stats, msg, sizeof msg)) {
@@ -718,14 +734,18 @@ static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) 
     }
     const prsm_memory *mem = &s->mem;
     if ((mem->has_h_prop != 0 && mem->has_h_prop != 1) || (mem->has_fsal != 0 && mem->has_fsal != 1)
+        || (mem->has_cont != 0 && mem->has_cont != 1)
         || (mem->has_h_prop && !(mem->h_prop > 0.0 && mem->h_prop < INFINITY))
         || (mem->has_fsal && !(isfinite(mem->fsal_t) && finite_all(mem->fsal_x, PRSM_NX)
-                               && finite_all(mem->fsal_u, 2) && finite_all(mem->fsal_f, PRSM_NX)))) {
+                               && finite_all(mem->fsal_u, 2) && finite_all(mem->fsal_f, PRSM_NX)))
+        || (mem->has_cont && !(isfinite(mem->cont_t) && finite_all(mem->cont_x, PRSM_NX_MAX)
+                               && finite_all(mem->cont_u, 2)
+                               && mem->cont_h > 0.0 && mem->cont_h < INFINITY))) {
         snprintf(msg, (size_t)len, "bad stepper memory");
         return -1;
     }
     if (s->phase >= PH_STEPPING) {
-        if (!finite_all(s->x, PRSM_NX) || !finite_all(s->u_held, 2)) {
+        if (!finite_all(s->x, PRSM_NX_MAX) || !finite_all(s->u_held, 2)) {
             snprintf(msg, (size_t)len, "state vector or held inputs not finite");
             return -1;
         }
@@ -734,7 +754,7 @@ static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) 
             snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
             return -1;
         }
-        if (s->stats[2] != (m->kinematic ? 0 : 1)) {
+        if (s->stats[2] != model_level(m)) {
             snprintf(msg, (size_t)len, "step_fidelity %d does not match the fidelity parameter", s->stats[2]);
             return -1;
         }

@@ -1,4 +1,5 @@
-/* The PRSM's kinematic and quasi-static levels in C (see prsm_model.h for what it mirrors).
+/* The PRSM's kinematic, quasi-static and dynamic levels in C (see prsm_model.h for what it
+ * mirrors).
  *
  * Every expression keeps the Python code's order of floating-point operations: the FMU's
  * outputs then equal the Python FMU's to round-off.  Compile without value-changing
@@ -6,6 +7,7 @@
  * (-ffp-contract=off where the target has FMA, e.g. arm64), or results differ in the last bits.
  */
 #include "prsm_model.h"
+#include "prsm_ros.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -252,6 +254,15 @@ static void carrier_speeds(const prsm_model *m, double omega, double *wps) {
     for (int k = 0; k < NS; k++) wps[k] = m->st[k].zeta * omega;
 }
 
+/* Mechanism.carrier_speeds: the state's at the dynamic level, zeta_k omega otherwise */
+static void speeds_of(const prsm_model *m, const double *x, double *wps) {
+    if (m->dynamic) {
+        for (int k = 0; k < NS; k++) wps[k] = x[2 + k];
+    } else {
+        carrier_speeds(m, x[1], wps);
+    }
+}
+
 /* KinematicModel._extra_loss_torque (0 for the quasi-static level) */
 static double extra_loss(const prsm_model *m, double omega, double load) {
     if (m->loss_factor == 0.0) return 0.0;
@@ -260,11 +271,11 @@ static double extra_loss(const prsm_model *m, double omega, double load) {
 
 /* Mechanism.solve/rates with slaved carriers: the carrier speeds, alpha and the sweep record
  * (whose coefficients live in cache) for a torque on screw 1 */
-static double solve(const prsm_model *m, double omega, double load, double torque, double *wps,
+static double solve(const prsm_model *m, const double *x, double load, double torque, double *wps,
                     coef_cache *cache, sweep_rec *rec, int *consistent) {
     memset(cache->have, 0, sizeof cache->have);
-    carrier_speeds(m, omega, wps);
-    return balance(m, omega, wps, load, torque, cache, rec, consistent);
+    speeds_of(m, x, wps);
+    return balance(m, x[1], wps, load, torque, cache, rec, consistent);
 }
 
 /* Model.rhs, torque drive, slaved carriers */
@@ -276,7 +287,7 @@ static void rhs(const prsm_model *m, const double *x, const double *u, double *d
     coef_cache cache;
     sweep_rec rec;
     int consistent;
-    double alpha = solve(m, omega, load, motor - loss, wps, &cache, &rec, &consistent);
+    double alpha = solve(m, x, load, motor - loss, wps, &cache, &rec, &consistent);
     double p_fric = consistent ? rates_power(m, omega, alpha, &rec) : NAN;
     if (!consistent) alpha = NAN;
     dx[0] = omega;
@@ -284,6 +295,41 @@ static void rhs(const prsm_model *m, const double *x, const double *u, double *d
     dx[2] = motor * omega;
     dx[3] = load * m->c_out * omega;
     dx[4] = p_fric + loss * omega;
+}
+
+/* DynamicModel.rhs (Model.rhs with Mechanism.rates and _rates, dynamic carriers, no extra loss):
+ * the signature of prsm_ros.h's right-hand side */
+static void rhs_dynamic(const void *ctx, const double *x, const double *u, double *dx) {
+    const prsm_model *m = (const prsm_model *)ctx;
+    double load = u[1], omega = x[1], motor = u[0];
+    double wps[NS];
+    coef_cache cache;
+    sweep_rec rec;
+    int consistent;
+    double alpha = solve(m, x, load, motor, wps, &cache, &rec, &consistent);
+    int ie = m->ie;
+    dx[0] = omega;
+    if (!consistent) {
+        dx[1] = NAN;
+        for (int k = 0; k < NS; k++) dx[2 + k] = NAN;
+        dx[ie] = motor * omega;
+        dx[ie + 1] = load * m->c_out * omega;
+        dx[ie + 2] = NAN;
+        return;
+    }
+    double p_fric = 0.0;
+    for (int k = 0; k < NS; k++) {
+        const rec_stage *r = &rec.s[k];
+        double a = r->a0 + r->a1 * alpha;
+        dx[2 + k] = r->co[1] * a / m->st[k].j_carrier;
+        p_fric += r->co[2] * a;
+        if (r->e != 0.0) p_fric += (r->h0 + r->h1 * alpha) * omega * m->st[k].spline_f;
+        if (r->g != 0.0) p_fric += r->g * r->sb * (r->b0 + r->b1 * alpha) * omega;
+    }
+    dx[1] = alpha;
+    dx[ie] = motor * omega;
+    dx[ie + 1] = load * m->c_out * omega;
+    dx[ie + 2] = p_fric + 0.0 * omega;
 }
 
 /* ---- models/slaved.py ---------------------------------------------------------------------- */
@@ -433,6 +479,9 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     }
 
     m->kinematic = cfg->kinematic;
+    m->dynamic = cfg->dynamic && !cfg->kinematic;
+    m->nx = m->dynamic ? PRSM_NX_MAX : PRSM_NX;
+    m->ie = m->dynamic ? 2 + NS : 2;
     m->mu = m->kinematic ? 0.0 : cfg->mu_screw_roller;
     m->v_eps = cfg->slip_velocity_scale;
     double limit = INFINITY;
@@ -474,11 +523,11 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
         return -1;
     }
     m->c_out = m->st[NS - 1].c;
-    for (int k = 0; k < NS; k++) {
+    for (int k = 0; k < NS; k++) {          /* carriers slaved to the screw (not dynamic) */
         prsm_stage *s = &m->st[k];
         double z = m->kinematic ? PRSM_STAGE_CONSTS[k][3] : PRSM_STAGE_CONSTS[k][2];
         s->zeta = z;
-        s->j_screw = s->j_screw + s->j_carrier * z * z;
+        if (!m->dynamic) s->j_screw = s->j_screw + s->j_carrier * z * z;
     }
     for (int k = 0; k < NS; k++) {
         prsm_stage *s = &m->st[k];
@@ -521,13 +570,37 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     m->fac_max = 5.0;
     m->max_substeps = cfg->max_substeps;
     m->fixed_substeps = cfg->substeps;
+    /* the dynamic level: Rosenbrock with configure's options (steppers.options.TUNED_OPTIONS
+     * when adaptive; plain rtol and atol with fixed substeps); quadrature states: the angle and
+     * the work integrals (Model.quadrature_states) */
+    prsm_ros *r = &m->ros;
+    r->n = m->nx;
+    r->nd = 1 + NS;
+    r->nq = 4;
+    for (int k = 0; k < r->nd; k++) r->dyn[k] = 1 + k;
+    r->quad[0] = 0;
+    for (int k = 1; k < 4; k++) r->quad[k] = 1 + NS + k;
+    r->rtol = m->rtol;
+    r->atol = m->atol;
+    r->h_min = m->h_min;
+    r->safety = m->safety;
+    r->fac_min = m->fac_min;
+    r->fac_max = m->fac_max;
+    r->jacobian_reuse = cfg->substeps ? 0.0 : 0.1;
+    r->first_step_stiffness = cfg->substeps ? 0.0 : 8.0;
+    r->max_substeps = cfg->max_substeps;
+    r->fixed_substeps = cfg->substeps;
     return 0;
 }
 
-void prsm_initial_state(double x[PRSM_NX], double screw_angle, double screw_speed) {
+void prsm_initial_state(const prsm_model *m, double x[PRSM_NX_MAX], double screw_angle,
+                        double screw_speed, int carrier_equilibrium) {
+    for (int i = 0; i < PRSM_NX_MAX; i++) x[i] = 0.0;
     x[0] = screw_angle;
     x[1] = screw_speed;
-    x[2] = x[3] = x[4] = 0.0;
+    if (m->dynamic)
+        for (int k = 0; k < NS; k++)
+            x[2 + k] = (carrier_equilibrium ? PRSM_STAGE_CONSTS[k][2] : 0.0) * screw_speed;
 }
 
 /* ---- models/base.Model.outputs --------------------------------------------------------------- */
@@ -537,7 +610,7 @@ static double efficiency(double p_in, double p_out) {
     return 0.0;
 }
 
-void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX], const double u[2], prsm_outputs *y) {
+void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[2], prsm_outputs *y) {
     double omega = x[1], load = u[1];
     double loss = extra_loss(m, omega, load);
     double motor = u[0];
@@ -545,7 +618,7 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX], const double u[2], 
     coef_cache cache;
     sweep_rec rec;
     int consistent;
-    double alpha = solve(m, omega, load, u[0] - loss, wps, &cache, &rec, &consistent);
+    double alpha = solve(m, x, load, u[0] - loss, wps, &cache, &rec, &consistent);
     /* Mechanism._assemble(detail=True) */
     double motor_sol = rec.m0 + rec.m1 * alpha;
     double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0;
@@ -583,7 +656,11 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX], const double u[2], 
     y->p_coulomb = loss != 0.0 ? p_coulomb + loss * omega : p_coulomb;
     y->p_joints = p_joints;
     y->consistent = consistent;
-    y->kinetic_energy = 0.5 * m->equivalent_inertia * omega * omega;
+    /* Mechanism.kinetic_energy */
+    double ke = 0.5 * m->equivalent_inertia * omega * omega;
+    if (m->dynamic)
+        for (int k = 0; k < NS; k++) ke += 0.5 * m->st[k].j_carrier * wps[k] * wps[k];
+    y->kinetic_energy = ke;
 }
 
 /* ---- steppers/explicit.py: Dormand-Prince 5(4) with step-size control ------------------------ */
@@ -774,11 +851,21 @@ static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const dou
 }
 
 /* ClosedForm.advance (or ExplicitAdaptive alone); memory changes only on success */
-int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_NX],
-                 const double u[2], double h, double x_new[PRSM_NX], prsm_stats *stats,
+int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_NX_MAX],
+                 const double u[2], double h, double x_new[PRSM_NX_MAX], prsm_stats *stats,
                  char *msg, int len) {
     stats->rhs_calls = 0;
     stats->substeps = 0;
+    stats->rejected = 0;
+    if (m->dynamic) {
+        prsm_memory trial = *mem;
+        double y[PRSM_NX_MAX] = {0.0};
+        if (prsm_ros_advance(&m->ros, rhs_dynamic, m, &trial, t, x, u, h, y, stats, msg, len))
+            return -1;
+        *mem = trial;
+        memcpy(x_new, y, sizeof y);
+        return 0;
+    }
     if (m->closed_form && slaved_advance(m, x, u, h, x_new)) {
         if (!finite_sum(x_new, PRSM_NX))
             return fail(msg, len, "closed_form: non-finite value in the closed-form step");
@@ -791,5 +878,6 @@ int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_
     if (explicit_advance(m, &trial, t, x, u, h, y, stats, msg, len)) return -1;
     *mem = trial;
     memcpy(x_new, y, sizeof y);
+    for (int i = PRSM_NX; i < PRSM_NX_MAX; i++) x_new[i] = 0.0;
     return 0;
 }
