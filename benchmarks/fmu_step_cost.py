@@ -20,6 +20,14 @@ Levels: quasi-static and dynamic with their default steppers (closed form; ROS34
 dynamic level with the exponential Rosenbrock stepper (``dyn exponential``); each dynamic row's
 doStep is also printed over the quasi-static doStep (the issue's goal ≤ 5, floor ≤ 10).
 
+The native C FMU of the same mechanism (``PRSM2-native.fmu``, fmu_build.native: the same
+model and steppers translated into C, equal to the Python FMU's outputs bit for bit) is measured
+beside it: ``native QS`` (quasi-static, its default closed form with the Dormand-Prince band
+fallback) and ``native dynamic`` (ROS34PW2); the native dynamic doStep is printed over the
+native quasi-static doStep as well, and the outputs of the native and the Python dynamic FMU
+after the same steps are compared (they must be equal: the error printed for ``dynamic`` is
+theirs).
+
 Also printed: ``doStep`` + ``getReal`` of every output (what a master that reads all outputs
 pays each step) over ``doStep`` + ``getReal`` of the empty FMU's one output, and the rhs calls
 per step the FMU reports (``step_rhs_calls``).  Ratios are measured in one run, on this machine.
@@ -124,8 +132,8 @@ def constant_input_errors(n_steps: int = 100) -> dict[str, tuple[float, float]]:
     return errors
 
 
-def build(dest: Path) -> tuple[Path, Path]:
-    """Build Empty.fmu and PRSM2.fmu in child processes; return their paths."""
+def build(dest: Path) -> tuple[Path, Path, Path]:
+    """Build Empty.fmu, PRSM2.fmu and PRSM2-native.fmu in child processes; return their paths."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [env.get("PYTHONPATH")] if p])
     (dest / "src").mkdir()
@@ -137,7 +145,9 @@ def build(dest: Path) -> tuple[Path, Path]:
                    check=True, env=env)
     subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest)], check=True,
                    env=env, stdout=subprocess.DEVNULL)
-    return dest / "Empty.fmu", dest / "PRSM2.fmu"
+    subprocess.run([sys.executable, "-m", "fmu_build", "--native", "PRSM2", "--dest", str(dest)],
+                   check=True, env=env, stdout=subprocess.DEVNULL)
+    return dest / "Empty.fmu", dest / "PRSM2.fmu", dest / "PRSM2-native.fmu"
 
 
 class Instance:
@@ -195,31 +205,38 @@ class Instance:
         self.fmu.freeInstance()
 
 
-def measure(empty_fmu: Path, prsm_fmu: Path, inputs) -> dict[str, tuple[float, float, float]]:
+def measure(empty_fmu: Path, prsm_fmu: Path, native_fmu: Path,
+            inputs) -> tuple[dict[str, tuple[float, float, float]], float]:
     """Row label -> (doStep [s], doStep + getReal [s], rhs calls per step), medians of
-    ``ROUNDS`` interleaved rounds of ``N_STEPS`` steps with ``inputs``."""
+    ``ROUNDS`` interleaved rounds of ``N_STEPS`` steps with ``inputs``; and the largest relative
+    difference between the native and the Python dynamic FMU's outputs after the last step."""
     start = {"initial_screw_speed": 100.0, "initial_carrier_equilibrium": True}
     instances = {"empty": Instance(empty_fmu),
                  "quasi-static": Instance(prsm_fmu, dict(start, fidelity="quasi-static"), inputs)}
     for label, stepper in DYNAMIC.items():
         instances[label] = Instance(prsm_fmu, dict(start, fidelity="dynamic", stepper=stepper),
                                     inputs)
+    instances["native QS"] = Instance(native_fmu, dict(start, fidelity="quasi-static"), inputs)
+    instances["native dynamic"] = Instance(native_fmu, dict(start, fidelity="dynamic"), inputs)
     for inst in instances.values():
         inst.run(WARM_UP)
     samples = {name: [] for name in instances}
     for _ in range(ROUNDS):
         for name, inst in instances.items():
             samples[name].append(inst.run(N_STEPS))
+    py, nat = (instances[n].fmu.getReal(instances[n].out) for n in ("dynamic", "native dynamic"))
+    diff = max(abs(a - b) / max(abs(a), abs(b)) if a != b else 0.0 for a, b in zip(py, nat))
     for inst in instances.values():
         inst.free()
-    return {name: tuple(statistics.median(s[i] for s in rows) for i in range(3))
-            for name, rows in samples.items()}
+    return ({name: tuple(statistics.median(s[i] for s in rows) for i in range(3))
+             for name, rows in samples.items()}, diff)
 
 
 def main() -> None:
     with tempfile.TemporaryDirectory(prefix="fmu_step_cost_") as tmp:
-        empty_fmu, prsm_fmu = build(Path(tmp))
-        costs = {name: measure(empty_fmu, prsm_fmu, inputs) for name, inputs in SCENARIOS.items()}
+        fmus = build(Path(tmp))
+        measured = {name: measure(*fmus, inputs) for name, inputs in SCENARIOS.items()}
+    costs = {name: m[0] for name, m in measured.items()}
     cost = costs["moving"]
     e_step, e_all, _ = cost["empty"]
     print(f"PRSM2 FMU, {N_STEPS} x {ROUNDS} steps of {H * 1e3:g} ms per level "
@@ -236,6 +253,11 @@ def main() -> None:
     for name in DYNAMIC:
         print(f"{name} doStep / quasi-static doStep = {cost[name][0] / qs:.1f} "
               "(goal <= 5, floor <= 10)")
+    print(f"native dynamic doStep / native QS doStep = "
+          f"{cost['native dynamic'][0] / cost['native QS'][0]:.1f} (goal <= 5, floor <= 10); "
+          f"native dynamic / Python quasi-static doStep = {cost['native dynamic'][0] / qs:.2f}; "
+          f"native dynamic outputs against the Python dynamic FMU's after the same steps: "
+          f"largest relative difference {measured['moving'][1]:.1e}")
     const = costs["constant"]
     errors = constant_input_errors()
     qs = const["quasi-static"][0]
@@ -246,6 +268,11 @@ def main() -> None:
         print(f"  {name:<16} doStep {const[name][0] * 1e6:8.2f} us, {const[name][2]:.1f} rhs/step, "
               f"/ quasi-static = {const[name][0] / qs:.1f} (goal <= 5, floor <= 10); error against "
               f"Radau rtol 1e-12 {err:.1e} ({rhs:.1f} rhs/step in-process)")
+    nqs, ndyn = const["native QS"][0], const["native dynamic"][0]
+    print(f"  native dynamic   doStep {ndyn * 1e6:8.2f} us, {const['native dynamic'][2]:.1f} "
+          f"rhs/step, / native QS ({nqs * 1e6:.2f} us) = {ndyn / nqs:.1f} (goal <= 5, floor <= 10); "
+          f"outputs equal to the Python dynamic FMU's within {measured['constant'][1]:.1e}, so its "
+          f"error is the dynamic row's {errors['dynamic'][0]:.1e}")
 
 
 if __name__ == "__main__":

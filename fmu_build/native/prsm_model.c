@@ -18,6 +18,8 @@
 #pragma STDC FP_CONTRACT OFF
 #endif
 
+double (*volatile prsm_pow)(double, double) = pow;
+
 #define NS PRSM_N_STAGES
 #define MAX_SIGN_ITERATIONS 8
 
@@ -167,7 +169,7 @@ static double bracket(const prsm_model *m, double omega, const double *wps, doub
     for (int i = 0; i < n_visited; i++) samples[n++] = visited[i];
     samples[n++] = 0.0;
     for (int e = 0; e <= 12; e += 2) {
-        double p = pow(10.0, (double)e);
+        double p = prsm_pow(10.0, (double)e);
         samples[n++] = -1.0 * p;
         samples[n++] = 1.0 * p;
     }
@@ -673,7 +675,7 @@ static int finite_sum(const double *v, int n) {
 static double err_factor(const prsm_model *m, double err) {
     if (err == 0.0) return m->fac_max;
     if (!(err < INFINITY)) return m->fac_min;
-    return fmin(m->fac_max, fmax(m->fac_min, m->safety * pow(err, -1.0 / 5.0)));
+    return fmin(m->fac_max, fmax(m->fac_min, m->safety * prsm_pow(err, -1.0 / 5.0)));
 }
 
 /* Python's min/max of two floats (the first unless the second is strictly smaller/larger) */
@@ -714,7 +716,7 @@ static int trial_dp5(const prsm_model *m, const double *x, const double *k1, dou
     for (int i = 0; i < PRSM_NX; i++) {
         double d = (e1 * k1[i] + e3 * k3[i] + e4 * k4[i] + e5 * k5[i] + e6 * k6[i] + e7 * k7[i])
                    / (m->atol + m->rtol * pmax(fabs(x[i]), fabs(xn[i])));
-        sq += pow(d, 2.0);
+        sq += prsm_pow(d, 2.0);
     }
     *err = sqrt(sq / (double)PRSM_NX);
     int ok = finite_sum(k2, PRSM_NX) && finite_sum(k3, PRSM_NX) && finite_sum(k4, PRSM_NX) &&
@@ -727,8 +729,8 @@ static void start_norms(const prsm_model *m, const double *x, const double *f0, 
                         double *d0, double *d1) {
     double s0 = 0.0, s1 = 0.0;
     for (int i = 0; i < PRSM_NX; i++) w[i] = m->atol + m->rtol * fabs(x[i]);
-    for (int i = 0; i < PRSM_NX; i++) s0 += pow(x[i] / w[i], 2.0);
-    for (int i = 0; i < PRSM_NX; i++) s1 += pow(f0[i] / w[i], 2.0);
+    for (int i = 0; i < PRSM_NX; i++) s0 += prsm_pow(x[i] / w[i], 2.0);
+    for (int i = 0; i < PRSM_NX; i++) s1 += prsm_pow(f0[i] / w[i], 2.0);
     *d0 = sqrt(s0 / (double)PRSM_NX);
     *d1 = sqrt(s1 / (double)PRSM_NX);
 }
@@ -744,11 +746,11 @@ static double starting_step(const prsm_model *m, const double *x, const double *
     rhs(m, z, u, f1);
     stats->rhs_calls += 1;
     double s = 0.0;
-    for (int i = 0; i < PRSM_NX; i++) s += pow((f1[i] - k1[i]) / w[i], 2.0);
+    for (int i = 0; i < PRSM_NX; i++) s += prsm_pow((f1[i] - k1[i]) / w[i], 2.0);
     double d2 = sqrt(s / (double)PRSM_NX) / h0;
     double dm = pmax(d1, d2);
     if (!isfinite(dm)) return pmin(h, h0);
-    double h1 = dm > 1e-15 ? pow(0.01 / dm, 1.0 / 6.0) : pmax(1e-6, 1e-3 * h0);
+    double h1 = dm > 1e-15 ? prsm_pow(0.01 / dm, 1.0 / 6.0) : pmax(1e-6, 1e-3 * h0);
     return pmin(pmin(h, 100.0 * h0), h1);
 }
 

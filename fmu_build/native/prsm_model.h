@@ -21,6 +21,12 @@
 
 #include "prsm_constants.h"
 
+/* Python's x ** y for floats, i.e. libm's pow.  Compilers replace pow(x, 2.0) by x * x, which
+ * rounds differently from glibc's pow in about 1 of 1000 cases (then the step sizes, and the
+ * results, differ from the Python FMU's in the last bits); called through this pointer, which
+ * the compiler cannot see through, pow stays pow.  Defined in prsm_model.c. */
+extern double (*volatile prsm_pow)(double, double);
+
 #define PRSM_NX 5
 /* the dynamic level's states: angle, speed, one speed per carrier, the three work integrals */
 #define PRSM_NX_MAX (5 + PRSM_N_STAGES)

@@ -265,7 +265,7 @@ static double drift(const prsm_ros *r, const double *y, const double *y_jac) {
 static double factor(const prsm_ros *r, double err) {
     if (err == 0.0) return r->fac_max;
     if (!(err < INFINITY)) return r->fac_min;
-    return pmin(r->fac_max, pmax(r->fac_min, r->safety * pow(err, -1.0 / 3.0)));
+    return pmin(r->fac_max, pmax(r->fac_min, r->safety * prsm_pow(err, -1.0 / 3.0)));
 }
 
 /* Rosenbrock._initial_step_stiff (with AdaptiveBase._initial_step) */
@@ -274,8 +274,8 @@ static double initial_step_stiff(const prsm_ros *r, const double *x, const doubl
     int n = r->n;
     double w[NX], s0 = 0.0, s1 = 0.0;
     for (int i = 0; i < n; i++) w[i] = r->atol + r->rtol * fabs(x[i]);
-    for (int i = 0; i < n; i++) s0 += pow(x[i] / w[i], 2.0);
-    for (int i = 0; i < n; i++) s1 += pow(f0[i] / w[i], 2.0);
+    for (int i = 0; i < n; i++) s0 += prsm_pow(x[i] / w[i], 2.0);
+    for (int i = 0; i < n; i++) s1 += prsm_pow(f0[i] / w[i], 2.0);
     double d0 = sqrt(s0 / (double)n), d1 = sqrt(s1 / (double)n);
     double h0 = !(d1 > 1e-5) ? h : pmin(h, 0.01 * pmax(d0, 1.0) / d1);
     double jf[NX];
@@ -290,11 +290,11 @@ static double initial_step_stiff(const prsm_ros *r, const double *x, const doubl
         jf[r->quad[k]] = s;
     }
     double s2 = 0.0;
-    for (int i = 0; i < n; i++) s2 += pow(jf[i] / w[i], 2.0);
+    for (int i = 0; i < n; i++) s2 += prsm_pow(jf[i] / w[i], 2.0);
     double d2 = sqrt(s2 / (double)n);
     double dm = pmax(d1, d2);
     if (!(dm > 1e-15)) return h0;
-    return pmin(h0, pow(0.01 / dm, 1.0 / 3.0));
+    return pmin(h0, prsm_pow(0.01 / dm, 1.0 / 3.0));
 }
 
 /* Rosenbrock._trial: 0, the first stage (2..4) with a non-finite value, or -1 for a non-finite
@@ -340,7 +340,7 @@ static int trial(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double
     for (int k = 0; k < nd; k++) {
         double p = xd[k], q = u1[k], rr = u2[k], s = u3[k], v = u4[k];
         double pn = p + m1 * q + m2 * rr + m3 * s + m4 * v;
-        sq += pow((e1 * q + e2 * rr + e3 * s + e4 * v) / (at + rtol * pmax(fabs(p), fabs(pn))), 2.0);
+        sq += prsm_pow((e1 * q + e2 * rr + e3 * s + e4 * v) / (at + rtol * pmax(fabs(p), fabs(pn))), 2.0);
         xn[dyn[k]] = pn;
         uw[k] = w1 * q + w2 * rr + w3 * s + w4 * v;
         ue[k] = v1 * q + v2 * rr + v3 * s + v4 * v;
@@ -353,7 +353,7 @@ static int trial(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double
         for (int c = 0; c < nd; c++) se += jac->qd[j][c] * ue[c];
         double pn = p + hs * (w1 * g1 + w2 * g2 + w3 * g3 + w4 * g4 + sw);
         double eq = hs * (v1 * g1 + v2 * g2 + v3 * g3 + v4 * g4 + se);
-        sq += pow(eq / (at + rtol * pmax(fabs(p), fabs(pn))), 2.0);
+        sq += prsm_pow(eq / (at + rtol * pmax(fabs(p), fabs(pn))), 2.0);
         xn[i] = pn;
     }
     *err = sqrt(sq / (double)n);
