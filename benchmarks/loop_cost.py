@@ -13,17 +13,21 @@ medians over the rounds:
 * the PRSM FMU's right-hand-side calls per step (its ``step_rhs_calls`` output).
 
 Configurations: the default loop (every output recorded, the motor's RK4 reference
-integrator); the same loop recording only the scene's outputs (``outputs`` of the scene file,
-plus ``prsm.step_rhs_calls`` for the count above): the blocks then read only what is recorded
-or connected (the FMU 7 of its 34 variables); the motor's exact exponential step
+integrator); the same loop recording only the scene's outputs (``outputs`` of the scene file and
+the carrier speeds, the outputs of work_precision.py's loop error, plus ``prsm.step_rhs_calls``
+for the count above): the blocks then read only what is recorded or connected; the motor's exact exponential step
 (``Motor(integrator="exponential")``); the Python FMU with ``stepper = "closed_form_explicit"``
 (the native FMU's method: Dormand–Prince 5(4) in the friction band); and the native C FMU
 (``python -m fmu_build --native PRSM2``, left out with the reason when it cannot be built),
-with every output recorded and with the scene's outputs only.  Each configuration's largest
+with every output recorded and with the scene's outputs only; and, recording the scene's
+outputs, the loop at the dynamic level (the scene's fidelity overridden: carriers as states,
+ROS34PW2) through the Python FMU and through the native FMU, which must agree bit for bit.  Each configuration's largest
 difference of any recorded output from the default's, relative to the output's largest
 magnitude (DESIGN.md §5), and the native FMU's from the Python FMU's at the same method.
 The target is judged for the default and for the cheapest configuration whose outputs agree
-with the default's within ``SAME_RESULT`` (1e-5; the PRSM FMU's tolerance is 1e-6).
+with the default's within ``SAME_RESULT`` (1e-5; the PRSM FMU's tolerance is 1e-6); and apart,
+at the dynamic level, for the native FMU, with the scene level's largest difference from it
+(the model error of the scene's level where the dynamic level is the reference).
 
 Which motor integrator is closer to the truth: the loop is also run once with an independent
 reference motor (the motor ODE of system_models/motor.py's docstring under the same inputs,
@@ -59,6 +63,9 @@ from system_models.ema import build_system  # noqa: E402
 from system_models.motor import Motor  # noqa: E402
 from system_models.scenes import load_scene  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from work_precision import loop_outputs  # noqa: E402
+
 PARTS = ("prsm", "motor", "controller", "load", "master+recording")
 #: label -> (motor integrator, record only the scene's outputs, FMU: "python" (pythonfmu, the
 #: scene's parameters), "python-explicit" (the same with stepper closed_form_explicit, the
@@ -68,7 +75,12 @@ CONFIGS = {"default (motor RK4)": ("rk4", False, "python"),
            "motor exponential": ("exponential", False, "python"),
            "closed_form_explicit": ("rk4", False, "python-explicit"),
            "native FMU": ("rk4", False, "native"),
-           "native FMU, scene outputs": ("rk4", True, "native")}
+           "native FMU, scene outputs": ("rk4", True, "native"),
+           "dynamic, Python FMU": ("rk4", True, "python-dynamic"),
+           "dynamic, native FMU": ("rk4", True, "native-dynamic")}
+#: the configurations at the dynamic level (the scene's fidelity overridden), judged apart: their
+#: outputs differ from the scene's level by its model error, not by round-off
+DYNAMIC_CONFIGS = ("dynamic, Python FMU", "dynamic, native FMU")
 TARGET, FLOOR = 0.35, 0.7
 #: a configuration counts for the target when every recorded output agrees with the default's
 #: within this fraction of the output's largest magnitude (the PRSM FMU's tolerance is 1e-6)
@@ -145,7 +157,8 @@ def with_stepper(scene, stepper: str):
 def run_once(scene, fmu: Path, integrator: str,
              scene_outputs: bool = False) -> tuple[dict[str, float], float, object]:
     """One run: (CPU s per simulated s by part and "total", rhs calls per step, result)."""
-    record = list(scene.outputs) + ["prsm.step_rhs_calls"] if scene_outputs else None
+    record = (sorted(set(scene.outputs) | set(loop_outputs(scene.name))) + ["prsm.step_rhs_calls"]
+              if scene_outputs else None)
     system = build_system(scene, prsm="fmu", fmu_path=fmu, record=record)
     master = system.master
     master.blocks[master.index["motor"]].integrator = integrator
@@ -202,8 +215,10 @@ def main() -> None:
         fmus = {"python": build_fmu(Path(tmp))}
         fmus["python-explicit"] = fmus["python"]
         fmus["native"] = build_fmu(Path(tmp), native=True)
+        fmus["python-dynamic"], fmus["native-dynamic"] = fmus["python"], fmus["native"]
+        dynamic = replace(scene, fidelity="dynamic")
         scenes = {"python": scene, "python-explicit": with_stepper(scene, "closed_form_explicit"),
-                  "native": scene}
+                  "native": scene, "python-dynamic": dynamic, "native-dynamic": dynamic}
         configs = {k: v for k, v in CONFIGS.items() if fmus[v[2]] is not None}
         samples: dict[str, list[dict[str, float]]] = {c: [] for c in configs}
         rhs: dict[str, list[float]] = {c: [] for c in configs}
@@ -229,14 +244,14 @@ def main() -> None:
         print(f"{label:<24}{med['total']:>8.3f}{parts}{statistics.median(rhs[label]):>10.1f}")
         print(f"{'  µs per step':<24}{med['total'] * us:>8.1f}"
               + "".join(f"{med[p] * us:>18.1f}" for p in PARTS))
-    labels = list(configs)
+    labels = [k for k in configs if k not in DYNAMIC_CONFIGS]
     same = {labels[0]: 0.0}
     for label in labels[1:]:
         d, where = max_difference(results[label], results[labels[0]])
         same[label] = d
         print(f"{label} against {labels[0]}: largest output difference {d:.2e} of the output's "
               f"maximum ({where})")
-    for a, b in (("native FMU", "closed_form_explicit"),):
+    for a, b in (("native FMU", "closed_form_explicit"), DYNAMIC_CONFIGS[::-1]):
         if a in results:
             d, where = max_difference(results[a], results[b])
             print(f"{a} against {b} (the same method): largest output difference {d:.2e} "
@@ -249,6 +264,15 @@ def main() -> None:
               f"{'met' if t <= FLOOR else 'NOT met'})")
     print(f"  (the second line: the cheapest configuration whose every output agrees with the "
           f"default's within {SAME_RESULT:g} of the output's maximum)")
+    label = DYNAMIC_CONFIGS[1]
+    if label in results:
+        t = totals[label]
+        d, where = max_difference(results[labels[0]], results[label], loop_outputs(scene.name))
+        print(f"loop / real time at the dynamic level, {label} = {t:.3f} (target <= {TARGET}: "
+              f"{'met' if t <= TARGET else 'NOT met'}; floor <= {FLOOR}: "
+              f"{'met' if t <= FLOOR else 'NOT met'}); the scene's {scene.fidelity} level "
+              f"differs from it by up to {d:.2e} of the output's maximum ({where}; over the "
+              f"outputs of work_precision.py's loop error)")
     print("against the loop with the reference motor (scipy DOP853, rtol 1e-13), |Δ|/max|y|:")
     for label in (labels[0], labels[2]):
         d, where = max_difference(results[label], reference)
