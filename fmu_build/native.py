@@ -389,12 +389,12 @@ def _fmi_headers() -> Path:
     return found[0].parent
 
 
-def compile_library(src: Path, out: Path) -> None:
-    """Compile the sources in ``src`` into the shared library ``out`` with gcc."""
+def compile_library(src: Path, out: Path, sources: tuple[str, ...] = SOURCES) -> None:
+    """Compile ``sources`` (default: the FMU's) in ``src`` into the shared library ``out`` with gcc."""
     gcc = shutil.which("gcc")
     if gcc is None:
         raise BuildError("gcc is needed to build the native FMU's Linux binary (apt-get install gcc)")
-    cmd = [gcc, *COMPILE_FLAGS, "-Wall", f"-I{src}", *(str(src / s) for s in SOURCES),
+    cmd = [gcc, *COMPILE_FLAGS, "-Wall", f"-I{src}", *(str(src / s) for s in sources),
            "-o", str(out), "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:

@@ -308,7 +308,18 @@ static void rhs_dynamic(const void *ctx, const double *x, const double *u, doubl
     coef_cache cache;
     sweep_rec rec;
     int consistent;
-    double alpha = solve(m, x, load, motor, wps, &cache, &rec, &consistent);
+    double alpha;
+    if (m->speed_drive) {
+        /* Model.rhs, speed drive: the prescribed acceleration; the motor torque follows */
+        alpha = u[0];
+        memset(cache.have, 0, sizeof cache.have);
+        speeds_of(m, x, wps);
+        sweep(m, omega, wps, load, alpha, &cache, &rec);
+        motor = rec.m0 + rec.m1 * alpha + 0.0;
+        consistent = 1;
+    } else {
+        alpha = solve(m, x, load, motor, wps, &cache, &rec, &consistent);
+    }
     int ie = m->ie;
     dx[0] = omega;
     if (!consistent) {
@@ -332,6 +343,12 @@ static void rhs_dynamic(const void *ctx, const double *x, const double *u, doubl
     dx[ie] = motor * omega;
     dx[ie + 1] = load * m->c_out * omega;
     dx[ie + 2] = p_fric + 0.0 * omega;
+}
+
+void prsm_rhs(const prsm_model *m, const double x[PRSM_NX_MAX], const double u[2],
+              double dx[PRSM_NX_MAX]) {
+    if (m->dynamic) rhs_dynamic(m, x, u, dx);
+    else rhs(m, x, u, dx);
 }
 
 /* ---- models/slaved.py ---------------------------------------------------------------------- */
@@ -482,6 +499,10 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
 
     m->kinematic = cfg->kinematic;
     m->dynamic = cfg->dynamic && !cfg->kinematic;
+    if (cfg->speed_drive && !m->dynamic)
+        return fail(msg, len, "drive = 'speed' is not available at this level in C: the speed drive "
+                    "runs at the dynamic level only");
+    m->speed_drive = cfg->speed_drive;
     m->nx = m->dynamic ? PRSM_NX_MAX : PRSM_NX;
     m->ie = m->dynamic ? 2 + NS : 2;
     m->mu = m->kinematic ? 0.0 : cfg->mu_screw_roller;

@@ -57,6 +57,7 @@ typedef struct {
     double mu_screw_roller, mu_spline, mu_nut_screw, slip_velocity_scale;
     int kinematic;             /* 1: kinematic level, 0: quasi-static or dynamic */
     int dynamic;               /* 1: dynamic level (carrier speeds are states) */
+    int speed_drive;           /* 1: inputs (screw acceleration [rad/s2], load [N]); dynamic only */
     double kinematic_efficiency;
     int closed_form;           /* 1: closed form with DP5(4) fallback; 0: DP5(4) only */
     double tolerance;
@@ -82,7 +83,7 @@ typedef struct {
     int n;
     prsm_stage st[PRSM_N_STAGES];
     prsm_flank fl[PRSM_N_STAGES][2];   /* both flanks of each stage ("+" first) */
-    int kinematic, dynamic;
+    int kinematic, dynamic, speed_drive;
     int nx, ie;                        /* states; index of input_work (after the carriers) */
     double mu, v_eps, c_out, last_mass, equivalent_inertia, loss_factor, band_speed;
     prsm_law law[2][2];
@@ -134,6 +135,10 @@ void prsm_initial_state(const prsm_model *m, double x[PRSM_NX_MAX], double screw
 int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_NX_MAX],
                  const double u[2], double h, double x_new[PRSM_NX_MAX], prsm_stats *stats,
                  char *msg, int msg_len);
+
+/* The state's time derivative at x with inputs u (Model.rhs). */
+void prsm_rhs(const prsm_model *m, const double x[PRSM_NX_MAX], const double u[2],
+              double dx[PRSM_NX_MAX]);
 
 /* Outputs at state x with inputs u held. */
 void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[2], prsm_outputs *y);

@@ -1,0 +1,110 @@
+/* A flat C interface to the model and its steppers, for Python's ctypes
+ * (fmu_build/native_stepper.py): only doubles, ints and char buffers cross it, so no struct
+ * layout has to be mirrored on the other side.  Not part of the FMU.
+ */
+#include <stdlib.h>
+#include <string.h>
+
+#include "prsm_model.h"
+
+typedef struct {
+    prsm_model model;
+    prsm_memory memory;
+} prsm_handle;
+
+/* Number of doubles and ints prsm_api_new reads. */
+int prsm_api_n_reals(void) { return 9 * PRSM_N_STAGES + 6; }
+int prsm_api_n_ints(void) { return 2 * PRSM_N_STAGES + 4; }
+
+/* A model with its stepper from
+ *   reals: per stage screw_mass, nut_mass, roller_mass, carrier_mass [kg], screw_inertia,
+ *          roller_inertia, carrier_inertia [kg m2], spline_radius, bearing_radius [m]; then
+ *          mu_screw_roller, mu_spline, mu_nut_screw [-], slip_velocity_scale [m/s],
+ *          tolerance [-], kinematic_efficiency [-];
+ *   ints:  per stage n_rollers, carriers; then the level (0 kinematic, 1 quasi-static,
+ *          2 dynamic), the drive (0 torque, 1 speed), substeps (0: adaptive), max_substeps.
+ * Returns NULL with the reason in msg when a value is out of range. */
+void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
+    prsm_config cfg;
+    memset(&cfg, 0, sizeof cfg);
+    for (int k = 0; k < PRSM_N_STAGES; k++) {
+        const double *r = reals + 9 * k;
+        prsm_stage_values *v = &cfg.stage[k];
+        v->screw_mass = r[0]; v->nut_mass = r[1]; v->roller_mass = r[2]; v->carrier_mass = r[3];
+        v->screw_inertia = r[4]; v->roller_inertia = r[5]; v->carrier_inertia = r[6];
+        v->spline_radius = r[7]; v->bearing_radius = r[8];
+        v->n_rollers = ints[2 * k];
+        v->carriers = ints[2 * k + 1];
+    }
+    const double *r = reals + 9 * PRSM_N_STAGES;
+    const int *i = ints + 2 * PRSM_N_STAGES;
+    cfg.mu_screw_roller = r[0]; cfg.mu_spline = r[1]; cfg.mu_nut_screw = r[2];
+    cfg.slip_velocity_scale = r[3]; cfg.tolerance = r[4]; cfg.kinematic_efficiency = r[5];
+    if (i[0] < 0 || i[0] > 2 || i[1] < 0 || i[1] > 1) {
+        strncpy(msg, "level must be 0, 1 or 2 and drive 0 or 1", (size_t)len - 1);
+        msg[len - 1] = 0;
+        return NULL;
+    }
+    cfg.kinematic = i[0] == 0;
+    cfg.dynamic = i[0] == 2;
+    cfg.speed_drive = i[1];
+    cfg.closed_form = 1;
+    cfg.substeps = i[2];
+    cfg.max_substeps = i[3];
+    prsm_handle *h = (prsm_handle *)calloc(1, sizeof *h);
+    if (!h) {
+        strncpy(msg, "out of memory", (size_t)len - 1);
+        msg[len - 1] = 0;
+        return NULL;
+    }
+    if (prsm_model_init(&h->model, &cfg, msg, len)) {
+        free(h);
+        return NULL;
+    }
+    return h;
+}
+
+/* The adaptive steppers' relative [-] and absolute [state units] tolerances, instead of the
+ * FMU's (tolerance and 1e-2 tolerance). */
+void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
+    prsm_handle *h = (prsm_handle *)handle;
+    h->model.rtol = h->model.ros.rtol = rtol;
+    h->model.atol = h->model.ros.atol = atol;
+}
+
+int prsm_api_n_states(void *handle) { return ((prsm_handle *)handle)->model.nx; }
+
+/* prsm_advance; stats receives (rhs calls, accepted substeps, rejected substeps). */
+int prsm_api_advance(void *handle, double t, const double *x, const double *u, double step,
+                     double *x_new, int *stats, char *msg, int len) {
+    prsm_handle *h = (prsm_handle *)handle;
+    double xi[PRSM_NX_MAX] = {0.0}, xo[PRSM_NX_MAX] = {0.0};
+    memcpy(xi, x, sizeof(double) * (size_t)h->model.nx);
+    prsm_stats st;
+    int rc = prsm_advance(&h->model, &h->memory, t, xi, u, step, xo, &st, msg, len);
+    stats[0] = st.rhs_calls;
+    stats[1] = st.substeps;
+    stats[2] = st.rejected;
+    if (rc == 0) memcpy(x_new, xo, sizeof(double) * (size_t)h->model.nx);
+    return rc;
+}
+
+/* The model's right-hand side at x with inputs u (Model.rhs). */
+void prsm_api_rhs(void *handle, const double *x, const double *u, double *dx) {
+    prsm_handle *h = (prsm_handle *)handle;
+    double xi[PRSM_NX_MAX] = {0.0}, d[PRSM_NX_MAX];
+    memcpy(xi, x, sizeof(double) * (size_t)h->model.nx);
+    prsm_rhs(&h->model, xi, u, d);
+    memcpy(dx, d, sizeof(double) * (size_t)h->model.nx);
+}
+
+/* The stepper's memory as bytes (what decides the next advance besides its arguments). */
+int prsm_api_memory_size(void) { return (int)sizeof(prsm_memory); }
+void prsm_api_get_memory(void *handle, unsigned char *out) {
+    memcpy(out, &((prsm_handle *)handle)->memory, sizeof(prsm_memory));
+}
+void prsm_api_set_memory(void *handle, const unsigned char *in) {
+    memcpy(&((prsm_handle *)handle)->memory, in, sizeof(prsm_memory));
+}
+
+void prsm_api_free(void *handle) { free(handle); }

@@ -1,0 +1,198 @@
+"""The native FMU's C model and steppers in-process: a stepper for :mod:`prsm_fmu` models.
+
+:class:`NativeStepper` advances a :class:`prsm_fmu.models.base.Model` (its state, inputs and
+communication steps) with the C code of the native FMU (``fmu_build/native``): the same
+mechanics and, at the dynamic level, the same ROS34PW2 with the FMU's tuned options, translated
+operation for operation, so that its states equal those of :func:`prsm_fmu.steppers.make_stepper`
+``("rosenbrock", model, **tuned_stepper_options("rosenbrock", rtol, atol))`` bit for bit
+(tests/test_native_stepper.py).  It is what the dynamic level costs without Python: the
+work-precision study times the seed 000 start-up with it.
+
+The C is compiled with gcc, with the geometry of the model's preset built in
+(:func:`fmu_build.native.constants_header`), into a shared library cached by the hash of its
+sources in the system's temporary directory; it exchanges only doubles and ints with Python
+(``prsm_api.c``, through ctypes).  What the C does not model (viscous and differential-sliding
+friction, the kinematic level's extra loss with the speed drive) is refused on construction.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
+
+from . import native
+from .builder import BuildError
+
+__all__ = ["NativeStepper", "native_library"]
+
+#: the library's sources: the model, its steppers and the flat interface
+LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_api.c")
+_STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
+                "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
+_LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
+_MSG = 600
+_loaded: dict[str, ctypes.CDLL] = {}
+
+
+def native_library(params) -> ctypes.CDLL:
+    """The C model of ``params``' geometry as a loaded shared library (built on first use).
+
+    Raises
+    ------
+    BuildError
+        When gcc is missing or fails.
+    """
+    constants = native.constants_header(params)
+    sources = {f: (native.SOURCE_DIR / f).read_bytes() for f in LIB_SOURCES + native.HEADERS}
+    digest = hashlib.sha256(constants.encode() + b"".join(
+        name.encode() + data for name, data in sorted(sources.items()))).hexdigest()[:20]
+    if digest in _loaded:
+        return _loaded[digest]
+    cache = Path(tempfile.gettempdir()) / "prsm-fmu-native"
+    lib = cache / f"prsm_{digest}.so"
+    if not lib.exists():
+        cache.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix="prsm_lib_", dir=cache) as tmp:
+            src = Path(tmp)
+            for name, data in sources.items():
+                (src / name).write_bytes(data)
+            (src / "prsm_constants.h").write_text(constants, encoding="utf-8")
+            out = src / lib.name
+            native.compile_library(src, out, LIB_SOURCES)
+            os.replace(out, lib)              # atomic: a concurrent build finds it whole
+    dll = ctypes.CDLL(str(lib))
+    dbl, i32, vp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
+    dll.prsm_api_new.restype = vp
+    dll.prsm_api_new.argtypes = [dbl, i32, ctypes.c_char_p, ctypes.c_int]
+    dll.prsm_api_set_tolerances.argtypes = [vp, ctypes.c_double, ctypes.c_double]
+    dll.prsm_api_n_states.argtypes = [vp]
+    dll.prsm_api_advance.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double, dbl, i32,
+                                     ctypes.c_char_p, ctypes.c_int]
+    dll.prsm_api_rhs.argtypes = [vp, dbl, dbl, dbl]
+    dll.prsm_api_get_memory.argtypes = [vp, ctypes.c_char_p]
+    dll.prsm_api_set_memory.argtypes = [vp, ctypes.c_char_p]
+    dll.prsm_api_free.argtypes = [vp]
+    _loaded[digest] = dll
+    return dll
+
+
+class NativeStepper(Stepper):
+    """ROS34PW2 (dynamic level) or the closed form with its Dormand-Prince fallback (slaved
+    levels, torque drive) in C, for a :mod:`prsm_fmu` model of the mechanism.
+
+    Parameters
+    ----------
+    model : prsm_fmu.models.base.Model
+        A kinematic, quasi-static or dynamic model (torque drive; speed drive at the dynamic
+        level); its parameters, level and drive select the C model.
+    rtol, atol : float
+        Relative [-] and absolute [state units] tolerances of the adaptive steps (the Python
+        steppers' meaning).
+    max_substeps : int
+        Internal steps (accepted and rejected) allowed per advance.
+    fixed_substeps : int or None
+        Equal internal steps per advance (ROS34PW2 without error control) instead of adaptive
+        ones.
+
+    Raises
+    ------
+    ValueError
+        Naming what the C does not model, or a value out of range (the C's own checks).
+    """
+
+    name = "native"
+
+    def __init__(self, model: Any, rtol: float = 1e-6, atol: float = 1e-8,
+                 max_substeps: int = 100000, fixed_substeps: int | None = None) -> None:
+        super().__init__(model)
+        params = model.params
+        level = getattr(model, "fidelity", "")
+        if level not in _LEVELS:
+            raise ValueError(f"fidelity = {level!r} is not allowed for the native stepper: must "
+                             f"be one of {', '.join(_LEVELS)}")
+        for name in ("mu_viscous", "mu_differential"):
+            if getattr(params, name):
+                raise ValueError(f"{name} = {getattr(params, name)!r} is not modelled in C: it "
+                                 "must be 0 for the native stepper")
+        for name, value in (("rtol", rtol), ("atol", atol)):
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
+        kinematic_efficiency = getattr(model, "efficiency", 1.0)
+        reals = [float(getattr(st, f)) for st in params.stages for f in _STAGE_REALS]
+        reals += [params.mu_screw_roller, params.mu_spline, params.mu_nut_screw,
+                  params.slip_velocity_scale, min(rtol, 0.5), kinematic_efficiency]
+        ints = [int(v) for st in params.stages for v in (st.n_rollers, st.carriers)]
+        ints += [_LEVELS[level], 1 if model.drive == "speed" else 0, fixed_substeps or 0,
+                 max_substeps]
+        self._lib = lib = native_library(params)
+        msg = ctypes.create_string_buffer(_MSG)
+        handle = lib.prsm_api_new((ctypes.c_double * len(reals))(*reals),
+                                  (ctypes.c_int * len(ints))(*ints), msg, _MSG)
+        if not handle:
+            raise ValueError(msg.value.decode())
+        self._handle = ctypes.c_void_p(handle)
+        lib.prsm_api_set_tolerances(self._handle, rtol, atol)
+        n = lib.prsm_api_n_states(self._handle)
+        if n != self.n_states:
+            raise ValueError(f"the C model has {n} states, the model {self.n_states}")
+        self._x = (ctypes.c_double * n)()
+        self._x_new = (ctypes.c_double * n)()
+        self._u = (ctypes.c_double * 2)()
+        self._stats = (ctypes.c_int * 3)()
+        self._msg = msg
+        self._memory_size = lib.prsm_api_memory_size()
+
+    def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
+        if not (0.0 < h < math.inf):
+            raise ValueError(f"h = {h!r} is out of range: must be a finite number > 0 [s]")
+        if len(x) != self.n_states:
+            raise ValueError(f"len(x) = {len(x)} does not match model.n_states = {self.n_states}")
+        self._x[:] = x
+        self._u[0], self._u[1] = u[0], u[1]
+        rc = self._lib.prsm_api_advance(self._handle, t, self._x, self._u, h, self._x_new,
+                                        self._stats, self._msg, _MSG)
+        if rc:
+            raise StepFailure(self._msg.value.decode())
+        stats = StepStats()
+        stats.rhs_calls, stats.substeps, stats.rejected = self._stats
+        return self._x_new[:], stats
+
+    def rhs(self, x: list[float], u: tuple) -> list[float]:
+        """The C model's right-hand side at ``x`` with inputs ``u`` (the model's ``rhs``)."""
+        dx = (ctypes.c_double * self.n_states)()
+        self._x[:] = x
+        self._u[0], self._u[1] = u[0], u[1]
+        self._lib.prsm_api_rhs(self._handle, self._x, self._u, dx)
+        return dx[:]
+
+    def get_memory(self) -> tuple:
+        """``(bytes,)``: the C stepper's memory (step proposal, continuation, last stage)."""
+        buf = ctypes.create_string_buffer(self._memory_size)
+        self._lib.prsm_api_get_memory(self._handle, buf)
+        return (buf.raw,)
+
+    def set_memory(self, m: tuple) -> None:
+        """Restore a memory from :meth:`get_memory` of a native stepper of the same build."""
+        m = tuple(m)
+        if len(m) != 1 or not isinstance(m[0], bytes) or len(m[0]) != self._memory_size:
+            raise ValueError(f"{self.name}: memory must be (bytes of length "
+                             f"{self._memory_size},) from get_memory")
+        self._lib.prsm_api_set_memory(self._handle, m[0])
+
+    def reset(self) -> None:
+        """Forget the memory."""
+        self.set_memory((bytes(self._memory_size),))
+
+    def __del__(self) -> None:
+        handle = getattr(self, "_handle", None)
+        if handle:
+            self._lib.prsm_api_free(handle)
+            self._handle = None
+

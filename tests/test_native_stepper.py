@@ -1,0 +1,92 @@
+"""The native FMU's C model and ROS34PW2 in-process (fmu_build.native_stepper) against the
+Python model and stepper they translate: equal states, rhs calls and right-hand sides."""
+
+from __future__ import annotations
+
+import random
+import shutil
+
+import pytest
+
+from prsm_fmu import presets
+from prsm_fmu.models import make_model
+from prsm_fmu.simulate import tuned_stepper_options
+from prsm_fmu.steppers import StepFailure, make_stepper
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
+
+
+def _native(model, **kw):
+    from fmu_build.native_stepper import NativeStepper
+
+    return NativeStepper(model, **kw)
+
+
+@pytest.mark.parametrize("drive,u", [("speed", (0.0, 5000.0)), ("torque", (19.75, 5000.0))])
+def test_start_up_equals_the_python_rosenbrock_bit_for_bit(drive, u):
+    """Seed 000's start-up (100 rad/s, carriers at rest, 5 kN; speed drive: the speed held,
+    torque drive: 19.75 N.m) over 1 ms in steps of 10 us: the carriers' transient is stiff
+    (time constants of ~0.01-0.5 ms), so every part of the stepper runs (first-step bound,
+    Jacobian reuse and refresh, continuation)."""
+    params = presets.load("seed000_two_stage")
+    model = make_model(params, "dynamic", drive)
+    x0 = model.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
+    py = make_stepper("rosenbrock", model, **tuned_stepper_options("rosenbrock", 1e-6, 1e-9))
+    nat = _native(model, rtol=1e-6, atol=1e-9)
+    xa = xb = x0
+    for i in range(100):
+        xa, sa = py.advance(i * 1e-5, xa, u, 1e-5)
+        xb, sb = nat.advance(i * 1e-5, xb, u, 1e-5)
+        assert xb == xa and (sb.rhs_calls, sb.substeps) == (sa.rhs_calls, sa.substeps), i
+    # the carriers spun up from rest towards the screw speed's ~0.37 (they moved)
+    assert 30.0 < xa[2] < 45.0 and 30.0 < xa[3] < 45.0
+
+
+@pytest.mark.parametrize("three,drive", [(False, "speed"), (False, "torque"), (True, "torque")])
+def test_rhs_equals_the_python_model_at_random_states(three, drive):
+    from fmu_build.mechanisms import three_stage
+
+    params = three_stage() if three else presets.load("seed000_two_stage")
+    model = make_model(params, "dynamic", drive)
+    nat = _native(model)
+    rng = random.Random(25)
+    n = params.n_stages
+    for _ in range(500):
+        x = ([rng.uniform(-10.0, 10.0), rng.uniform(-200.0, 200.0)]
+             + [rng.uniform(-100.0, 100.0) for _ in range(n)] + [0.0, 0.0, 0.0])
+        first = rng.uniform(-3e4, 3e4) if drive == "speed" else rng.uniform(-40.0, 40.0)
+        u = (first, rng.uniform(-8000.0, 8000.0))
+        assert nat.rhs(x, u) == model.rhs(0.0, x, u), (x, u)
+
+
+def test_memory_round_trip_repeats_the_next_advance():
+    model = make_model(presets.load("seed000_two_stage"), "dynamic", "speed")
+    u = (0.0, 5000.0)
+    nat = _native(model)
+    x = model.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
+    for i in range(5):
+        x, _ = nat.advance(i * 1e-5, x, u, 1e-5)
+    memory = nat.get_memory()
+    a, sa = nat.advance(5e-5, x, u, 1e-5)
+    nat.set_memory(memory)
+    b, sb = nat.advance(5e-5, x, u, 1e-5)
+    assert a == b and sa.rhs_calls == sb.rhs_calls
+    with pytest.raises(ValueError, match="memory"):
+        nat.set_memory((b"short",))
+
+
+def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
+    params = presets.load("seed000_two_stage")
+    with pytest.raises(ValueError, match="drive = 'speed'"):
+        _native(make_model(params, "quasi-static", "speed"))
+    with pytest.raises(ValueError, match="rtol"):
+        _native(make_model(params, "dynamic", "torque"), rtol=0.0)
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match="mu_viscous"):
+        _native(make_model(replace(params, mu_viscous=0.01), "dynamic", "torque"))
+    model = make_model(params, "dynamic", "speed")
+    nat = _native(model, max_substeps=1)
+    x = model.initial_state((0.0, 5000.0), screw_speed=100.0, carrier_ratio=0.0)
+    with pytest.raises(StepFailure, match="max_substeps"):
+        nat.advance(0.0, x, (0.0, 5000.0), 1e-3)
