@@ -39,6 +39,7 @@ import argparse
 import csv
 import importlib.util
 import math
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -81,6 +82,12 @@ REFERENCE_RTOL, CHECK_RTOL = 1e-12, 1e-11
 AUTO_FIXED_STEP_TOLERANCE = 1e-6
 #: errors below this are plotted at it (round-off; a log axis has no zero)
 ERROR_FLOOR = 1e-16
+#: the dynamic level's ROS34PW2 in C (fmu_build.native_stepper, the native FMU's code): the
+#: configuration's outputs, errors and rhs calls are simulate's with the Python ROS34PW2 at the
+#: same options, its cost the timed replay with the C stepper (one call into C for the run's
+#: communication steps, NativeStepper.advance_many), whose final outputs must equal
+#: simulate's bit for bit (checked, as for every configuration)
+NATIVE = "rosenbrock_native"
 
 
 # ---- configurations --------------------------------------------------------------------------
@@ -99,8 +106,9 @@ class Config:
         ``rk4`` (explicit fixed), ``explicit_adaptive`` (Dormand–Prince 5(4)), ``exponential``
         (dynamic level: exponential Rosenbrock exprb32), ``rosenbrock``
         (implicit, ROS34PW2), ``closed_form`` (slaved levels), ``default`` (``auto`` only: its
-        own choice of DP5(4) or ROS34PW2 per step, the FMU's default) or ``radau``
-        (``solve_ivp`` restarted on each communication step: the baseline and the reference).
+        own choice of DP5(4) or ROS34PW2 per step, the FMU's default), ``radau``
+        (``solve_ivp`` restarted on each communication step: the baseline and the reference)
+        or :data:`NATIVE` (ROS34PW2 in C, the speed drive's start-up scenes).
     knob : str
         ``substeps`` (internal steps per communication step), ``rtol`` or ``""`` (none).
     value : float
@@ -188,6 +196,18 @@ def standard_grid(fidelities=FIDELITIES, substeps=(1, 2, 4, 8, 16, 32),
     return tuple(grid)
 
 
+def native_grid(rtols=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)) -> tuple[Config, ...]:
+    """The dynamic level's ROS34PW2 in C (:data:`NATIVE`) × rtol; none without gcc."""
+    if shutil.which("gcc") is None:
+        return ()
+    return tuple(Config("dynamic", NATIVE, "rtol", r) for r in rtols)
+
+
+def python_points(points: list) -> list:
+    """The points of the Python steppers (all but :data:`NATIVE`)."""
+    return [p for p in points if p.config.stepper != NATIVE]
+
+
 # ---- scenes ----------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -216,7 +236,8 @@ class Scene:
     reference_fidelity : str
         The level of the reference (the most detailed one).
     speedup_to_beat : float or None
-        The number issue 5 asks for at the target (printed beside the measured one).
+        The speed-up over restarted Radau asked for at the target (printed beside the
+        measured one).
     auto : callable or None
         ``auto(tolerance) -> AutoChoice``: what ``fidelity = "auto"`` picks for this scene
         (prsm_fmu.models.auto); the printout checks its estimate against the measured errors.
@@ -281,8 +302,10 @@ def make_simulate_runner(params, drive: str, t_end: float, comm_step: float, inp
         speed0 = float(initial.get("initial_screw_speed", 0.0))
 
     def run(cfg: Config, time_it: bool = True) -> RunResult:
+        native = cfg.stepper == NATIVE
+        stepper = "rosenbrock" if native else cfg.stepper
         res = simulate(params, cfg.fidelity, drive, t_end=t_end, output_interval=comm_step,
-                       stepper=cfg.stepper, rtol=cfg.rtol, atol=cfg.atol,
+                       stepper=stepper, rtol=cfg.rtol, atol=cfg.atol,
                        stepper_options=cfg.stepper_options, **inputs, **initial)
         outputs = {k: v for k, v in res.items() if isinstance(v, np.ndarray)}
         if not time_it:
@@ -291,14 +314,25 @@ def make_simulate_runner(params, drive: str, t_end: float, comm_step: float, inp
             tolerance=cfg.rtol, inputs=u, comm_step=comm_step, screw_speed=speed0,
             carrier_ratio=initial.get("initial_carrier_ratio", 0.0))
         model = make_model(params, cfg.fidelity, drive, **auto)
-        opts = tuned_stepper_options(cfg.stepper, cfg.rtol, cfg.atol)
+        opts = tuned_stepper_options(stepper, cfg.rtol, cfg.atol)
         opts.update(cfg.stepper_options)
+        if native:
+            from fmu_build.native_stepper import NativeStepper
+
+            def make():
+                return NativeStepper(model, rtol=opts["rtol"], atol=opts["atol"])
+        else:
+            def make():
+                return make_stepper(stepper, model, **opts)
         x0 = model.initial_state(u, screw_speed=speed0,
                                  carrier_ratio=initial.get("initial_carrier_ratio", 0.0))
         last = []
 
         def replay():
-            st = make_stepper(cfg.stepper, model, **opts)
+            st = make()
+            if native:            # one call into C for the run (the state after every step)
+                last[:] = [st.advance_many(0.0, x0, u, comm_step, n_steps)[0][-1]]
+                return
             x = x0
             for i in range(n_steps):
                 x, _ = st.advance(i * comm_step, x, u, comm_step)
@@ -327,9 +361,9 @@ STARTUP = Scene(
     run=make_simulate_runner(SEED000, "speed", 1e-3, 1e-5,
                              {"screw_speed": 100.0, "load_force": 5000.0},
                              {"initial_carrier_ratio": 0.0}),
-    grid=standard_grid(),
+    grid=standard_grid() + native_grid(),
     target_error=1e-6,
-    speedup_to_beat=20.0,
+    speedup_to_beat=100.0,
     auto=lambda tol: choose_for_start(SEED000, tol, "speed", (0.0, 5000.0), screw_speed=100.0,
                                       carrier_ratio=0.0, comm_step=1e-5),
 )
@@ -346,7 +380,7 @@ STARTUP_1US = Scene(
                              {"initial_carrier_ratio": 0.0}),
     grid=(standard_grid(("dynamic",), substeps=(1, 2), rtols=(1e-5, 1e-6, 1e-7),
                         radau_rtols=(1e-5, 1e-6, 1e-7), auto_rtols=(1e-6, 1e-7))
-          + (Config("quasi-static", "closed_form"),)),
+          + (Config("quasi-static", "closed_form"),) + native_grid((1e-5, 1e-6, 1e-7))),
     target_error=1e-6,
     speedup_to_beat=20.0,
 )
@@ -624,8 +658,9 @@ def summary(scene: Scene, result: dict) -> list[str]:
     lines = ["Pareto front (cheapest first):"]
     for p in sorted((p for p in pts if p.pareto), key=lambda p: p.cpu_per_s):
         lines.append(f"  {p.config.label:42s} error {p.error:9.2e}  CPU {p.cpu_per_s:9.3e} s/s")
-    best = cheapest(pts, scene.target_error)
+    best = cheapest(python_points(pts), scene.target_error)
     base = cheapest(pts, scene.target_error, "radau")
+    native = cheapest(pts, scene.target_error, NATIVE)
     conventional = next((p for p in pts if p.config.stepper == "radau" and p.config.value == 1e-6
                          and p.status == "ok"), None)
     if best is None:
@@ -642,6 +677,14 @@ def summary(scene: Scene, result: dict) -> list[str]:
     if conventional is not None:
         lines.append(f"  speed-up over Radau at rtol 1e-6 (error {conventional.error:.2e}): "
                      f"{conventional.cpu_per_s / best.cpu_per_s:.1f}x")
+    if native is not None:
+        lines.append(f"the same ROS34PW2 in C (the native FMU's code, fmu_build.native_stepper), "
+                     f"cheapest at error ≤ {scene.target_error:g}: {native.config.label} (error "
+                     f"{native.error:.2e}, {native.cpu_per_s:.3e} CPU s/s): "
+                     f"{best.cpu_per_s / native.cpu_per_s:.1f}x the Python steppers' cheapest"
+                     + (f"; speed-up over restarted Radau {base.cpu_per_s / native.cpu_per_s:.1f}x"
+                        if base is not None else "")
+                     + (f"  (to beat: ≥ {scene.speedup_to_beat:g}x)" if scene.speedup_to_beat else ""))
     lines += auto_summary(scene, result)
     return lines
 
@@ -685,7 +728,8 @@ def auto_summary(scene: Scene, result: dict) -> list[str]:
                      f"{implicit.cpu_per_s / mine.cpu_per_s:.1f}x"
                      + (f"  (to beat: ≥ {to_beat:g}x)" if to_beat else ""))
     if implicit is not None:
-        floor = min((p for p in pts if p.status == "ok"), key=lambda p: p.cpu_per_s)
+        floor = min((p for p in python_points(pts) if p.status == "ok"),
+                    key=lambda p: p.cpu_per_s)
         lines.append(f"  bound: the cheapest configuration of the grid at any error "
                      f"({floor.config.label}, error {floor.error:.2e}) is "
                      f"{implicit.cpu_per_s / floor.cpu_per_s:.1f}x cheaper than that implicit "
@@ -722,7 +766,8 @@ STEPPER_STYLE = {"rk4": ("tab:blue", "explicit fixed (RK4 × substeps)"),
                  "exponential": ("tab:olive", "exponential Rosenbrock (exprb32, rtol)"),
                  "closed_form": ("tab:purple", "closed form (slaved levels)"),
                  "default": ("tab:brown", "auto's own choice per step (DP5(4) or ROS34PW2)"),
-                 "radau": ("tab:gray", "solve_ivp Radau restarted (baseline, rtol)")}
+                 "radau": ("tab:gray", "solve_ivp Radau restarted (baseline, rtol)"),
+                 NATIVE: ("tab:red", "ROS34PW2 in C (native FMU's code, rtol)")}
 FIDELITY_MARKER = {"dynamic": "o", "quasi-static": "s", "kinematic": "^", "auto": "D"}
 
 

@@ -38,7 +38,9 @@ _STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_
                 "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
 _LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
 _MSG = 600
+#: libraries loaded in this process, by source hash and by the parameters' repr
 _loaded: dict[str, ctypes.CDLL] = {}
+_by_params: dict[str, ctypes.CDLL] = {}
 
 
 def native_library(params) -> ctypes.CDLL:
@@ -49,11 +51,15 @@ def native_library(params) -> ctypes.CDLL:
     BuildError
         When gcc is missing or fails.
     """
+    key = repr(params)
+    if key in _by_params:
+        return _by_params[key]
     constants = native.constants_header(params)
     sources = {f: (native.SOURCE_DIR / f).read_bytes() for f in LIB_SOURCES + native.HEADERS}
     digest = hashlib.sha256(constants.encode() + b"".join(
         name.encode() + data for name, data in sorted(sources.items()))).hexdigest()[:20]
     if digest in _loaded:
+        _by_params[key] = _loaded[digest]
         return _loaded[digest]
     cache = Path(tempfile.gettempdir()) / "prsm-fmu-native"
     lib = cache / f"prsm_{digest}.so"
@@ -75,11 +81,13 @@ def native_library(params) -> ctypes.CDLL:
     dll.prsm_api_n_states.argtypes = [vp]
     dll.prsm_api_advance.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double, dbl, i32,
                                      ctypes.c_char_p, ctypes.c_int]
+    dll.prsm_api_advance_many.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double,
+                                          ctypes.c_int, dbl, i32, ctypes.c_char_p, ctypes.c_int]
     dll.prsm_api_rhs.argtypes = [vp, dbl, dbl, dbl]
     dll.prsm_api_get_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_set_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_free.argtypes = [vp]
-    _loaded[digest] = dll
+    _loaded[digest] = _by_params[key] = dll
     return dll
 
 
@@ -163,6 +171,29 @@ class NativeStepper(Stepper):
         stats = StepStats()
         stats.rhs_calls, stats.substeps, stats.rejected = self._stats
         return self._x_new[:], stats
+
+    def advance_many(self, t0: float, x: list[float], u: tuple, h: float,
+                     n_steps: int) -> tuple[list[list[float]], StepStats]:
+        """``n_steps`` advances of ``h`` [s] from ``t0`` [s] (the i-th from ``t0 + i h``) with
+        the inputs ``u`` held, in one call into C: the states after each advance, and the
+        work of all of them.  Equal to calling :meth:`advance` ``n_steps`` times."""
+        if not (0.0 < h < math.inf):
+            raise ValueError(f"h = {h!r} is out of range: must be a finite number > 0 [s]")
+        if len(x) != self.n_states or n_steps < 1:
+            raise ValueError(f"len(x) = {len(x)} must be model.n_states = {self.n_states} and "
+                             f"n_steps = {n_steps!r} >= 1")
+        n = self.n_states
+        out = (ctypes.c_double * (n * n_steps))()
+        self._x[:] = x
+        self._u[0], self._u[1] = u[0], u[1]
+        rc = self._lib.prsm_api_advance_many(self._handle, t0, self._x, self._u, h, n_steps, out,
+                                             self._stats, self._msg, _MSG)
+        if rc:
+            raise StepFailure(self._msg.value.decode())
+        stats = StepStats()
+        stats.rhs_calls, stats.substeps, stats.rejected = self._stats
+        flat = out[:]
+        return [flat[i * n:(i + 1) * n] for i in range(n_steps)], stats
 
     def rhs(self, x: list[float], u: tuple) -> list[float]:
         """The C model's right-hand side at ``x`` with inputs ``u`` (the model's ``rhs``)."""

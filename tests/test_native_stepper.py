@@ -90,3 +90,17 @@ def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
     x = model.initial_state((0.0, 5000.0), screw_speed=100.0, carrier_ratio=0.0)
     with pytest.raises(StepFailure, match="max_substeps"):
         nat.advance(0.0, x, (0.0, 5000.0), 1e-3)
+
+
+def test_advance_many_equals_single_advances():
+    model = make_model(presets.load("seed000_two_stage"), "dynamic", "speed")
+    u = (0.0, 5000.0)
+    x0 = model.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
+    one, many = _native(model), _native(model)
+    rows, stats = many.advance_many(0.0, x0, u, 1e-5, 30)
+    x, calls = x0, 0
+    for i in range(30):
+        x, s = one.advance(i * 1e-5, x, u, 1e-5)
+        calls += s.rhs_calls
+        assert rows[i] == x, i
+    assert stats.rhs_calls == calls

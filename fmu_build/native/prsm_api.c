@@ -89,6 +89,29 @@ int prsm_api_advance(void *handle, double t, const double *x, const double *u, d
     return rc;
 }
 
+/* n_steps advances of step [s] each from t0 (the i-th from t0 + i step) with the inputs u held
+ * throughout: the states after each in x_out (n_steps rows of n_states), stats summed.  Returns
+ * 0, or -1 with the reason in msg (the rows before the failing step are filled). */
+int prsm_api_advance_many(void *handle, double t0, const double *x, const double *u, double step,
+                          int n_steps, double *x_out, int *stats, char *msg, int len) {
+    prsm_handle *h = (prsm_handle *)handle;
+    int nx = h->model.nx;
+    double xi[PRSM_NX_MAX] = {0.0}, xo[PRSM_NX_MAX] = {0.0};
+    memcpy(xi, x, sizeof(double) * (size_t)nx);
+    stats[0] = stats[1] = stats[2] = 0;
+    for (int i = 0; i < n_steps; i++) {
+        prsm_stats st;
+        int rc = prsm_advance(&h->model, &h->memory, t0 + i * step, xi, u, step, xo, &st, msg, len);
+        stats[0] += st.rhs_calls;
+        stats[1] += st.substeps;
+        stats[2] += st.rejected;
+        if (rc) return rc;
+        memcpy(x_out + (size_t)i * (size_t)nx, xo, sizeof(double) * (size_t)nx);
+        memcpy(xi, xo, sizeof xi);
+    }
+    return 0;
+}
+
 /* The model's right-hand side at x with inputs u (Model.rhs). */
 void prsm_api_rhs(void *handle, const double *x, const double *u, double *dx) {
     prsm_handle *h = (prsm_handle *)handle;
