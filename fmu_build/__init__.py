@@ -25,8 +25,8 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
     (``start``: parameter start values other than the preset's, see ``builder.start_values``;
     Python FMU only).
 
-    ``native``: the native C FMU ``<name>-native.fmu`` (kinematic and quasi-static levels,
-    :mod:`fmu_build.native`) instead of the Python one.
+    ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
+    levels, :mod:`fmu_build.native`) instead of the Python one.
 
     Returns
     -------

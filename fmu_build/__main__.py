@@ -5,8 +5,8 @@
     prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native] [--dest DIR] [--no-validate]
     prsm-fmu-build --preset NAME --name ID [--native] [--dest DIR]
 
-``--native`` builds ``<name>-native.fmu`` instead: the kinematic and quasi-static levels in C,
-no Python needed to run it (:mod:`fmu_build.native`; needs gcc).
+``--native`` builds ``<name>-native.fmu`` instead: the kinematic, quasi-static and dynamic
+levels in C, no Python needed to run it (:mod:`fmu_build.native`; needs gcc).
 
 A bad argument is answered with one line naming it and its allowed values, exit status 2,
 before anything is built (:mod:`prsm_fmu.arguments`); a failed build exits with 1.
@@ -25,8 +25,8 @@ DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, py
                "an FMU from any preset of prsm_fmu.presets with --preset NAME --name ID (ID "
                "is the FMI modelIdentifier, e.g. PRSM2_seed002). Each FMU is checked with "
                "fmpy validate and the project's modelDescription rules unless --no-validate. "
-               "With --native: the native C FMU <name>-native.fmu (kinematic and quasi-static "
-               "levels, needs gcc; runs without Python). "
+               "With --native: the native C FMU <name>-native.fmu (kinematic, quasi-static and "
+               "dynamic levels, needs gcc; runs without Python). "
                "Also runs as 'python -m fmu_build'.")
 
 
@@ -44,8 +44,8 @@ def build_parser() -> ArgumentParser:
                     help="a parameter start value other than the preset's, e.g. "
                          "fidelity=dynamic (for hosts that cannot set it); repeatable")
     ap.add_argument("--native", action="store_true",
-                    help="build the native C FMU <name>-native.fmu (kinematic and quasi-static "
-                         "levels; needs gcc) instead of the Python one")
+                    help="build the native C FMU <name>-native.fmu (kinematic, quasi-static and "
+                         "dynamic levels; needs gcc) instead of the Python one")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
     return ap

@@ -1,10 +1,11 @@
-"""Build the native FMU ``<name>-native.fmu``: the kinematic, quasi-static and dynamic levels in C.
+"""Build the native FMU ``<name>-native.fmu``: the kinematic, quasi-static and dynamic levels
+in C.
 
 No Python in the FMU: the physics of :mod:`prsm_fmu.mechanics`, :mod:`prsm_fmu.models.slaved`,
 the Dormand-Prince 5(4) fallback and the dynamic level's ROS34PW2 of :mod:`prsm_fmu.steppers`
-translated into C
-(``fmu_build/native/*.c``), operation for operation, so that the outputs equal the Python
-FMU's to round-off (tests/test_native_fmu.py: 1e-12).
+translated into C (``fmu_build/native/*.c``), operation for operation, so that the outputs equal
+the Python FMU's to round-off (tests/test_native_fmu.py: 1e-12; bit for bit at the dynamic
+level).
 
 What this module does:
 
@@ -17,8 +18,9 @@ What this module does:
    initialization with a logged fmi2Error rather than being silently ignored);
 2. computes the geometry-derived constants with the Python package (contact points, normals,
    slip Jacobians of both flanks, c_k, the carrier ratios ζ) and writes them, with the
-   Dormand-Prince and ROS34PW2 tableaux of :mod:`prsm_fmu.steppers.tableaux`, into ``prsm_constants.h`` as
-   exact (hexadecimal) double literals, and the variable table into ``prsm_variables.h``;
+   Dormand-Prince and ROS34PW2 tableaux of :mod:`prsm_fmu.steppers.tableaux`, into
+   ``prsm_constants.h`` as exact (hexadecimal) double literals, and the variable table into
+   ``prsm_variables.h``;
 3. marks the parameters the constants are computed from as structural: causality ``local``,
    variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
    ``parameter``, variability ``fixed`` (settable before ``exitInitializationMode``);

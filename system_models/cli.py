@@ -55,8 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output directory (default: out)")
     r.add_argument("--prsm", choices=["fmu", "native", "python"], default="fmu",
                    help="the PRSM as the FMU stepped by fmpy (default), as the native C FMU "
-                        "(kinematic and quasi-static levels; needs gcc to build) or as the plain "
-                        "Python model")
+                        "(kinematic, quasi-static and dynamic levels; needs gcc to build) or as "
+                        "the plain Python model")
     r.add_argument("--fmu", type=existing_file,
                    help="the FMU file (default: dist/<mechanism>.fmu, or "
                         "dist/<mechanism>-native.fmu with --prsm native, built if missing)")

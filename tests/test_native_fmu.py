@@ -392,11 +392,11 @@ def test_c_host_runs_the_native_fmu_without_python_equal_to_python_fmu(native, c
 
 # ---- the regression suite and the actuator loop ---------------------------------------------------
 
-def test_regression_case_at_quasi_static_passes_with_the_native_fmu(native):
+@pytest.mark.parametrize("case", ["startup_seed000_quasi-static", "startup_seed000_dynamic"])
+def test_regression_case_passes_with_the_native_fmu(native, case):
     from prsm_fmu.regress import core
 
-    (result,) = core.check(built_native()["PRSM2"], core.DEFAULT_DIR,
-                           cases=["startup_seed000_quasi-static"])
+    (result,) = core.check(built_native()["PRSM2"], core.DEFAULT_DIR, cases=[case])
     assert result.passed, result.error or [r for r in result.results if not r.passed]
     assert len(result.results) >= 10          # every stored output was compared
 
