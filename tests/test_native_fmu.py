@@ -90,6 +90,19 @@ def all_outputs(host: Host) -> list[str]:
     return [v.name for v in host.md.modelVariables if v.causality == "output"]
 
 
+def both_loops(name: str, py_start: dict, native_start: dict, load: float, n: int = 400):
+    """:func:`loop` through the Python and the native FMU ``name``: (Python rows, native rows,
+    output names)."""
+    runs = []
+    for host in (Host(name, start=py_start), native_host(name, start=native_start)):
+        try:
+            names = all_outputs(host)
+            runs.append(loop(host, n, load, names)[0])
+        finally:
+            host.free()
+    return runs[0], runs[1], names
+
+
 # ---- the modelDescription -----------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", NATIVE)
@@ -130,14 +143,7 @@ def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, 
     start = {"fidelity": fidelity}
     if fidelity == "kinematic":
         start["kinematic_efficiency"] = 0.85
-    runs = []
-    for host in (Host("PRSM2", start={**start, **PY_SAME_METHOD}), native_host(start=start)):
-        try:
-            names = all_outputs(host)
-            runs.append(loop(host, 400, load, names)[0])
-        finally:
-            host.free()
-    py, nat = runs
+    py, nat, names = both_loops("PRSM2", {**start, **PY_SAME_METHOD}, start, load)
     assert max_relative_difference(nat, py) <= 1e-12
     i_speed, i_calls = names.index("screw_speed"), names.index("step_rhs_calls")
     speeds = [r[i_speed] for r in py]
@@ -157,14 +163,7 @@ def test_dynamic_level_equals_python_fmu_step_for_step(native, name, load, start
     friction band) and holds it; adaptive (continuation, Jacobian reuse, rejections) and fixed
     substeps."""
     start = {"fidelity": "dynamic", **start}
-    runs = []
-    for host in (Host(name, start=start), native_host(name, start=start)):
-        try:
-            names = all_outputs(host)
-            runs.append(loop(host, 400, load, names)[0])
-        finally:
-            host.free()
-    py, nat = runs
+    py, nat, names = both_loops(name, start, start, load)
     assert max_relative_difference(nat, py) <= 1e-12
     i_speed, i_calls = names.index("screw_speed"), names.index("step_rhs_calls")
     i_carrier = names.index("stage[1].carrier_speed_ratio")
