@@ -202,6 +202,29 @@ def test_dynamic_level_with_inputs_changing_every_step_equals_python_fmu_bit_for
     assert nat == py
 
 
+@pytest.mark.parametrize("torque,load", [(1e9, 0.0), (40.0, -1e9)])
+def test_dynamic_level_refuses_the_steps_the_python_fmu_refuses_for_the_same_reason(native, torque,
+                                                                                   load):
+    """Inputs no rigid PRSM follows in a 1 ms step (1e9 N.m; 1e9 N pulling): both FMUs discard
+    the step, state unchanged, after the same step-size collapse (the same step size in the
+    message)."""
+    reasons = []
+    for host in (Host("PRSM2", start={"fidelity": "dynamic"}),
+                 native_host(start={"fidelity": "dynamic"})):
+        try:
+            vr = [host.vars["screw_torque"].valueReference, host.vars["load_force"].valueReference]
+            before = host.state_bytes()
+            host.fmu.setReal(vr, [torque, load])
+            assert host.step(0.0) == DISCARD
+            host.fmu.setReal(vr, [0.0, 0.0])
+            assert host.state_bytes() == before and host.get_real(["screw_speed"]) == [0.0]
+            reasons.append(host.messages[-1][1])
+        finally:
+            host.free()
+    py, nat = (r.split("step size ")[1].split(" s below")[0] for r in reasons)
+    assert "below h_min" in reasons[1] and nat == py
+
+
 def test_random_states_both_flanks_both_load_directions_equal_python_fmu(native):
     rnd = random.Random(16)
     flank_signs = set()
