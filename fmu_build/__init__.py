@@ -23,7 +23,7 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
                 native: bool = False):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
     (``start``: parameter start values other than the preset's, see ``builder.start_values``;
-    Python FMU only).
+    for the native FMU not the structural ones).
 
     ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
     levels, :mod:`fmu_build.native`) instead of the Python one.
@@ -39,8 +39,5 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
         raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
                          "(or use --preset)") from None
     if native:
-        if start:
-            raise ValueError("--start is for the Python FMU: the native FMU takes the preset's "
-                             "start values (set parameters at initialization instead)")
-        return build_native(name, make(), source, dest, check)
+        return build_native(name, make(), source, dest, check, start)
     return build_fmu(name, make(), source, dest, check, start)

@@ -19,6 +19,7 @@ import sys
 from prsm_fmu.arguments import ArgumentParser, one_line, writable_dir
 
 from . import FMUS, BuildError, build_fmu, build_named, build_native
+from .native import structural_start
 
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
                "DIR: PRSM2 by default, any of the standard FMUs by name or all with --all, or "
@@ -70,6 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print("prsm-fmu-build: error: argument --start: must be NAME=VALUE", file=sys.stderr)
         return 2
+    if args.native and structural_start(start):
+        print(f"prsm-fmu-build: error: argument {structural_start(start)}", file=sys.stderr)
+        return 2
     try:
         if args.preset:
             from prsm_fmu import presets
@@ -90,10 +94,7 @@ def main(argv: list[str] | None = None) -> int:
                          + ", ".join(n for n in presets.names()
                                      if isinstance(presets.load(n), MechanismParams)))
             if args.native:
-                if start:
-                    ap.error("argument --start: must not be given with --native (the native FMU "
-                             "takes its parameters at initialization)")
-                targets = [build_native(args.name, params, args.preset, args.dest, check)]
+                targets = [build_native(args.name, params, args.preset, args.dest, check, start)]
             else:
                 targets = [build_fmu(args.name, params, args.preset, args.dest, check, start)]
         else:
@@ -102,9 +103,6 @@ def main(argv: list[str] | None = None) -> int:
                 ap.error(f"argument FMU: invalid choice(s) {', '.join(map(repr, unknown))}: "
                          f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
-            if args.native and start:
-                ap.error("argument --start: must not be given with --native (the native FMU "
-                         "takes its parameters at initialization)")
             targets = [build_named(n, args.dest, check, start, native=args.native) for n in names]
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2

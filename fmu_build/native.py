@@ -52,7 +52,8 @@ from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _RO
 from . import model_description
 from .builder import BuildError, build_fmu, validate
 
-__all__ = ["build_native", "native_name", "NATIVE_LEVELS", "STRUCTURAL", "SOURCES", "COMPILE_FLAGS"]
+__all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
+           "SOURCES", "COMPILE_FLAGS"]
 
 #: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
@@ -107,6 +108,17 @@ _SCALE_OF_ABSENT_TERM = ("threads_per_roller",)
 _STAGE_NAME = re.compile(r"^stage\[(\d+)\]\.(\w+)$")
 _TYPE_CODE = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN",
               "String": "T_STRING", "Enumeration": "T_ENUM"}
+
+
+def structural_start(start: dict | None) -> str:
+    """Why ``start`` (parameter start values) cannot be built into a native FMU: it names a
+    structural parameter, whose value the contact geometry is built from; "" if it can."""
+    names = [k for k in (start or {}) if (m := _STAGE_NAME.match(k)) and m.group(2) in STRUCTURAL]
+    if not names:
+        return ""
+    return (f"--start {', '.join(names)}: not allowed with --native: must be a parameter that is "
+            f"not structural (the contact geometry is built in from {', '.join(STRUCTURAL)}); "
+            "build from a preset with that geometry, or the Python FMU")
 
 
 def native_name(name: str) -> str:
@@ -404,7 +416,7 @@ def compile_library(src: Path, out: Path, sources: tuple[str, ...] = SOURCES) ->
 
 
 def build_native(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",
-                 check: bool = True) -> Path:
+                 check: bool = True, start: dict | None = None) -> Path:
     """Build ``<dest>/<name>-native.fmu`` (module docstring).
 
     Parameters
@@ -419,19 +431,31 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         Output directory.
     check : bool
         Validate with fmpy and the project's modelDescription rules.
+    start : dict, optional
+        Parameter start values other than the preset's (``builder.start_values``: e.g.
+        ``fidelity = dynamic`` for hosts that cannot set an Enumeration); not the structural
+        ones, which the geometry is built from (use a preset with that geometry).
 
     Returns
     -------
     Path
         The FMU file.
+
+    Raises
+    ------
+    BuildError
+        For a structural parameter in ``start``, or what the C cannot build.
     """
     params = params.validate()
+    problem = structural_start(start)
+    if problem:
+        raise BuildError(problem)
     identifier = native_name(name)
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="prsm_native_") as tmp:
         tmp = Path(tmp)
-        py_fmu = build_fmu(name, params, preset, tmp / "python", check=False)
+        py_fmu = build_fmu(name, params, preset, tmp / "python", check=False, start=start)
         with zipfile.ZipFile(py_fmu) as z:
             md = z.read("modelDescription.xml")
         src = tmp / "sources"

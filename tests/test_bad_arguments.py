@@ -151,6 +151,9 @@ CASES: list[tuple[str, list[str], str]] = [
     ("prsm-fmu-build", ["--preset", "seed004_recirculating", "--name", "R", "--dest", OUT],
      "--preset"),
     ("prsm-fmu-build", ["--dest", FILE + "/sub"], "--dest"),
+    # the native FMU's geometry is built in: a structural start value is refused, named
+    ("prsm-fmu-build", ["--native", "--start", "stage[1].screw_lead=0.002", "--dest", OUT],
+     "stage[1].screw_lead"),
     # prsm-ema
     ("prsm-ema", [], "COMMAND"),
     ("prsm-ema", ["fly"], "COMMAND"),

@@ -119,16 +119,33 @@ def _libcosim_times(n: int) -> list[tuple[float, float]]:
     return [(t[k], t[k + 1] - t[k]) for k in range(n)]
 
 
-@pytest.mark.parametrize("name", NAMES + ("PRSM2 dynamic",))
-def test_libcosim_runs_the_fmus_bit_for_bit_as_fmpy(name, dynamic_prsm2):
+@pytest.fixture(scope="module")
+def dynamic_native(tmp_path_factory) -> Path:
+    """The native PRSM2 built with the start value fidelity = dynamic."""
+    import shutil
+
+    if shutil.which("gcc") is None or sys.platform != "linux":
+        pytest.skip("the native FMU is built here with gcc, for Linux")
+    dest = tmp_path_factory.mktemp("prsm2_native_dynamic")
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--native", "--dest",
+                           str(dest), "--start", "fidelity=dynamic"], env=subprocess_env(),
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return dest / "PRSM2-native.fmu"
+
+
+@pytest.mark.parametrize("name", NAMES + ("PRSM2 dynamic", "PRSM2 native dynamic"))
+def test_libcosim_runs_the_fmus_bit_for_bit_as_fmpy(name, request):
     pytest.importorskip("libcosimpy")
-    fmu = dynamic_prsm2 if name == "PRSM2 dynamic" else built_fmus()[name]
+    dynamic = name.endswith("dynamic")
+    fmu = (request.getfixturevalue("dynamic_native" if "native" in name else "dynamic_prsm2")
+           if dynamic else built_fmus()[name])
     status, data, err = child(LIBCOSIM.format(fmu=str(fmu), h_ns=H_NS, u=U, start={},
                                               steps=STEPS, outputs=OUTPUTS))
     assert status == 0 and data, err[-2000:]
     assert all(data["ok"]) and data["enumerations"] == []      # libcosim drops Enumerations
-    assert data["rows"] == fmpy_run(fmu, _libcosim_times(STEPS),
-                                    {"fidelity": 2} if name == "PRSM2 dynamic" else {})
+    # fmpy sets fidelity 2 (dynamic) as well: the same steps as the start value gave libcosim
+    assert data["rows"] == fmpy_run(fmu, _libcosim_times(STEPS), {"fidelity": 2} if dynamic else {})
     assert data["rows"][-1][0] > 0.0                                  # it moved
 
 
