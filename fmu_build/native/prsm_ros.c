@@ -107,18 +107,15 @@ static int lu_factor(const double jdd[ND][ND], int nd, double d, ros_lu *lu) {
     }
     /* lu_factor: rows of A = d I - J with their columns reversed; the current column is the
      * last entry of each active row ("pop") */
-    double tails[ND][ND];
-    int len = nd, rows[ND], n_active = nd, n_mult[ND];
-    double mults[ND][ND];
+    double tails[ND][ND], mults[ND][ND];
+    /* the active rows are tails[slot[0..n_active)] in list order, orig[] their rows of A */
+    int len = nd, n_active = nd, n_mult[ND], slot[ND], orig[ND];
     for (int i = 0; i < nd; i++) {
         for (int j = 0; j < nd; j++) tails[i][j] = -jdd[i][nd - 1 - j];
         tails[i][nd - 1 - i] += d;
-        rows[i] = i;
         n_mult[i] = 0;
+        slot[i] = orig[i] = i;
     }
-    /* active rows are tails[slot[0..n_active)] in list order; orig[] their rows of A */
-    int slot[ND], orig[ND];
-    for (int i = 0; i < nd; i++) { slot[i] = i; orig[i] = rows[i]; }
     for (int k = 0; k < nd; k++) {
         int p = 0;
         double amax = fabs(tails[slot[0]][len - 1]);
