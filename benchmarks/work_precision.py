@@ -16,6 +16,10 @@ run and compared with the scene's reference:
   stepper's advances, best of several repeats; outputs are evaluated outside the timing) and
   right-hand-side calls per simulated second.
 
+The start-up scenes also run the dynamic level's ROS34PW2 in C (:data:`NATIVE`: the native
+FMU's code in-process, the same steps as the Python ROS34PW2 bit for bit), printed apart from
+the Python steppers' cheapest configuration with its own speed-up over Radau.
+
 Each scene writes ``docs/figures/wp_<scene>.csv`` (one row per configuration, with the error of
 every output) and ``docs/figures/wp_<scene>.png`` (log–log error against cost, Pareto front
 marked), and prints the cheapest configuration at the scene's target error and its speed-up over
