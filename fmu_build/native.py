@@ -4,8 +4,7 @@ in C.
 No Python in the FMU: the physics of :mod:`prsm_fmu.mechanics`, :mod:`prsm_fmu.models.slaved`,
 the Dormand-Prince 5(4) fallback and the dynamic level's ROS34PW2 of :mod:`prsm_fmu.steppers`
 translated into C (``fmu_build/native/*.c``), operation for operation, so that the outputs equal
-the Python FMU's to round-off (tests/test_native_fmu.py: 1e-12; bit for bit at the dynamic
-level).
+the Python FMU's bit for bit (tests/test_native_fmu.py).
 
 What this module does:
 

@@ -2,7 +2,7 @@
  * mirrors).
  *
  * Every expression keeps the Python code's order of floating-point operations: the FMU's
- * outputs then equal the Python FMU's to round-off.  Compile without value-changing
+ * outputs then equal the Python FMU's bit for bit (same libm).  Compile without value-changing
  * optimisations (no -ffast-math) and without fused multiply-add contraction
  * (-ffp-contract=off where the target has FMA, e.g. arm64), or results differ in the last bits.
  */

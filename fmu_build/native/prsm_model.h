@@ -2,7 +2,7 @@
  * the speed drive): the model and its steppers.
  *
  * A translation of the Python package, operation for operation, so that the results are the
- * Python FMU's to round-off (tests/test_native_fmu.py checks 1e-12):
+ * Python FMU's bit for bit (tests/test_native_fmu.py):
  *   prsm_fmu/mechanics.py          the balances (sweep, sign iteration, bracketing, assembly)
  *   prsm_fmu/models/base.py,       right-hand side and outputs, kinematic efficiency loss
  *   prsm_fmu/models/kinematic.py
