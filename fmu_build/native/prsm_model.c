@@ -330,15 +330,12 @@ static void rhs_dynamic(const void *ctx, const double *x, const double *u, doubl
         dx[ie + 2] = NAN;
         return;
     }
-    double p_fric = 0.0;
+    /* Mechanism._rates: the carriers' generalized forces over their inertias, friction power */
     for (int k = 0; k < NS; k++) {
         const rec_stage *r = &rec.s[k];
-        double a = r->a0 + r->a1 * alpha;
-        dx[2 + k] = r->co[1] * a / m->st[k].j_carrier;
-        p_fric += r->co[2] * a;
-        if (r->e != 0.0) p_fric += (r->h0 + r->h1 * alpha) * omega * m->st[k].spline_f;
-        if (r->g != 0.0) p_fric += r->g * r->sb * (r->b0 + r->b1 * alpha) * omega;
+        dx[2 + k] = r->co[1] * (r->a0 + r->a1 * alpha) / m->st[k].j_carrier;
     }
+    double p_fric = rates_power(m, omega, alpha, &rec);
     dx[1] = alpha;
     dx[ie] = motor * omega;
     dx[ie + 1] = load * m->c_out * omega;
