@@ -10,14 +10,15 @@ work-precision study times the seed 000 start-up with it.
 
 The C is compiled with gcc, with the geometry of the model's preset built in
 (:func:`fmu_build.native.constants_header`), into a shared library cached by the hash of its
-sources in the system's temporary directory; it exchanges only doubles and ints with Python
-(``prsm_api.c``, through ctypes).  What the C does not model (viscous and differential-sliding
+sources in a directory of the user's own in the system's temporary directory; it exchanges only
+doubles and ints with Python (``prsm_api.c``, through ctypes).  What the C does not model (viscous and differential-sliding
 friction, the kinematic level's extra loss with the speed drive) is refused on construction.
 """
 
 from __future__ import annotations
 
 import ctypes
+import getpass
 import hashlib
 import math
 import os
@@ -61,10 +62,11 @@ def native_library(params) -> ctypes.CDLL:
     if digest in _loaded:
         _by_params[key] = _loaded[digest]
         return _loaded[digest]
-    cache = Path(tempfile.gettempdir()) / "prsm-fmu-native"
+    # a directory of this user's own (mode 0700): no other user can put a library there
+    cache = Path(tempfile.gettempdir()) / f"prsm-fmu-native-{getpass.getuser()}"
     lib = cache / f"prsm_{digest}.so"
     if not lib.exists():
-        cache.mkdir(parents=True, exist_ok=True)
+        cache.mkdir(mode=0o700, parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(prefix="prsm_lib_", dir=cache) as tmp:
             src = Path(tmp)
             for name, data in sources.items():
