@@ -11,8 +11,9 @@ work-precision study times the seed 000 start-up with it.
 The C is compiled with gcc, with the geometry of the model's preset built in
 (:func:`fmu_build.native.constants_header`), into a shared library cached by the hash of its
 sources in a directory of the user's own in the system's temporary directory; it exchanges only
-doubles and ints with Python (``prsm_api.c``, through ctypes).  What the C does not model (viscous and differential-sliding
-friction, the kinematic level's extra loss with the speed drive) is refused on construction.
+doubles and ints with Python (``prsm_api.c``, through ctypes).  What the C does not model
+(viscous and differential-sliding friction, the speed drive below the dynamic level) is refused
+on construction.
 """
 
 from __future__ import annotations
@@ -81,8 +82,6 @@ def native_library(params) -> ctypes.CDLL:
     dll.prsm_api_new.argtypes = [dbl, i32, ctypes.c_char_p, ctypes.c_int]
     dll.prsm_api_set_tolerances.argtypes = [vp, ctypes.c_double, ctypes.c_double]
     dll.prsm_api_n_states.argtypes = [vp]
-    dll.prsm_api_advance.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double, dbl, i32,
-                                     ctypes.c_char_p, ctypes.c_int]
     dll.prsm_api_advance_many.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double,
                                           ctypes.c_int, dbl, i32, ctypes.c_char_p, ctypes.c_int]
     dll.prsm_api_rhs.argtypes = [vp, dbl, dbl, dbl]
@@ -142,6 +141,9 @@ class NativeStepper(Stepper):
         ints += [_LEVELS[level], 1 if model.drive == "speed" else 0, fixed_substeps or 0,
                  max_substeps]
         self._lib = lib = native_library(params)
+        if (len(reals), len(ints)) != (lib.prsm_api_n_reals(), lib.prsm_api_n_ints()):
+            raise ValueError(f"the C model reads {lib.prsm_api_n_reals()} doubles and "
+                             f"{lib.prsm_api_n_ints()} ints, not {len(reals)} and {len(ints)}")
         msg = ctypes.create_string_buffer(_MSG)
         handle = lib.prsm_api_new((ctypes.c_double * len(reals))(*reals),
                                   (ctypes.c_int * len(ints))(*ints), msg, _MSG)
@@ -153,26 +155,14 @@ class NativeStepper(Stepper):
         if n != self.n_states:
             raise ValueError(f"the C model has {n} states, the model {self.n_states}")
         self._x = (ctypes.c_double * n)()
-        self._x_new = (ctypes.c_double * n)()
         self._u = (ctypes.c_double * 2)()
         self._stats = (ctypes.c_int * 3)()
         self._msg = msg
         self._memory_size = lib.prsm_api_memory_size()
 
     def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
-        if not (0.0 < h < math.inf):
-            raise ValueError(f"h = {h!r} is out of range: must be a finite number > 0 [s]")
-        if len(x) != self.n_states:
-            raise ValueError(f"len(x) = {len(x)} does not match model.n_states = {self.n_states}")
-        self._x[:] = x
-        self._u[0], self._u[1] = u[0], u[1]
-        rc = self._lib.prsm_api_advance(self._handle, t, self._x, self._u, h, self._x_new,
-                                        self._stats, self._msg, _MSG)
-        if rc:
-            raise StepFailure(self._msg.value.decode())
-        stats = StepStats()
-        stats.rhs_calls, stats.substeps, stats.rejected = self._stats
-        return self._x_new[:], stats
+        rows, stats = self.advance_many(t, x, u, h, 1)
+        return rows[0], stats
 
     def advance_many(self, t0: float, x: list[float], u: tuple, h: float,
                      n_steps: int) -> tuple[list[list[float]], StepStats]:

@@ -74,24 +74,10 @@ void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
 
 int prsm_api_n_states(void *handle) { return ((prsm_handle *)handle)->model.nx; }
 
-/* prsm_advance; stats receives (rhs calls, accepted substeps, rejected substeps). */
-int prsm_api_advance(void *handle, double t, const double *x, const double *u, double step,
-                     double *x_new, int *stats, char *msg, int len) {
-    prsm_handle *h = (prsm_handle *)handle;
-    double xi[PRSM_NX_MAX] = {0.0}, xo[PRSM_NX_MAX] = {0.0};
-    memcpy(xi, x, sizeof(double) * (size_t)h->model.nx);
-    prsm_stats st;
-    int rc = prsm_advance(&h->model, &h->memory, t, xi, u, step, xo, &st, msg, len);
-    stats[0] = st.rhs_calls;
-    stats[1] = st.substeps;
-    stats[2] = st.rejected;
-    if (rc == 0) memcpy(x_new, xo, sizeof(double) * (size_t)h->model.nx);
-    return rc;
-}
-
-/* n_steps advances of step [s] each from t0 (the i-th from t0 + i step) with the inputs u held
- * throughout: the states after each in x_out (n_steps rows of n_states), stats summed.  Returns
- * 0, or -1 with the reason in msg (the rows before the failing step are filled). */
+/* n_steps advances (prsm_advance) of step [s] each from t0 (the i-th from t0 + i step) with the
+ * inputs u held throughout: the states after each in x_out (n_steps rows of n_states); stats
+ * receives (rhs calls, accepted substeps, rejected substeps) summed.  Returns 0, or -1 with the
+ * reason in msg (the rows before the failing step are filled). */
 int prsm_api_advance_many(void *handle, double t0, const double *x, const double *u, double step,
                           int n_steps, double *x_out, int *stats, char *msg, int len) {
     prsm_handle *h = (prsm_handle *)handle;

@@ -280,7 +280,8 @@ static double solve(const prsm_model *m, const double *x, double load, double to
     return balance(m, x[1], wps, load, torque, cache, rec, consistent);
 }
 
-/* Model.rhs, torque drive, slaved carriers */
+/* Model.rhs: torque drive at every level, speed drive at the dynamic level (the carrier speeds
+ * are states there, slaved to the screw otherwise; an extra loss at the kinematic level only) */
 static void rhs(const prsm_model *m, const double *x, const double *u, double *dx) {
     double load = u[1], omega = x[1];
     double loss = m->kinematic ? extra_loss(m, omega, load) : 0.0;
@@ -288,64 +289,41 @@ static void rhs(const prsm_model *m, const double *x, const double *u, double *d
     double wps[NS];
     coef_cache cache;
     sweep_rec rec;
-    int consistent;
-    double alpha = solve(m, x, load, motor - loss, wps, &cache, &rec, &consistent);
-    double p_fric = consistent ? rates_power(m, omega, alpha, &rec) : NAN;
-    if (!consistent) alpha = NAN;
-    dx[0] = omega;
-    dx[1] = alpha;
-    dx[2] = motor * omega;
-    dx[3] = load * m->c_out * omega;
-    dx[4] = p_fric + loss * omega;
-}
-
-/* DynamicModel.rhs (Model.rhs with Mechanism.rates and _rates, dynamic carriers, no extra loss):
- * the signature of prsm_ros.h's right-hand side */
-static void rhs_dynamic(const void *ctx, const double *x, const double *u, double *dx) {
-    const prsm_model *m = (const prsm_model *)ctx;
-    double load = u[1], omega = x[1], motor = u[0];
-    double wps[NS];
-    coef_cache cache;
-    sweep_rec rec;
-    int consistent;
+    int consistent = 1;
     double alpha;
     if (m->speed_drive) {
-        /* Model.rhs, speed drive: the prescribed acceleration; the motor torque follows */
+        /* the prescribed acceleration; the motor torque follows (Mechanism._balance) */
         alpha = u[0];
         memset(cache.have, 0, sizeof cache.have);
         speeds_of(m, x, wps);
         sweep(m, omega, wps, load, alpha, &cache, &rec);
-        motor = rec.m0 + rec.m1 * alpha + 0.0;
-        consistent = 1;
+        motor = rec.m0 + rec.m1 * alpha + loss;
     } else {
-        alpha = solve(m, x, load, motor, wps, &cache, &rec, &consistent);
+        alpha = solve(m, x, load, motor - loss, wps, &cache, &rec, &consistent);
     }
+    double p_fric = consistent ? rates_power(m, omega, alpha, &rec) : NAN;
+    if (!consistent) alpha = NAN;
+    if (m->dynamic)      /* Mechanism._rates: carrier generalized forces over their inertias */
+        for (int k = 0; k < NS; k++) {
+            const rec_stage *r = &rec.s[k];
+            dx[2 + k] = consistent ? r->co[1] * (r->a0 + r->a1 * alpha) / m->st[k].j_carrier : NAN;
+        }
     int ie = m->ie;
     dx[0] = omega;
-    if (!consistent) {
-        dx[1] = NAN;
-        for (int k = 0; k < NS; k++) dx[2 + k] = NAN;
-        dx[ie] = motor * omega;
-        dx[ie + 1] = load * m->c_out * omega;
-        dx[ie + 2] = NAN;
-        return;
-    }
-    /* Mechanism._rates: the carriers' generalized forces over their inertias, friction power */
-    for (int k = 0; k < NS; k++) {
-        const rec_stage *r = &rec.s[k];
-        dx[2 + k] = r->co[1] * (r->a0 + r->a1 * alpha) / m->st[k].j_carrier;
-    }
-    double p_fric = rates_power(m, omega, alpha, &rec);
     dx[1] = alpha;
     dx[ie] = motor * omega;
     dx[ie + 1] = load * m->c_out * omega;
-    dx[ie + 2] = p_fric + 0.0 * omega;
+    dx[ie + 2] = p_fric + loss * omega;
+}
+
+/* rhs with the signature of prsm_ros.h's right-hand side */
+static void rhs_ctx(const void *ctx, const double *x, const double *u, double *dx) {
+    rhs((const prsm_model *)ctx, x, u, dx);
 }
 
 void prsm_rhs(const prsm_model *m, const double x[PRSM_NX_MAX], const double u[2],
               double dx[PRSM_NX_MAX]) {
-    if (m->dynamic) rhs_dynamic(m, x, u, dx);
-    else rhs(m, x, u, dx);
+    rhs(m, x, u, dx);
 }
 
 /* ---- models/slaved.py ---------------------------------------------------------------------- */
@@ -880,7 +858,7 @@ int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_
     if (m->dynamic) {
         prsm_memory trial = *mem;
         double y[PRSM_NX_MAX] = {0.0};
-        if (prsm_ros_advance(&m->ros, rhs_dynamic, m, &trial, t, x, u, h, y, stats, msg, len))
+        if (prsm_ros_advance(&m->ros, rhs_ctx, m, &trial, t, x, u, h, y, stats, msg, len))
             return -1;
         *mem = trial;
         memcpy(x_new, y, sizeof y);
