@@ -12,22 +12,23 @@ medians over the rounds:
   CPU time, so the parts add up to the total and are measured in the same run;
 * the PRSM FMU's right-hand-side calls per step (its ``step_rhs_calls`` output).
 
-Configurations: the default loop (every output recorded, the motor's RK4 reference
-integrator); the same loop recording only the scene's outputs (``outputs`` of the scene file and
-the carrier speeds, the outputs of work_precision.py's loop error, plus ``prsm.step_rhs_calls``
-for the count above): the blocks then read only what is recorded or connected; the motor's exact exponential step
-(``Motor(integrator="exponential")``); the Python FMU with ``stepper = "closed_form_explicit"``
-(the native FMU's method: Dormand–Prince 5(4) in the friction band); and the native C FMU
-(``python -m fmu_build --native PRSM2``, left out with the reason when it cannot be built),
-with every output recorded and with the scene's outputs only; and, recording the scene's
-outputs, the loop at the dynamic level (the scene's fidelity overridden: carriers as states,
-ROS34PW2) through the Python FMU and through the native FMU, which must agree bit for bit.  Each configuration's largest
-difference of any recorded output from the default's, relative to the output's largest
-magnitude (DESIGN.md §5), and the native FMU's from the Python FMU's at the same method.
-The target is judged for the default and for the cheapest configuration whose outputs agree
-with the default's within ``SAME_RESULT`` (1e-5; the PRSM FMU's tolerance is 1e-6); and apart,
-at the dynamic level, for the native FMU, with the scene level's largest difference from it
-(the model error of the scene's level where the dynamic level is the reference).
+Configurations: the default loop (every output recorded, the motor's RK4 reference integrator);
+the same loop recording only the scene's outputs (``outputs`` of the scene file and the carrier
+speeds, the outputs of work_precision.py's loop error, plus ``prsm.step_rhs_calls`` for the
+count above): the blocks then read only what is recorded or connected; the motor's exact
+exponential step (``Motor(integrator="exponential")``); the Python FMU with ``stepper =
+"closed_form_explicit"`` (the native FMU's method: Dormand–Prince 5(4) in the friction band);
+and the native C FMU (``python -m fmu_build --native PRSM2``, left out with the reason when it
+cannot be built), with every output recorded and with the scene's outputs only; and, recording
+the scene's outputs, the loop at the dynamic level (the scene's fidelity overridden: carriers as
+states, ROS34PW2) through the Python FMU and through the native FMU, which must agree bit for
+bit. Each configuration's largest difference of any recorded output from the default's, relative
+to the output's largest magnitude (DESIGN.md §5), and the native FMU's from the Python FMU's at
+the same method. The target is judged for the default and for the cheapest configuration whose
+outputs agree with the default's within ``SAME_RESULT`` (1e-5; the PRSM FMU's tolerance is
+1e-6); and apart, at the dynamic level, for the native FMU, with the scene level's largest
+difference from it (the model error of the scene's level where the dynamic level is the
+reference).
 
 Which motor integrator is closer to the truth: the loop is also run once with an independent
 reference motor (the motor ODE of system_models/motor.py's docstring under the same inputs,

@@ -71,8 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print("prsm-fmu-build: error: argument --start: must be NAME=VALUE", file=sys.stderr)
         return 2
-    if args.native and structural_start(start):
-        print(f"prsm-fmu-build: error: argument {structural_start(start)}", file=sys.stderr)
+    problem = structural_start(start) if args.native else ""
+    if problem:
+        print(f"prsm-fmu-build: error: argument {problem}", file=sys.stderr)
         return 2
     try:
         if args.preset:

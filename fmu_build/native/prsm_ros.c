@@ -186,6 +186,17 @@ typedef struct {
     double norm;                /* ||J_dd||_inf [1/s] (0 when neither reuse nor a first-step bound) */
 } ros_jac;
 
+/* ||J_dd||_inf [1/s]: the largest row sum of magnitudes */
+static double inf_norm(const prsm_ros *r, const ros_jac *jac) {
+    double norm = 0.0;
+    for (int k = 0; k < r->nd; k++) {
+        double s = 0.0;
+        for (int c = 0; c < r->nd; c++) s += fabs(jac->dd[k][c]);
+        norm = k == 0 ? s : pmax(norm, s);
+    }
+    return norm;
+}
+
 /* Rosenbrock._fresh_jac: 0, or -1 for a non-finite entry */
 static int fresh_jac(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double *x,
                      const double *f0, const double *u, prsm_stats *stats, ros_jac *jac) {
@@ -215,26 +226,13 @@ static int fresh_jac(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const do
         sums[n_rows++] = s;
     }
     if (!finite_sum(sums, n_rows)) return -1;
-    jac->norm = 0.0;
-    if (!(r->jacobian_reuse != 0.0 || r->first_step_stiffness != 0.0)) return 0;
-    for (int k = 0; k < r->nd; k++) {
-        double s = 0.0;
-        for (int c = 0; c < r->nd; c++) s += fabs(jac->dd[k][c]);
-        jac->norm = k == 0 ? s : pmax(jac->norm, s);
-    }
+    jac->norm = r->jacobian_reuse != 0.0 || r->first_step_stiffness != 0.0 ? inf_norm(r, jac) : 0.0;
     return 0;
 }
 
 /* Rosenbrock._quiet */
 static int quiet(const prsm_ros *r, const double *x, const double *f0, const ros_jac *jac) {
-    double jac_norm = jac->norm;
-    if (jac_norm == 0.0) {
-        for (int k = 0; k < r->nd; k++) {
-            double s = 0.0;
-            for (int c = 0; c < r->nd; c++) s += fabs(jac->dd[k][c]);
-            jac_norm = k == 0 ? s : pmax(jac_norm, s);
-        }
-    }
+    double jac_norm = jac->norm != 0.0 ? jac->norm : inf_norm(r, jac);
     double num = 0.0, den = 0.0;
     for (int k = 0; k < r->nd; k++) {
         int i = r->dyn[k];
