@@ -30,8 +30,10 @@ What this module does:
 
 from __future__ import annotations
 
+import getpass
 import hashlib
 import math
+import os
 import re
 import shutil
 import subprocess
@@ -412,6 +414,35 @@ def compile_library(src: Path, out: Path, sources: tuple[str, ...] = SOURCES) ->
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise BuildError(f"gcc failed:\n{proc.stderr}")
+
+
+def cached_library(prefix: str, files: dict[str, bytes], sources: tuple[str, ...]) -> Path:
+    """A shared library compiled from ``files`` (name → contents; ``sources`` are the ones
+    compiled, the others are headers), built once and kept under the hash of every file.
+
+    The cache is a directory of the user's own (mode 0700) in the system's temporary
+    directory, so no other user can put a library there; the library is moved in whole, so
+    a concurrent build finds it complete.
+
+    Raises
+    ------
+    BuildError
+        When gcc is missing or fails.
+    """
+    digest = hashlib.sha256(b"".join(name.encode() + b"\0" + data + b"\0"
+                                     for name, data in sorted(files.items()))).hexdigest()[:20]
+    cache = Path(tempfile.gettempdir()) / f"prsm-fmu-native-{getpass.getuser()}"
+    lib = cache / f"{prefix}_{digest}.so"
+    if not lib.exists():
+        cache.mkdir(mode=0o700, parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix=f"{prefix}_lib_", dir=cache) as tmp:
+            src = Path(tmp)
+            for name, data in files.items():
+                (src / name).write_bytes(data)
+            out = src / lib.name
+            compile_library(src, out, sources)
+            os.replace(out, lib)
+    return lib
 
 
 def build_native(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",

@@ -19,12 +19,7 @@ on construction.
 from __future__ import annotations
 
 import ctypes
-import getpass
-import hashlib
 import math
-import os
-import tempfile
-from pathlib import Path
 from typing import Any
 
 from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
@@ -57,25 +52,13 @@ def native_library(params) -> ctypes.CDLL:
     if key in _by_params:
         return _by_params[key]
     constants = native.constants_header(params)
-    sources = {f: (native.SOURCE_DIR / f).read_bytes() for f in LIB_SOURCES + native.HEADERS}
-    digest = hashlib.sha256(constants.encode() + b"".join(
-        name.encode() + data for name, data in sorted(sources.items()))).hexdigest()[:20]
+    files = {f: (native.SOURCE_DIR / f).read_bytes() for f in LIB_SOURCES + native.HEADERS}
+    files["prsm_constants.h"] = constants.encode()
+    lib = native.cached_library("prsm", files, LIB_SOURCES)
+    digest = lib.stem
     if digest in _loaded:
         _by_params[key] = _loaded[digest]
         return _loaded[digest]
-    # a directory of this user's own (mode 0700): no other user can put a library there
-    cache = Path(tempfile.gettempdir()) / f"prsm-fmu-native-{getpass.getuser()}"
-    lib = cache / f"prsm_{digest}.so"
-    if not lib.exists():
-        cache.mkdir(mode=0o700, parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(prefix="prsm_lib_", dir=cache) as tmp:
-            src = Path(tmp)
-            for name, data in sources.items():
-                (src / name).write_bytes(data)
-            (src / "prsm_constants.h").write_text(constants, encoding="utf-8")
-            out = src / lib.name
-            native.compile_library(src, out, LIB_SOURCES)
-            os.replace(out, lib)              # atomic: a concurrent build finds it whole
     dll = ctypes.CDLL(str(lib))
     dbl, i32, vp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
     dll.prsm_api_new.restype = vp

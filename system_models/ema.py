@@ -152,7 +152,7 @@ def _nominals(motor: MotorParams, c: float, reference, scene: Scene, mode: str) 
 def build_system(scene: Scene, prsm: str = "fmu", fmu_path=None, fidelity: str | None = None,
                  step: float | None = None, order: str | None = None,
                  extrapolation: int | None = None, retry: RetryPolicy | None = None,
-                 record: Sequence[str] | None = None) -> System:
+                 record: Sequence[str] | None = None, loop: str = "python") -> System:
     """Blocks, connections and master for ``scene`` (options override the scene's values).
 
     Parameters
@@ -167,7 +167,15 @@ def build_system(scene: Scene, prsm: str = "fmu", fmu_path=None, fidelity: str |
     record : sequence of str, optional
         ``"block.port"`` outputs to record (default: every output).  The blocks read only the
         outputs that are recorded or connected: the PRSM FMU's other variables are not read.
+    loop : {"python", "native"}
+        Who takes the macro steps: the Python master, or its translation to C
+        (:class:`system_models.native_loop.NativeMaster`: the same outputs bit for bit, needs
+        ``prsm = "fmu"``, gcc and a retry policy without a coupling tolerance).
     """
+    from .native_loop import LOOPS, NativeMaster
+
+    if loop not in LOOPS:
+        raise ValueError(f"loop = {loop!r} is not allowed: must be one of {', '.join(LOOPS)}")
     t0 = scene.t0
     motor = _overrides(MotorParams, MotorParams(), scene.motor, f"scene {scene.name}: [motor]").validate()
     load = _overrides(LoadParams, LoadParams(), scene.load, f"scene {scene.name}: [load]",
@@ -231,7 +239,8 @@ def build_system(scene: Scene, prsm: str = "fmu", fmu_path=None, fidelity: str |
     ]
     rp = retry if retry is not None else RetryPolicy(**scene.retry)
     try:
-        master = Master(blocks, CONNECTIONS, step if step is not None else scene.step, t0=t0,
+        master = (NativeMaster if loop == "native" else Master)(
+                        blocks, CONNECTIONS, step if step is not None else scene.step, t0=t0,
                         order=order or scene.order,
                         extrapolation=scene.extrapolation if extrapolation is None else extrapolation,
                         retry=rp, nominals=_nominals(motor, c, reference, scene, mode),

@@ -309,9 +309,14 @@ class FMUBlock(Block):
         if status == 2:              # fmi2Discard: state unchanged, may retry
             raise StepRefused(self.name, t, h, self._since(n0)[2:])
         if status > 1:
-            raise FMUError(f"{self.name}: doStep(t = {t!r} s, h = {h!r} s) failed with status "
-                           f"{status} ({_STATUS[status] if 0 <= status < 6 else '?'})"
-                           + self._since(n0))
+            raise self.step_error(t, h, status, n0)
+
+    def step_error(self, t: float, h: float, status: int, n0: int) -> FMUError:
+        """The error of a ``doStep(t, h)`` [s] that returned ``status`` (fmi2Error or worse),
+        with the FMU's messages since the ``n0``-th."""
+        return FMUError(f"{self.name}: doStep(t = {t!r} s, h = {h!r} s) failed with status "
+                        f"{status} ({_STATUS[status] if 0 <= status < 6 else '?'})"
+                        + self._since(n0))
 
     def get_state(self) -> Any:
         return self._call("getFMUstate")

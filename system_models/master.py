@@ -508,25 +508,39 @@ class Master:
         rows = array("d")                        # the recorded rows, one after the other
         self._record_row(rows)
         times = [t0]
-        for k in range(n):
-            t, t_next = t0 + k * h, t0 + (k + 1) * h
-            try:
-                self._macro_step(k, t, t_next)
-            except StepRefused as exc:
-                partial = self._result(times, rows, wall0)
-                tried = (f"; retried with up to {2 ** self.retry.max_halvings} substeps"
-                         if self.retry.max_halvings else "; no retry (max_halvings = 0)")
-                raise CoSimulationError(
-                    f"co-simulation stopped at t = {t:.9g} s (macro step {k + 1} of {n}, h = {h:g} s): "
-                    f"block {exc.block!r} refused the step from t = {exc.time:.9g} s over "
-                    f"{exc.step:.3g} s: {exc.reason}{tried}. The run is incomplete: no result "
-                    f"beyond t = {times[-1]:.9g} s.", t, exc.block, exc.reason, partial) from exc
-            self._stats["macro_steps"] += 1
-            self._record_row(rows)
-            times.append(t_next)
+        k = 0
+        while k < n:
+            k = self._advance(k, n, times, rows, wall0)
             if progress is not None:
-                progress(t_next, t_end)
+                progress(times[-1], t_end)
         return self._result(times, rows, wall0)
+
+    def _advance(self, k: int, n: int, times: list[float], rows: array, wall0: float) -> int:
+        """Take macro step ``k`` of ``n``, appending its end time to ``times`` and its recorded
+        outputs to ``rows``; return the index of the next step to take.
+
+        Raises
+        ------
+        CoSimulationError
+            If a block refuses the step and no retry can take it.
+        """
+        h, t0 = self.step, self.t0
+        t, t_next = t0 + k * h, t0 + (k + 1) * h
+        try:
+            self._macro_step(k, t, t_next)
+        except StepRefused as exc:
+            partial = self._result(times, rows, wall0)
+            tried = (f"; retried with up to {2 ** self.retry.max_halvings} substeps"
+                     if self.retry.max_halvings else "; no retry (max_halvings = 0)")
+            raise CoSimulationError(
+                f"co-simulation stopped at t = {t:.9g} s (macro step {k + 1} of {n}, h = {h:g} s): "
+                f"block {exc.block!r} refused the step from t = {exc.time:.9g} s over "
+                f"{exc.step:.3g} s: {exc.reason}{tried}. The run is incomplete: no result "
+                f"beyond t = {times[-1]:.9g} s.", t, exc.block, exc.reason, partial) from exc
+        self._stats["macro_steps"] += 1
+        self._record_row(rows)
+        times.append(t_next)
+        return k + 1
 
     def _record_row(self, rows: array) -> None:
         """Append the recorded outputs at the current communication point to ``rows``."""

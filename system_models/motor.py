@@ -177,7 +177,7 @@ class Motor(PythonBlock):
         """The voltages the inverter applies: the command, scaled onto the limit circle."""
         vd, vq = self.u[0], self.u[1]
         vmax = self._vmax
-        mag = math.hypot(vd, vq)
+        mag = math.sqrt(vd * vd + vq * vq)      # (not hypot: C's and Python's round apart)
         if mag > vmax:
             s = vmax / mag
             return vd * s, vq * s
@@ -232,7 +232,7 @@ class Motor(PythonBlock):
             x = self._rk4(x, vd, vq, w0, dw, h)
         if not all(math.isfinite(v) for v in x):
             raise StepRefused(self.name, t, h, f"the motor state became non-finite: {x}")
-        mag = math.hypot(x[0], x[1])
+        mag = math.sqrt(x[0] * x[0] + x[1] * x[1])
         if mag > self._trip:
             raise StepRefused(self.name, t, h, f"overcurrent: |i| = {mag:.4g} A exceeds the trip "
                               f"level {self._trip:.4g} A (trip_factor x current_limit): the drive trips")

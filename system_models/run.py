@@ -16,11 +16,16 @@ __all__ = ["SceneRun", "run_scene", "build_scene_system", "describe_system"]
 def build_scene_system(scene: Scene, **options) -> System:
     """The scene's blocks and master for its topology (``direct``: :func:`.ema.build_system`,
     ``geared``: :func:`.geared.build_geared_system`); options as :func:`run_scene`'s."""
+    loop = options.pop("loop", "python")
+    if loop != "python":
+        from .native_loop import check_native_loop
+
+        check_native_loop(scene.topology, options.get("prsm", "fmu"))
     if scene.topology == "geared":
         from .geared import build_geared_system
 
         return build_geared_system(scene, **options)
-    return build_system(scene, **options)
+    return build_system(scene, loop=loop, **options)
 
 
 def describe_system(system: System) -> dict[str, Any]:
@@ -68,11 +73,12 @@ class SceneRun:
 def run_scene(scene: Scene | str, prsm: str = "fmu", fmu_path=None, fidelity: str | None = None,
               step: float | None = None, order: str | None = None,
               extrapolation: int | None = None, retry: RetryPolicy | None = None,
-              progress=None) -> SceneRun:
+              progress=None, loop: str = "python") -> SceneRun:
     """Build and run ``scene`` (a :class:`Scene` or a name/path); evaluate its checks.
 
     With ``prsm="fmu"`` the FMU at ``fmu_path`` (default ``dist/<mechanism>.fmu``) must exist:
-    :func:`system_models.fmu.ensure_fmu` builds it.
+    :func:`system_models.fmu.ensure_fmu` builds it.  ``loop = "native"``: the macro steps
+    taken in C (:class:`system_models.native_loop.NativeMaster`, the same outputs bit for bit).
 
     Raises
     ------
@@ -81,7 +87,8 @@ def run_scene(scene: Scene | str, prsm: str = "fmu", fmu_path=None, fidelity: st
     """
     sc = load_scene(scene) if isinstance(scene, str) else scene
     system = build_scene_system(sc, prsm=prsm, fmu_path=fmu_path, fidelity=fidelity, step=step,
-                                order=order, extrapolation=extrapolation, retry=retry)
+                                order=order, extrapolation=extrapolation, retry=retry,
+                                loop=loop)
     res = system.run(progress)
     checks = evaluate(res, sc.checks, {"reference": system.reference,
                                        "params": system.prsm.params()})

@@ -72,7 +72,7 @@ def _signals(check: dict) -> list[str]:
 
 def check_scene(scene: Scene, prsm: str = "fmu", fidelity: str | None = None,
                 step: float | None = None, order: str | None = None,
-                extrapolation: int | None = None) -> dict[str, Any]:
+                extrapolation: int | None = None, loop: str = "python") -> dict[str, Any]:
     """Check ``scene`` (with the run's overrides) whole; ValueError naming the field.
 
     Returns a few facts of the run it would be: ``steps``, ``outputs`` (count),
@@ -83,6 +83,12 @@ def check_scene(scene: Scene, prsm: str = "fmu", fidelity: str | None = None,
 
     where = f"scene {scene.name}"
     _finite(scene)
+    if loop != "python":
+        from .native_loop import LOOPS, check_native_loop
+
+        if loop not in LOOPS:
+            raise ValueError(f"--loop {loop!r} is not allowed: must be one of {', '.join(LOOPS)}")
+        check_native_loop(scene.topology, prsm, scene.retry.get("tolerance"))
     if prsm == "native":
         from fmu_build.native import NATIVE_LEVELS
 
