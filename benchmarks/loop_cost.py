@@ -19,16 +19,20 @@ count above): the blocks then read only what is recorded or connected; the motor
 exponential step (``Motor(integrator="exponential")``); the Python FMU with ``stepper =
 "closed_form_explicit"`` (the native FMU's method: Dormand–Prince 5(4) in the friction band);
 and the native C FMU (``python -m fmu_build --native PRSM2``, left out with the reason when it
-cannot be built), with every output recorded and with the scene's outputs only; and, recording
-the scene's outputs, the loop at the dynamic level (the scene's fidelity overridden: carriers as
-states, ROS34PW2) through the Python FMU and through the native FMU, which must agree bit for
-bit. Each configuration's largest difference of any recorded output from the default's, relative
+cannot be built), with every output recorded and with the scene's outputs only; the same loops
+with their macro steps taken in C (``build_system(loop="native")``,
+system_models.native_loop.NativeMaster: the master, controller, motor and load translated,
+the FMU called through its FMI functions) with the Python FMU and the native FMU, each of which
+must equal its Python-master twin bit for bit; and, recording the scene's outputs, the loop at
+the dynamic level (the scene's fidelity overridden: carriers as states, ROS34PW2) through the
+Python FMU, the native FMU and the native FMU in the C loop, which must agree bit for bit.  In
+the C loop the parts are timed by the C (clock_gettime around each block's calls). Each configuration's largest difference of any recorded output from the default's, relative
 to the output's largest magnitude (DESIGN.md §5), and the native FMU's from the Python FMU's at
 the same method. The target is judged for the default and for the cheapest configuration whose
 outputs agree with the default's within ``SAME_RESULT`` (1e-5; the PRSM FMU's tolerance is
-1e-6); and apart, at the dynamic level, for the native FMU, with the scene level's largest
-difference from it (the model error of the scene's level where the dynamic level is the
-reference).
+1e-6); and apart, at the dynamic level, for its cheapest configuration, with the scene
+level's largest difference from it (the model error of the scene's level where the dynamic
+level is the reference).
 
 Which motor integrator is closer to the truth: the loop is also run once with an independent
 reference motor (the motor ODE of system_models/motor.py's docstring under the same inputs,
@@ -70,18 +74,30 @@ from work_precision import loop_outputs  # noqa: E402
 PARTS = ("prsm", "motor", "controller", "load", "master+recording")
 #: label -> (motor integrator, record only the scene's outputs, FMU: "python" (pythonfmu, the
 #: scene's parameters), "python-explicit" (the same with stepper closed_form_explicit, the
-#: native FMU's method) or "native" (the C FMU, ``python -m fmu_build --native``))
-CONFIGS = {"default (motor RK4)": ("rk4", False, "python"),
-           "scene outputs only": ("rk4", True, "python"),
-           "motor exponential": ("exponential", False, "python"),
-           "closed_form_explicit": ("rk4", False, "python-explicit"),
-           "native FMU": ("rk4", False, "native"),
-           "native FMU, scene outputs": ("rk4", True, "native"),
-           "dynamic, Python FMU": ("rk4", True, "python-dynamic"),
-           "dynamic, native FMU": ("rk4", True, "native-dynamic")}
+#: native FMU's method) or "native" (the C FMU, ``python -m fmu_build --native``), the master:
+#: "python" (system_models.master.Master) or "native" (its macro steps in C,
+#: system_models.native_loop.NativeMaster))
+CONFIGS = {"default (motor RK4)": ("rk4", False, "python", "python"),
+           "scene outputs only": ("rk4", True, "python", "python"),
+           "motor exponential": ("exponential", False, "python", "python"),
+           "closed_form_explicit": ("rk4", False, "python-explicit", "python"),
+           "native FMU": ("rk4", False, "native", "python"),
+           "native FMU, scene outputs": ("rk4", True, "native", "python"),
+           "C loop, Python FMU": ("rk4", False, "python", "native"),
+           "C loop, native FMU": ("rk4", False, "native", "native"),
+           "C loop, native, scene out": ("rk4", True, "native", "native"),
+           "dynamic, Python FMU": ("rk4", True, "python-dynamic", "python"),
+           "dynamic, native FMU": ("rk4", True, "native-dynamic", "python"),
+           "dynamic, C loop, native": ("rk4", True, "native-dynamic", "native")}
 #: the configurations at the dynamic level (the scene's fidelity overridden), judged apart: their
 #: outputs differ from the scene's level by its model error, not by round-off
-DYNAMIC_CONFIGS = ("dynamic, Python FMU", "dynamic, native FMU")
+DYNAMIC_CONFIGS = ("dynamic, Python FMU", "dynamic, native FMU", "dynamic, C loop, native")
+#: (configuration, the one it must equal bit for bit: the same method in another FMU or master)
+SAME_METHOD = (("native FMU", "closed_form_explicit"), ("C loop, Python FMU", "default (motor RK4)"),
+               ("C loop, native FMU", "native FMU"),
+               ("C loop, native, scene out", "native FMU, scene outputs"),
+               ("dynamic, native FMU", "dynamic, Python FMU"),
+               ("dynamic, C loop, native", "dynamic, native FMU"))
 TARGET, FLOOR = 0.35, 0.7
 #: a configuration counts for the target when every recorded output agrees with the default's
 #: within this fraction of the output's largest magnitude (the PRSM FMU's tolerance is 1e-6)
@@ -155,12 +171,12 @@ def with_stepper(scene, stepper: str):
     return replace(scene, prsm=prsm)
 
 
-def run_once(scene, fmu: Path, integrator: str,
-             scene_outputs: bool = False) -> tuple[dict[str, float], float, object]:
+def run_once(scene, fmu: Path, integrator: str, scene_outputs: bool = False,
+             loop: str = "python") -> tuple[dict[str, float], float, object]:
     """One run: (CPU s per simulated s by part and "total", rhs calls per step, result)."""
     record = (sorted(set(scene.outputs) | set(loop_outputs(scene.name))) + ["prsm.step_rhs_calls"]
               if scene_outputs else None)
-    system = build_system(scene, prsm="fmu", fmu_path=fmu, record=record)
+    system = build_system(scene, prsm="fmu", fmu_path=fmu, record=record, loop=loop)
     master = system.master
     master.blocks[master.index["motor"]].integrator = integrator
     c0 = time.process_time()
@@ -228,22 +244,22 @@ def main() -> None:
             if fmus[which] is not None:
                 run_once(scene, fmus[which], "rk4")
         for _ in range(args.rounds):
-            for label, (integrator, narrow, which) in configs.items():   # interleaved rounds
-                cost, r, res = run_once(scenes[which], fmus[which], integrator, narrow)
+            for label, (integrator, narrow, which, loop) in configs.items():   # interleaved
+                cost, r, res = run_once(scenes[which], fmus[which], integrator, narrow, loop)
                 samples[label].append(cost)
                 rhs[label].append(r)
                 results[label] = res
         reference, motor = reference_run(scene, fmus["python"])
     print(f"actuator loop, scene {scene.name}: {scene.t_end:g} s simulated in steps of "
           f"{scene.step:g} s, PRSM2 FMU through fmpy; medians of {args.rounds} rounds")
-    print(f"{'CPU s per simulated s':<24}{'total':>8}" + "".join(f"{p:>18}" for p in PARTS)
+    print(f"{'CPU s per simulated s':<26}{'total':>8}" + "".join(f"{p:>18}" for p in PARTS)
           + f"{'rhs/step':>10}")
     us = 1e6 * scene.step               # CPU s per simulated s -> µs per communication step
     for label, rows in samples.items():
         med = {k: statistics.median(r[k] for r in rows) for k in rows[0]}
         parts = "".join(f"{med[p]:>9.3f} ({100 * med[p] / med['total']:>4.1f} %)" for p in PARTS)
-        print(f"{label:<24}{med['total']:>8.3f}{parts}{statistics.median(rhs[label]):>10.1f}")
-        print(f"{'  µs per step':<24}{med['total'] * us:>8.1f}"
+        print(f"{label:<26}{med['total']:>8.3f}{parts}{statistics.median(rhs[label]):>10.1f}")
+        print(f"{'  µs per step':<26}{med['total'] * us:>8.1f}"
               + "".join(f"{med[p] * us:>18.1f}" for p in PARTS))
     labels = [k for k in configs if k not in DYNAMIC_CONFIGS]
     same = {labels[0]: 0.0}
@@ -252,8 +268,8 @@ def main() -> None:
         same[label] = d
         print(f"{label} against {labels[0]}: largest output difference {d:.2e} of the output's "
               f"maximum ({where})")
-    for a, b in (("native FMU", "closed_form_explicit"), DYNAMIC_CONFIGS[::-1]):
-        if a in results:
+    for a, b in SAME_METHOD:
+        if a in results and b in results:
             d, where = max_difference(results[a], results[b])
             print(f"{a} against {b} (the same method): largest output difference {d:.2e} "
                   f"({where or 'all equal'})")
@@ -265,8 +281,9 @@ def main() -> None:
               f"{'met' if t <= FLOOR else 'NOT met'})")
     print(f"  (the second line: the cheapest configuration whose every output agrees with the "
           f"default's within {SAME_RESULT:g} of the output's maximum)")
-    label = DYNAMIC_CONFIGS[1]
-    if label in results:
+    dyn = [k for k in DYNAMIC_CONFIGS if k in results]
+    if dyn:
+        label = min(dyn, key=totals.get)
         t = totals[label]
         d, where = max_difference(results[labels[0]], results[label], loop_outputs(scene.name))
         print(f"loop / real time at the dynamic level, {label} = {t:.3f} (target <= {TARGET}: "
