@@ -156,3 +156,16 @@ def test_cli_refuses_the_native_loop_for_the_python_prsm_and_the_geared_topology
         code = cli.main(["run", *extra, "--loop", "native", "--out", str(tmp_path)])
         err = capsys.readouterr().err
         assert code == 2 and "loop = 'native'" in err, err
+
+
+def test_cli_run_with_the_native_loop_writes_the_same_csv_as_the_python_loop(capsys, tmp_path):
+    """`prsm-ema run --loop native` passes the scene's checks and writes the CSV byte for byte
+    as the Python master does."""
+    csv = {}
+    for loop in ("python", "native"):
+        out = tmp_path / loop
+        code = cli.main(["run", "--scene", "position_step", "--prsm", "native", "--fmu",
+                         str(native_fmu()), "--loop", loop, "--no-plots", "--out", str(out)])
+        assert code == 0, capsys.readouterr().err
+        csv[loop] = (out / "position_step.csv").read_bytes()
+    assert csv["python"] == csv["native"]
