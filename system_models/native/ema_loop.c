@@ -206,11 +206,26 @@ static void motor_applied(const motor_t *m, const double *u, double *vd, double 
     }
 }
 
+/* One RK4 stage (Motor._rk4's, term by term): the current derivatives d, q and the power rates
+ * (electrical pe, copper pc, air gap pa) at the currents (a0, a1) and the speed w */
+typedef struct { double d, q, pe, pc, pa; } rates_t;
+
+static rates_t motor_rates(const motor_t *m, double vd, double vq, double a0, double a1, double w)
+{
+    double r = m->r, ell = m->ell;
+    double we = m->p * w, wl = we * ell;
+    rates_t k;
+    k.d = (vd - r * a0 + wl * a1) / ell;
+    k.q = (vq - r * a1 - wl * a0 - we * m->psi) / ell;
+    k.pe = 1.5 * (vd * a0 + vq * a1);
+    k.pc = (1.5 * r) * (a0 * a0 + a1 * a1);
+    k.pa = m->kt * a1 * w;
+    return k;
+}
+
 static void motor_rk4(const motor_t *m, double *x, double vd, double vq, double w0, double dw,
                       double h)
 {
-    double r = m->r, ell = m->ell, p = m->p, psi = m->psi, kt = m->kt;
-    double c_cu = 1.5 * r;
     double nf = ceil(h / m->max_substep - 1e-9);
     long n = nf > 1.0 ? (long)nf : 1;
     double dt = h / (double)n;
@@ -220,42 +235,15 @@ static void motor_rk4(const motor_t *m, double *x, double vd, double vq, double 
     for (long j = 0; j < n; j++) {
         double tau = (double)j * dt;
         double wa = w0 + dw * tau, wm = w0 + dw * (tau + 0.5 * dt), wb = w0 + dw * (tau + dt);
-        double we = p * wa, wl = we * ell;
-        double d1 = (vd - r * i0 + wl * i1) / ell;
-        double q1 = (vq - r * i1 - wl * i0 - we * psi) / ell;
-        double pe1 = 1.5 * (vd * i0 + vq * i1);
-        double pc1 = c_cu * (i0 * i0 + i1 * i1);
-        double pa1 = kt * i1 * wa;
-        double a0 = i0 + hdt * d1, a1 = i1 + hdt * q1;
-        we = p * wm;
-        wl = we * ell;
-        double wp = we * psi;
-        double d2 = (vd - r * a0 + wl * a1) / ell;
-        double q2 = (vq - r * a1 - wl * a0 - wp) / ell;
-        double pe2 = 1.5 * (vd * a0 + vq * a1);
-        double pc2 = c_cu * (a0 * a0 + a1 * a1);
-        double pa2 = kt * a1 * wm;
-        a0 = i0 + hdt * d2;
-        a1 = i1 + hdt * q2;
-        double d3 = (vd - r * a0 + wl * a1) / ell;
-        double q3 = (vq - r * a1 - wl * a0 - wp) / ell;
-        double pe3 = 1.5 * (vd * a0 + vq * a1);
-        double pc3 = c_cu * (a0 * a0 + a1 * a1);
-        double pa3 = kt * a1 * wm;
-        a0 = i0 + dt * d3;
-        a1 = i1 + dt * q3;
-        we = p * wb;
-        wl = we * ell;
-        double d4 = (vd - r * a0 + wl * a1) / ell;
-        double q4 = (vq - r * a1 - wl * a0 - we * psi) / ell;
-        double pe4 = 1.5 * (vd * a0 + vq * a1);
-        double pc4 = c_cu * (a0 * a0 + a1 * a1);
-        double pa4 = kt * a1 * wb;
-        i0 = i0 + dt6 * (d1 + 2.0 * d2 + 2.0 * d3 + d4);
-        i1 = i1 + dt6 * (q1 + 2.0 * q2 + 2.0 * q3 + q4);
-        e_el = e_el + dt6 * (pe1 + 2.0 * pe2 + 2.0 * pe3 + pe4);
-        e_cu = e_cu + dt6 * (pc1 + 2.0 * pc2 + 2.0 * pc3 + pc4);
-        e_ag = e_ag + dt6 * (pa1 + 2.0 * pa2 + 2.0 * pa3 + pa4);
+        rates_t k1 = motor_rates(m, vd, vq, i0, i1, wa);
+        rates_t k2 = motor_rates(m, vd, vq, i0 + hdt * k1.d, i1 + hdt * k1.q, wm);
+        rates_t k3 = motor_rates(m, vd, vq, i0 + hdt * k2.d, i1 + hdt * k2.q, wm);
+        rates_t k4 = motor_rates(m, vd, vq, i0 + dt * k3.d, i1 + dt * k3.q, wb);
+        i0 = i0 + dt6 * (k1.d + 2.0 * k2.d + 2.0 * k3.d + k4.d);
+        i1 = i1 + dt6 * (k1.q + 2.0 * k2.q + 2.0 * k3.q + k4.q);
+        e_el = e_el + dt6 * (k1.pe + 2.0 * k2.pe + 2.0 * k3.pe + k4.pe);
+        e_cu = e_cu + dt6 * (k1.pc + 2.0 * k2.pc + 2.0 * k3.pc + k4.pc);
+        e_ag = e_ag + dt6 * (k1.pa + 2.0 * k2.pa + 2.0 * k3.pa + k4.pa);
     }
     x[0] = i0; x[1] = i1; x[2] = e_el; x[3] = e_cu; x[4] = e_ag;
 }
