@@ -122,7 +122,8 @@ class NativeMaster(Master):
         super().__init__(blocks, connections, step, **kwargs)
         kinds = []
         for b in self.blocks:
-            kind = next((k for cls, k in _KINDS if isinstance(b, cls)), None)
+            # the exact classes: a subclass may change what a step does, which the C would not
+            kind = next((k for cls, k in _KINDS if type(b) is cls), None)
             if kind is None:
                 raise ValueError(f"loop = 'native': block {b.name!r} ({type(b).__name__}) has no "
                                  "C translation; the native loop runs the controller, motor, "
@@ -228,7 +229,7 @@ class NativeMaster(Master):
     def _state(self) -> list[float]:
         """The Python blocks' and the master's state in ema_loop.c's layout (state_io)."""
         ctl, motor, load = self._block(0), self._block(1), self._block(3)
-        s = [float(ctl.j), *ctl.cmd, *ctl.integrals, *motor.x, load.t, load.external(load.t)]
+        s = [float(ctl.j), *ctl.cmd, *ctl.integrals, *motor.x, load.t]
         for b in self.blocks:
             u = getattr(b, "u", None) or [0.0] * len(b.inputs)
             du = getattr(b, "du", None) or [0.0] * len(b.inputs)
@@ -255,7 +256,7 @@ class NativeMaster(Master):
         ctl.j = int(s[0])
         ctl.cmd, ctl.integrals, motor.x = s[1:7], s[7:11], s[11:16]
         load.t = s[16]
-        a = 18
+        a = 17
         for b in self.blocks:
             n = len(b.inputs)
             if isinstance(b, FMUBlock):

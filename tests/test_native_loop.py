@@ -26,8 +26,10 @@ from test_fmu import built_fmus  # noqa: E402
 from test_native_fmu import built_native  # noqa: E402
 
 from system_models import cli  # noqa: E402
-from system_models.ema import build_system  # noqa: E402
+from system_models.ema import CONNECTIONS, build_system  # noqa: E402
+from system_models.load import SpringDamperLoad  # noqa: E402
 from system_models.master import CoSimulationError, RetryPolicy  # noqa: E402
+from system_models.native_loop import NativeMaster  # noqa: E402
 from system_models.scenes import load_scene  # noqa: E402
 
 
@@ -144,6 +146,16 @@ def test_what_the_native_loop_cannot_run_is_refused_naming_the_option():
         build_system(sc, prsm="fmu", fmu_path=native_fmu(), loop="fast")
     with pytest.raises(ValueError, match="PythonPRSM"):
         build_system(sc, prsm="python", loop="native")
+    # a subclass of a block may step differently from the block the C translates
+    class Load(SpringDamperLoad):
+        pass
+
+    python = build_system(sc, prsm="fmu", fmu_path=native_fmu())
+    blocks = python.master.blocks
+    blocks[3] = Load(blocks[3].params, blocks[3].external)
+    with pytest.raises(ValueError, match="block 'load' \\(Load\\) has no C translation"):
+        NativeMaster(blocks, CONNECTIONS, sc.step)
+    python.master.terminate()
     system = build_system(sc, prsm="fmu", fmu_path=native_fmu(), loop="native")
     system.master.blocks[1].integrator = "exponential"
     with pytest.raises(ValueError, match="motor.integrator"):

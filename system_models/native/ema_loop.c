@@ -350,12 +350,10 @@ static int block_step(loop_t *L, int i, const double *vals, const double *slopes
         if (st > 1) { L->stop_status = st; L->stop_call = 1; return RUN_FMU_ERROR; }
         return RUN_DONE;
     }
-    for (int q = 0; q < n; q++) {
-        b->u[q] = vals[q];
+    for (int q = 0; q < n; q++) {     /* held inputs (the load's): value + slope·h/2 */
+        b->u[q] = b->interpolates ? vals[q] : vals[q] + 0.5 * h * slopes[q];
         b->du[q] = b->interpolates ? slopes[q] : 0.0;
     }
-    if (!b->interpolates)            /* held inputs: value + slope·h/2 (none of ours) */
-        for (int q = 0; q < n; q++) b->u[q] = vals[q] + 0.5 * h * slopes[q];
     switch (b->kind) {
     case K_CONTROLLER: {
         int r = controller_step(&L->ctl, b->u, b->du, t, h);
@@ -554,7 +552,7 @@ int ema_loop_set_fmu(void *p, void *comp, void *set_real, void *get_real, void *
 }
 
 /* State in and out, one flat array of doubles (the layout system_models.native_loop writes):
- * the controller's j, cmd[6], integrals[4]; the motor's x[5]; the load's t and F_ext(t); per
+ * the controller's j, cmd[6], integrals[4]; the motor's x[5]; the load's t; per
  * block the inputs u and slopes du (n_in each); the master's y, y_prev, scale (n_out per
  * block each), has_prev, t_prev. */
 static int state_io(loop_t *L, double *s, int out)
@@ -568,7 +566,6 @@ static int state_io(loop_t *L, double *s, int out)
     for (int q = 0; q < 4; q++) IO(L->ctl.integ[q]);
     for (int q = 0; q < 5; q++) IO(L->mot.x[q]);
     IO(L->load.t);
-    IO(L->load.fe);
     for (int i = 0; i < NB; i++)
         for (int q = 0; q < L->b[i].n_in; q++) { IO(L->b[i].u[q]); IO(L->b[i].du[q]); }
     for (int i = 0; i < NB; i++)
