@@ -26,7 +26,6 @@ from array import array
 from pathlib import Path
 from typing import Any
 
-from .blocks import Block
 from .controller import CascadeController
 from .fmu import FMUBlock
 from .load import SpringDamperLoad
@@ -296,7 +295,7 @@ class NativeMaster(Master):
         k1 = min(n, k + CHUNK)
         nrec = len(self._record)
         out = (ctypes.c_double * max(1, (k1 - k) * nrec))()
-        info = (ctypes.c_double * 5)()
+        info = (ctypes.c_double * 4)()
         timers = _doubles(self._block_time)
         fmu = self._block(2)
         n0 = len(fmu.messages)
@@ -315,12 +314,13 @@ class NativeMaster(Master):
         if code == _DONE:
             return k1
         if code == _FMU_ERROR:
-            call, status = _FMU_CALLS[int(info[4])], int(info[3])
+            call, status = _FMU_CALLS[int(info[3])], int(info[2])
             if call == "doStep":
                 t = t0 + (k + done) * h
                 raise fmu.step_error(t, (t0 + (k + done + 1) * h) - t, status, n0)
             fmu._check(call, status, n0)
-        # a refused step (or a sample past the references given): the Python master takes it
+        # _REFUSED or _PROFILE_END (a sample past the references given): the Python master
+        # takes the step
         return super()._advance(k + done, n, times, rows, wall0)
 
     def terminate(self) -> None:

@@ -95,7 +95,7 @@ typedef struct {
     int n_watched, watched[2 * NB * MAXOUT];
     int n_record, record[2 * NB * MAXOUT];
     /* what stopped a run */
-    int stop_block, stop_status, stop_call;
+    int stop_status, stop_call;
 } loop_t;
 
 /* Python's max(a, b) and min(a, b) for two floats: the first unless the second is larger /
@@ -111,13 +111,12 @@ static double now(void)
 }
 
 /* ---- controller: CascadeController._sample and do_step --------------------------------------- */
-static void controller_sample(controller_t *s, double t, double x, double w, double idd, double iq)
+static void controller_sample(controller_t *s, double x, double w, double idd, double iq)
 {
     double ts = s->ts;
     long j = s->j;
     double *cmd = s->cmd, *integ = s->integ;
     double ref = s->ref[j];
-    (void)t;
     cmd[2] = ref;
     if (s->mode == MODE_POSITION && j % s->position_div == 0) {
         double tp = ts * (double)s->position_div;
@@ -185,7 +184,7 @@ static int controller_step(controller_t *s, const double *u, const double *du, d
         if (s->j >= s->n_ref)
             return RUN_PROFILE_END;
         double dt = tj - t;
-        controller_sample(s, tj, u[0] + du[0] * dt, u[1] + du[1] * dt, u[2] + du[2] * dt,
+        controller_sample(s, u[0] + du[0] * dt, u[1] + du[1] * dt, u[2] + du[2] * dt,
                           u[3] + du[3] * dt);
         tj = s->t0 + (double)s->j * ts;
     }
@@ -412,10 +411,10 @@ static int master_step(loop_t *L, double t, double h, long k, double *err, doubl
         }
         double c0 = now();
         int r = block_step(L, i, vals, slopes, t, h, k);
-        if (r != RUN_DONE) { L->stop_block = i; return r; }
+        if (r != RUN_DONE) return r;
         if (L->gs && b->read_after) {
             r = block_outputs(L, i, L->y_new[i]);
-            if (r != RUN_DONE) { L->stop_block = i; return r; }
+            if (r != RUN_DONE) return r;
         }
         timers[i] += now() - c0;
     }
@@ -423,7 +422,7 @@ static int master_step(loop_t *L, double t, double h, long k, double *err, doubl
         for (int i = 0; i < NB; i++) {
             double c0 = now();
             int r = block_outputs(L, i, L->y_new[i]);
-            if (r != RUN_DONE) { L->stop_block = i; return r; }
+            if (r != RUN_DONE) return r;
             timers[i] += now() - c0;
         }
     }
@@ -465,8 +464,6 @@ static int master_step(loop_t *L, double t, double h, long k, double *err, doubl
 /* ---- the interface (doubles, ints and addresses only) -------------------------------------- */
 void *ema_loop_new(void) { return calloc(1, sizeof(loop_t)); }
 void ema_loop_free(void *p) { free(p); }
-int ema_loop_max_ports(void) { return MAXP; }
-int ema_loop_max_outputs(void) { return MAXOUT; }
 
 /* ints: gs, extrapolation, then per block: kind, n_in, n_out, interpolates, feedthrough,
  * read_after, and per input: plan kind, source block, source port, discrete; then n_watched and
@@ -582,8 +579,8 @@ int ema_loop_set_state(void *p, const double *s) { return state_io(p, (double *)
 int ema_loop_get_state(void *p, double *s) { return state_io(p, s, 1); }
 
 /* Macro steps k0 .. k1 − 1 (t_k = t0 + k h), each row of recorded outputs into rows.
- * info (out): [0] steps done, [1] largest coupling error estimate, [2] the block that stopped the
- * run, [3] its status, [4] the FMU call (0 setReal, 1 doStep, 2 getReal, 3 getInteger);
+ * info (out): [0] steps done, [1] largest coupling error estimate, [2] the failing FMU call's
+ * status, [3] that call (0 setReal, 1 doStep, 2 getReal, 3 getInteger);
  * timers (in/out): seconds per block.  Returns RUN_DONE, or why it stopped at step k0 + info[0]
  * (the Python blocks then as at that step's start). */
 int ema_loop_run(void *p, long k0, long k1, double *rows, double *info, double *timers)
@@ -627,8 +624,7 @@ int ema_loop_run(void *p, long k0, long k1, double *rows, double *info, double *
     }
     info[0] = (double)(k - k0);
     info[1] = max_err;
-    info[2] = L->stop_block;
-    info[3] = L->stop_status;
-    info[4] = L->stop_call;
+    info[2] = L->stop_status;
+    info[3] = L->stop_call;
     return code;
 }
