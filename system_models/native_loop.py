@@ -167,6 +167,8 @@ class NativeMaster(Master):
             ints += [i, p]
         if lib.ema_loop_set_plan(self._handle, _ints(ints), _doubles(reals)) < 0:
             raise ValueError("loop = 'native': a block has more ports than the C loop holds")
+        #: the arrays the C reads during the run (profiles)
+        self._keep: list[ctypes.Array] = []
         self._set_controller(n)
         r, ell, p, psi, kt = motor._c
         lib.ema_loop_set_motor(self._handle, _doubles([r, ell, p, psi, kt, motor.max_substep,
@@ -177,11 +179,10 @@ class NativeMaster(Master):
         # the load's time after macro step k is t + (t_next − t), as the master computes it
         ext = [load.external((t0 + k * h) + ((t0 + (k + 1) * h) - (t0 + k * h)))
                for k in range(n)]
-        self._keep = [_doubles(ext)]
+        self._keep.append(_doubles(ext))
         lib.ema_loop_set_load(self._handle, _doubles([lp.preload, lp.stiffness, lp.damping]),
-                              self._keep[0], n)
+                              self._keep[-1], n)
         self._set_fmu()
-        self._keep += self._controller_arrays
 
     def _set_controller(self, n: int) -> None:
         ctl: CascadeController = self._block(0)
@@ -199,7 +200,7 @@ class NativeMaster(Master):
                     t = ctl.t0 + j * ts
                     plus[j], minus[j] = ctl.reference(t + tp), ctl.reference(t - tp)
         arrays = [_doubles(ref), _doubles(plus), _doubles(minus)]
-        self._controller_arrays = arrays
+        self._keep += arrays
         reals = [ts, p.current_kp, p.current_ki, p.speed_kp, p.speed_ki, p.position_kp,
                  p.position_ki, p.velocity_feedforward, p.current_limit, p.voltage_limit,
                  p.speed_limit, ctl._kaw_position, ctl._kaw_speed, ctl._kaw_current,
@@ -276,22 +277,11 @@ class NativeMaster(Master):
         self.t_prev = s[a + 1] if has_prev else None
 
     # ---- stepping ----------------------------------------------------------------------------
-    def run(self, t_end: float, progress=None):
-        from .master import whole_steps
-
-        self._n_run = whole_steps(self.t0, t_end, self.step)
-        self._ready = False
-        try:
-            return super().run(t_end, progress)
-        finally:
-            self._keep = []
-
     def _advance(self, k: int, n: int, times: list[float], rows: array, wall0: float) -> int:
         """Macro steps from ``k`` in C, up to :data:`CHUNK` at a time; a step the C hands back
         is taken by the Python master."""
-        if not self._ready:
-            self._setup(self._n_run)
-            self._ready = True
+        if k == 0:                       # a run's first step: the C loop for its n steps
+            self._setup(n)
         k1 = min(n, k + CHUNK)
         nrec = len(self._record)
         out = (ctypes.c_double * max(1, (k1 - k) * nrec))()

@@ -83,11 +83,9 @@ def check_scene(scene: Scene, prsm: str = "fmu", fidelity: str | None = None,
 
     where = f"scene {scene.name}"
     _finite(scene)
-    if loop != "python":
-        from .native_loop import LOOPS, check_native_loop
+    if loop == "native":
+        from .native_loop import check_native_loop
 
-        if loop not in LOOPS:
-            raise ValueError(f"--loop {loop!r} is not allowed: must be one of {', '.join(LOOPS)}")
         check_native_loop(scene.topology, prsm, scene.retry.get("tolerance"))
     if prsm == "native":
         from fmu_build.native import NATIVE_LEVELS
