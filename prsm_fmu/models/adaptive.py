@@ -45,7 +45,7 @@ import math
 from typing import Any
 
 from ..steppers import ClosedForm, StepStats, Stepper, make_stepper
-from ..steppers.options import TUNED_OPTIONS
+from ..steppers.options import TOLERANCE_FACTOR, TUNED_OPTIONS
 from .auto import MARGIN, carrier_time_constants, effective_load
 from .dynamic import DynamicModel
 from .quasi_static import QuasiStaticModel
@@ -59,9 +59,9 @@ MODES = ("dynamic", "quasi-static")
 MAX_WAIT = 64
 
 #: with the ``default`` stepper, a dynamic step is explicit (Dormand–Prince 5(4)) where the
-#: communication step is at most this many fastest carrier time constants, linearly implicit
-#: (ROS34PW2) elsewhere: DP5(4) is stable to 3.3 τ on the real axis; the margin covers the
-#: screw–carrier coupling and a speed that falls within the step (τ ∝ ω)
+#: communication step is at most this many fastest carrier time constants, stiff (exponential or
+#: ROS34PW2, :class:`SwitchingStepper`) elsewhere: DP5(4) is stable to 3.3 τ on the real axis;
+#: the margin covers the screw–carrier coupling and a speed that falls within the step (τ ∝ ω)
 EXPLICIT_STEP_PER_TAU = 1.5
 
 #: outputs compared before a switch, by the kind of scale they are measured against
@@ -243,15 +243,23 @@ class SwitchingStepper(Stepper):
     ----------
     model : AdaptiveModel
     name : str
-        Stepper of the dynamic level; ``default``: each dynamic step explicit (DP5(4)) where
-        the communication step is at most :data:`EXPLICIT_STEP_PER_TAU` times the fastest
-        carrier time constant at the step's start (τ_k = c_k |ω|/|F|), ROS34PW2 with the tuned
-        options of :data:`prsm_fmu.steppers.options.TUNED_OPTIONS` elsewhere; ``closed_form`` and
-        ``closed_form_explicit`` mean ``rosenbrock``.
+        Stepper of the dynamic level; ``default``: for each dynamic step, ROS34PW2 with the
+        tuned options of :data:`prsm_fmu.steppers.options.TUNED_OPTIONS` where the screw speed
+        is zero or heads through zero within the step (at the last step's acceleration); else
+        explicit (DP5(4)) where the communication step is at most :data:`EXPLICIT_STEP_PER_TAU`
+        times the fastest carrier time constant at the step's start (τ_k = c_k |ω|/|F|), and the
+        exponential stepper (exprb32) at the tolerances scaled by
+        :data:`prsm_fmu.steppers.options.TOLERANCE_FACTOR` everywhere else. Why: ROS34PW2 at the
+        tolerance misses it on the approach to a zero-speed crossing (8.7e-4 at tolerance 1e-4
+        on the speed reversal scene, docs/accuracy.md §2), which the exponential stepper meets;
+        through the crossing itself, where every friction law passes the three
+        once-differentiable points of its band, ROS34PW2 at the tolerance is accurate and takes
+        a third of the exponential stepper's rhs calls (375 against 1117 in that 0.1 ms step at
+        tolerance 1e-6). ``closed_form`` and ``closed_form_explicit`` mean ``rosenbrock``.
     **options
         That stepper's options; ``rtol``, ``atol`` and ``max_substeps`` also set the
         quasi-static closed form's fallback integrator (with ``default``, they and
-        ``fixed_substeps`` set both dynamic steppers).
+        ``fixed_substeps`` set all three dynamic steppers).
     """
 
     name = "auto"
@@ -267,8 +275,11 @@ class SwitchingStepper(Stepper):
             if "fixed_substeps" in options:          # fixed steps: no step-size tuning
                 common["fixed_substeps"] = options["fixed_substeps"]
                 tuned = {}
+            k = TOLERANCE_FACTOR["exponential"]
+            stiff = {key: v * k if key in ("rtol", "atol") else v for key, v in common.items()}
             self.dynamic_steppers = {
                 "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic, **common),
+                "exponential": make_stepper("exponential", model.dynamic, **stiff),
                 "rosenbrock": make_stepper("rosenbrock", model.dynamic, **tuned, **common)}
         else:
             name = "rosenbrock" if name in ("closed_form", "closed_form_explicit") else name
@@ -330,12 +341,12 @@ class SwitchingStepper(Stepper):
         m = self.model
         # the axial force that drives the carriers, with the last step's acceleration
         omega, load = m.screw_speed(x, u), u[1] + m._nut_term * self.alpha
-        if omega == 0.0:
-            return steppers["rosenbrock"]
+        if omega == 0.0 or omega * (omega + self.alpha * h) < 0.0:
+            return steppers["rosenbrock"]               # at or through zero speed
         if load == 0.0:
             return steppers["explicit_adaptive"]       # the carriers are not driven
         tau = min(m.lag_coefficients(omega * load > 0.0)) * abs(omega) / abs(load)
-        return steppers["explicit_adaptive" if h <= EXPLICIT_STEP_PER_TAU * tau else "rosenbrock"]
+        return steppers["explicit_adaptive" if h <= EXPLICIT_STEP_PER_TAU * tau else "exponential"]
 
     def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
         h = self._check_args(t, x, h)
