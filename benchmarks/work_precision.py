@@ -738,6 +738,13 @@ def auto_summary(scene: Scene, result: dict) -> list[str]:
                      f"({floor.config.label}, error {floor.error:.2e}) is "
                      f"{implicit.cpu_per_s / floor.cpu_per_s:.1f}x cheaper than that implicit "
                      "stepper: no choice of level can be faster than this")
+    own = sorted((p for p in pts if p.config.fidelity == "auto" and p.config.stepper == "default"),
+                 key=lambda p: -p.config.value)
+    if own:
+        lines.append("  auto with its default stepper (the FMU's) against its own tolerance: "
+                     + ", ".join(f"{p.config.value:.0e} → " + (
+                         f"{p.error:.2e} " + ("meets" if p.error <= p.config.value else "MISSES")
+                         if p.status == "ok" else p.status) for p in own))
     cheaper = FIDELITIES[:FIDELITIES.index(choice.fidelity)]
     if cheaper:
         nxt = level_floor(pts, cheaper[-1])
@@ -769,7 +776,7 @@ STEPPER_STYLE = {"rk4": ("tab:blue", "explicit fixed (RK4 × substeps)"),
                  "rosenbrock": ("tab:green", "implicit (ROS34PW2, rtol)"),
                  "exponential": ("tab:olive", "exponential Rosenbrock (exprb32, rtol)"),
                  "closed_form": ("tab:purple", "closed form (slaved levels)"),
-                 "default": ("tab:brown", "auto's own choice per step (DP5(4) or ROS34PW2)"),
+                 "default": ("tab:brown", "auto's own choice per step (DP5(4), exprb32 or ROS34PW2)"),
                  "radau": ("tab:gray", "solve_ivp Radau restarted (baseline, rtol)"),
                  NATIVE: ("tab:red", "ROS34PW2 in C (native FMU's code, rtol)")}
 FIDELITY_MARKER = {"dynamic": "o", "quasi-static": "s", "kinematic": "^", "auto": "D"}

@@ -30,7 +30,7 @@ AUTO_FIDELITY = "quasi-static"
 
 #: stepper choices: ``default`` is ``closed_form`` for the levels with slaved carriers
 #: (quasi-static, kinematic), ``rosenbrock`` for the dynamic level, and for the dynamic steps of
-#: ``auto`` explicit or linearly implicit per step (prsm_fmu/models/adaptive.py)
+#: ``auto`` explicit, exponential or linearly implicit per step (prsm_fmu/models/adaptive.py)
 STEPPER_CHOICES = ("default",) + STEPPER_NAMES
 
 #: the FMU's Enumeration ``Fidelity``: item name -> (value, description).  The values are part

@@ -22,8 +22,8 @@ from .steppers.options import TUNED_OPTIONS, tuned_stepper_options
 Signal = Union[float, Callable[[float], float]]
 
 #: default stepper per fidelity level (used by simulate and the FMU); ``auto``'s ``default``
-#: chooses explicit or linearly implicit dynamic steps from the communication step and the
-#: carriers' time constant (prsm_fmu/models/adaptive.py)
+#: chooses explicit, exponential or linearly implicit dynamic steps from the communication
+#: step, the carriers' time constant and the screw speed's sign (prsm_fmu/models/adaptive.py)
 #: The dynamic level keeps ROS34PW2: the exponential stepper (exprb32) needs half its rhs calls on
 #: smooth 1 ms steps, but through a zero-speed crossing (scene speed_reversal, where the band's
 #: friction law is only once differentiable) it took 1117 rhs calls in one step against the
