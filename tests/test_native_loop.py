@@ -5,7 +5,8 @@ so the expected values are the Python loop's own, bit for bit: every recorded ou
 communication point, the master's statistics and the blocks' end states.  The runs cover the
 scenes' controller modes (position with and without velocity feed-forward, speed), both
 coupling orders and extrapolation orders, the native FMU and the Python FMU, a step the FMU
-refuses (with and without retries) and a step the motor refuses (overcurrent trip).
+refuses (with and without retries), a doStep that fails (fmi2Error) and a step the motor
+refuses (overcurrent trip).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from test_native_fmu import built_native  # noqa: E402
 
 from system_models import cli  # noqa: E402
 from system_models.ema import CONNECTIONS, build_system  # noqa: E402
+from system_models.fmu import FMUError  # noqa: E402
 from system_models.load import SpringDamperLoad  # noqa: E402
 from system_models.master import CoSimulationError, RetryPolicy  # noqa: E402
 from system_models.native_loop import NativeMaster  # noqa: E402
@@ -125,6 +127,59 @@ def test_a_motor_trip_is_handed_to_the_python_master_with_the_same_error():
     assert "overcurrent" in a.reason and a.block == "motor"
     assert str(a) == str(b)
     assert all(np.array_equal(a.partial[n], b.partial[n]) for n in a.partial.names())
+
+
+class _DllWith:
+    """An FMU's library with one function replaced (what the C loop takes its pointers from)."""
+
+    def __init__(self, dll, **functions):
+        self._dll = dll
+        self.__dict__.update(functions)
+
+    def __getattr__(self, name):
+        return getattr(self._dll, name)
+
+
+def test_an_fmu_error_in_the_c_loop_stops_the_run_with_the_python_loops_error():
+    """doStep returning fmi2Error (3) from t = 12 ms on (neither FMU does so from its inputs, so
+    a wrapper around the FMU's own fmi2DoStep returns it, in both loops): the C loop stops the
+    run with the FMU block's own error (FMUError, not retried: not a refusal), the same message
+    after the same doStep calls as the Python master's."""
+    import ctypes
+
+    proto = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double,
+                             ctypes.c_int)
+    sc = dataclasses.replace(load_scene("position_step"), t_end=0.02)
+    errors, calls, systems = {}, {}, {}
+    for loop in ("python", "native"):
+        system = systems[loop] = build_system(sc, prsm="fmu", fmu_path=native_fmu(), loop=loop)
+        blk = next(b for b in system.master.blocks if b.name == "prsm")
+        dll, real = blk.fmu.dll, blk.fmu.dll.fmi2DoStep
+        seen = calls[loop] = []
+
+        def do_step(component, t, h, no_prior, real=real, seen=seen):
+            seen.append(t)
+            return 3 if t >= 0.012 - 1e-12 else real(component, t, h, no_prior)
+
+        wrapper = proto(do_step)
+        blk._c_do_step = wrapper                          # the Python master's call
+        blk.fmu.dll = _DllWith(dll, fmi2DoStep=wrapper)   # the C loop's, read at its set-up
+        try:
+            with pytest.raises(FMUError) as info:
+                system.run()
+        finally:
+            blk.fmu.dll = dll
+        errors[loop] = str(info.value)
+    # 12 ms / 0.1 ms: the 121st doStep, at t = 12 ms, fails and is not tried again
+    assert calls["python"] == calls["native"] and len(calls["native"]) == 121
+    assert errors["python"] == errors["native"]
+    assert errors["native"].startswith("prsm: doStep(t = 0.012 s") and "(error)" in errors["native"]
+    # the C puts the Python blocks back to the failing step's start, as for a refused step: the
+    # controller has taken its 120 samples of 0 … 11.9 ms (the Python master, which stops
+    # inside the step, leaves it after its 121st)
+    assert systems["native"].master.blocks[0].j == 120
+    for s in systems.values():
+        s.master.terminate()
 
 
 def test_progress_is_reported_up_to_the_end():
