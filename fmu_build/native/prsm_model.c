@@ -662,21 +662,11 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
 }
 
 /* ---- steppers/explicit.py: Dormand-Prince 5(4) with step-size control ------------------------ */
-static int finite_sum(const double *v, int n) {
-    double s = 0.0;
-    for (int i = 0; i < n; i++) s += v[i];
-    return s - s == 0.0;
-}
-
 static double err_factor(const prsm_model *m, double err) {
     if (err == 0.0) return m->fac_max;
     if (!(err < INFINITY)) return m->fac_min;
     return fmin(m->fac_max, fmax(m->fac_min, m->safety * prsm_pow(err, -1.0 / 5.0)));
 }
-
-/* Python's min/max of two floats (the first unless the second is strictly smaller/larger) */
-static double pmin(double a, double b) { return b < a ? b : a; }
-static double pmax(double a, double b) { return b > a ? b : a; }
 
 /* one trial step: xn, k7 = f(xn), err; returns 0, or nonzero if a value is not finite */
 static int trial_dp5(const prsm_model *m, const double *x, const double *k1, double hs,

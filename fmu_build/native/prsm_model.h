@@ -28,6 +28,18 @@
  * the compiler cannot see through, pow stays pow.  Defined in prsm_model.c. */
 extern double (*volatile prsm_pow)(double, double);
 
+/* Python's min(a, b) and max(a, b) of two floats: the first unless the second is strictly
+ * smaller/larger (fmin/fmax differ at signed zeros and NaN) */
+static inline double pmin(double a, double b) { return b < a ? b : a; }
+static inline double pmax(double a, double b) { return b > a ? b : a; }
+
+/* steppers/base._is_finite_sum: whether the sum of v[0..n) is finite (no NaN, no infinity) */
+static inline int finite_sum(const double *v, int n) {
+    double s = 0.0;
+    for (int i = 0; i < n; i++) s += v[i];
+    return s - s == 0.0;
+}
+
 #define PRSM_NX 5
 /* the dynamic level's states: angle, speed, one speed per carrier, the three work integrals */
 #define PRSM_NX_MAX (5 + PRSM_N_STAGES)

@@ -2,7 +2,7 @@
  *
  * Every expression keeps the Python code's order of floating-point operations; compile as
  * prsm_model.c (no fast-math, no fused multiply-add).  Python's min(a, b) and max(a, b) of two
- * floats are pmin/pmax (the first unless the second is strictly smaller/larger).
+ * floats are pmin/pmax (prsm_model.h).
  */
 #include "prsm_ros.h"
 
@@ -21,16 +21,6 @@
 #define QUIET 0.01
 /* control._TIME_MATCH */
 #define TIME_MATCH 4e-16
-
-static double pmin(double a, double b) { return b < a ? b : a; }
-static double pmax(double a, double b) { return b > a ? b : a; }
-
-/* base._is_finite_sum */
-static int finite_sum(const double *v, int n) {
-    double s = 0.0;
-    for (int i = 0; i < n; i++) s += v[i];
-    return s - s == 0.0;
-}
 
 /* ---- linalg.py: factors of (d I - J_dd) --------------------------------------------------- */
 typedef struct {
