@@ -6,11 +6,11 @@ Cases (quasi-static level, torque drive, the FMU's tolerance: rtol 1e-6, atol 1e
 * ``position_step``: the PRSM block's held inputs of every 0.1 ms step of the actuator scene
   (system_models/scenes/position_step.toml, the Python block; the rod creeps inside the spline
   friction band for ~40 % of the steps), replayed open loop from the scene's start;
-* ``holding``: seed 000, 6 N·m against 2 kN from rest, 0.1 ms and 10 ms steps (the screw creeps
+* ``holding``: Li et al. (2021), 6 N·m against 2 kN from rest, 0.1 ms and 10 ms steps (the screw creeps
   back-driven at the speed where the friction holds the load, near zero: the stiffest point);
-* ``reversal``: seed 000, 5 N·m against 5 kN from 30 rad/s: brakes through zero speed, then
+* ``reversal``: Li et al. (2021), 5 N·m against 5 kN from 30 rad/s: brakes through zero speed, then
   back-driven (1 ms steps);
-* ``viscous reversal``: seed 003 (viscous term: no closed form anywhere), −2 N·m against 3 kN
+* ``viscous reversal``: the friction-torque article (viscous term: no closed form anywhere), −2 N·m against 3 kN
   from 20 rad/s (1 ms steps).
 
 Error (DESIGN.md §5): max over the step ends and the states of |x − x_ref| / max|x_ref|, the
@@ -79,8 +79,8 @@ def error(xs, ref) -> float:
 def cases():
     model, steps, x0 = scene_steps()
     yield "position_step (0.1 ms)", model, steps, x0
-    s000 = make_model(presets.load("seed000_two_stage"), "quasi-static", "torque")
-    s003 = make_model(presets.load("seed003_single_stage"), "quasi-static", "torque")
+    s000 = make_model(presets.load("li2021_two_stage"), "quasi-static", "torque")
+    s003 = make_model(presets.load("friction_single_stage"), "quasi-static", "torque")
     rest = [0.0] * 5
     for h, n in ((1e-4, 300), (1e-2, 3)):
         yield f"holding ({h * 1e3:g} ms)", s000, [(k * h, (6.0, 2000.0), h) for k in range(n)], rest

@@ -6,7 +6,7 @@ binary, loaded through fmpy's ``FMU2Slave`` in this process): the empty one is a
 path (ctypes → C++ → Python and back).  The ratio is the cost the mechanism adds, in units
 of that price.  Target (issue 3): ≤ 5 for the quasi-static level at a 1 ms step.
 
-Scenarios: seed 000's two-stage PRSM (``PRSM2``), 1 ms communication steps, start at 100 rad/s
+Scenarios: Li et al.'s (2021) two-stage PRSM (``PRSM2``), 1 ms communication steps, start at 100 rad/s
 with the carriers at equilibrium; the inputs of ``benchmarks/step_cost.py``'s "moving" scenario
 (load F(t) = 5000 + 1000 sin(2π·25 t) N, motor torque 19.75 F(t)/5000 + sin(2π·40 t) N·m, new
 values every step: the screw keeps turning at ≈ 100…116 rad/s), and the operating point itself
@@ -109,7 +109,7 @@ def constant_input_errors(n_steps: int = 100) -> dict[str, tuple[float, float]]:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from step_cost import OUTPUTS
 
-    model = make_model(presets.load("seed000_two_stage"), "dynamic", "torque")
+    model = make_model(presets.load("li2021_two_stage"), "dynamic", "torque")
     u = constant_inputs(0.0)
 
     def trajectory(name: str, opts: dict) -> tuple[list[dict], float]:

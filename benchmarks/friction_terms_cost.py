@@ -1,8 +1,8 @@
-"""Cost of seed 003's viscous and differential friction terms on the hot path (``Model.rhs``).
+"""Cost of the friction-torque article's viscous and differential friction terms on the hot path (``Model.rhs``).
 
 For each mechanism, the dynamic level's right-hand side (torque and speed drive, carriers at
 equilibrium, 50 rad/s, 1 kN) is timed with the Coulomb law only (µ_1 = µ_3 = 0) and with all
-three terms (seed 003's values: µ_1 = 0.001 N·s/m, n_t = 10, µ_3 = 1e-6 m), one after the other
+three terms (the friction-torque article's values: µ_1 = 0.001 N·s/m, n_t = 10, µ_3 = 1e-6 m), one after the other
 in one run (best of 7 repeats of 20 000 calls each; on a shared machine compare the ratios).  Prints µs per call and the ratio, measured
 in this run, on this machine.
 
@@ -29,7 +29,7 @@ def rhs_cost(params, drive: str) -> float:
 
 
 def main() -> None:
-    for name in ("seed003_single_stage", "seed000_two_stage"):
+    for name in ("friction_single_stage", "li2021_two_stage"):
         base = presets.load(name)
         coulomb = base.with_changes(mu_viscous=0.0, mu_differential=0.0)
         terms = coulomb.with_changes(mu_viscous=0.001, mu_differential=1e-6)

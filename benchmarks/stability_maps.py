@@ -62,7 +62,7 @@ from prsm_fmu.steppers import EXPLICIT_TABLEAUS, StepFailure, make_stepper
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURES = ROOT / "docs" / "figures"
-SEED000 = presets.load("seed000_two_stage")
+LI2021 = presets.load("li2021_two_stage")
 
 CORRECT, WRONG, DIVERGED = "correct", "bounded-but-wrong", "diverged"
 CLASS_COLOUR = {CORRECT: "tab:green", WRONG: "tab:orange", DIVERGED: "tab:red"}
@@ -203,7 +203,7 @@ def jacobian_tau(model, x, u) -> float:
     return 1.0 / float(np.max(np.abs(np.linalg.eigvals(jac))))
 
 
-def operating_point(drive: str, omega: float, load: float, params=SEED000,
+def operating_point(drive: str, omega: float, load: float, params=LI2021,
                     horizons: tuple[float, float] | None = None,
                     disturbance: float = DISTURBANCE) -> OperatingPoint:
     """Set up one operating point and its reference (Radau rtol 1e-12 over ``horizons``, the
@@ -496,7 +496,7 @@ def friction_map(v_eps=V_EPS, configs=FRICTION_CONFIGS, verbose=True) -> dict:
     runs, regs = [], []
     refs = {}
     for ve in v_eps:
-        p = SEED000.with_changes(slip_velocity_scale=ve)
+        p = LI2021.with_changes(slip_velocity_scale=ve)
         c0 = time.process_time()
         ref = reversal_reference(p, 1e-12)
         check = reversal_reference(p, 1e-11)
@@ -594,7 +594,7 @@ def plot_friction(result: dict, path: Path) -> None:
     ax.set_xlim(0, len(v_eps))
     ax.set_ylim(row + 1, 0)
     ax.set_xticks([j + 0.5 for j in range(len(v_eps))])
-    ax.set_xticklabels([f"{v:g}" + (" (default)" if v == SEED000.slip_velocity_scale else "")
+    ax.set_xticklabels([f"{v:g}" + (" (default)" if v == LI2021.slip_velocity_scale else "")
                         for v in v_eps], fontsize=8)
     ax.set_yticks([i + 0.5 for i in range(row + 1)])
     ax.set_yticklabels([f"{s} {'×' if k == 'substeps' else 'rtol '}{v:g}" for s, k, v in cfgs]

@@ -1,6 +1,6 @@
 """Cost of advancing the torque-driven two-stage machine across 1 ms steps, against restarted Radau.
 
-Scenarios: seed 000's two-stage PRSM, torque drive, starting at 100 rad/s with the carriers at
+Scenarios: Li et al.'s (2021) two-stage PRSM, torque drive, starting at 100 rad/s with the carriers at
 equilibrium; the motor torque and the load change every 1 ms step, as they do inside a closed
 loop, over 100 steps; the load is F(t) = 5000 + 1000 sin(2π·25 t) N and the motor torque
 
@@ -8,7 +8,7 @@ loop, over 100 steps; the load is F(t) = 5000 + 1000 sin(2π·25 t) N and the mo
   torque of the load plus a ripple; the screw keeps turning (≈ 100…116 rad/s);
 * ``stop-and-go``: M(t) = 20 + 4 sin(2π·40 t) N·m, open loop (reported, not the figure of
   merit).  Meant to stall the screw at zero speed, in the self-holding band where the
-  regularised friction is stiff for every level; with the seed 000 inertias it does not: the
+  regularised friction is stiff for every level; with the Li et al. (2021) inertias it does not: the
   screw swings between ≈ 22 and 185 rad/s without stopping, so this scenario does not reach
   the friction band.
 
@@ -106,7 +106,7 @@ def main() -> None:
 
 def table() -> None:
     """One table: every level and stepper on the current scenario."""
-    params = presets.load("seed000_two_stage")
+    params = presets.load("li2021_two_stage")
     configs = {
         "dynamic": [("rosenbrock", {"rtol": 1e-6, "atol": 1e-9}),
 

@@ -1,7 +1,7 @@
 """Scaling of a parameter study on Dask: speed-up of 2 workers over 1, and the per-point cost of
 the Dask path over a plain loop.
 
-Study: seed 000 §3.1's start-up on the FMU (PRSM2, dynamic level, 100 rad/s step, 5000 N,
+Study: Li et al. (2021) §3.1's start-up on the FMU (PRSM2, dynamic level, 100 rad/s step, 5000 N,
 1 ms at 1 µs communication steps, the speed prescribed by the FMU master), over a grid of
 µ_SR × µ_SS (default 6 × 4 = 24 points, ≈ 0.3 s each).  Three runs of
 :func:`prsm_fmu.sweep.run_study` on fresh output directories, each timed from the call to its
@@ -41,7 +41,7 @@ def _study(path: str, n_points: int) -> None:
         fh.write(textwrap.dedent(f"""
             [study]
             name = "scaling"
-            preset = "seed000_two_stage"
+            preset = "li2021_two_stage"
             backend = "fmu"
             [scenario]
             fidelity = "dynamic"
@@ -73,7 +73,7 @@ def main() -> None:
     _study(study_path, args.points)
     study = load_study(study_path)
     n = len(study.points())
-    print(f"study: seed 000 start-up on PRSM2.fmu (dynamic, 1 ms at 1 µs steps), {n} points "
+    print(f"study: Li et al. (2021) start-up on PRSM2.fmu (dynamic, 1 ms at 1 µs steps), {n} points "
           f"(µ_SR × µ_SS), {os.cpu_count()} cores")
 
     def timed(label: str, **kw) -> float:

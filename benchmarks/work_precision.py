@@ -1,6 +1,6 @@
 """Work-precision charts: error against cost for every fidelity level × stepper × step or tolerance.
 
-For each scene (a data structure, :data:`SCENES`: the seed 000 start-up of the mechanism alone,
+For each scene (a data structure, :data:`SCENES`: the Li et al. (2021) start-up of the mechanism alone,
 and the actuator-loop scenes of system_models/ with the PRSM as the plain Python block:
 position step, sine tracking, load step, speed reversal), every configuration of the grid is
 run and compared with the scene's reference:
@@ -354,21 +354,21 @@ def make_simulate_runner(params, drive: str, t_end: float, comm_step: float, inp
     return run
 
 
-SEED000 = presets.load("seed000_two_stage")
+LI2021 = presets.load("li2021_two_stage")
 
-#: seed 000 §3.1 start-up: screw speed stepped to 100 rad/s with the carriers at rest, F = 5 kN
+#: Li et al. (2021) §3.1 start-up: screw speed stepped to 100 rad/s with the carriers at rest, F = 5 kN
 STARTUP = Scene(
     name="startup",
-    title="seed 000 start-up: ω stepped to 100 rad/s, carriers at rest, F = 5 kN, 0–1 ms, "
+    title="Li et al. (2021) start-up: ω stepped to 100 rad/s, carriers at rest, F = 5 kN, 0–1 ms, "
           "communication step 10 µs",
     t_end=1e-3, comm_step=1e-5,
-    run=make_simulate_runner(SEED000, "speed", 1e-3, 1e-5,
+    run=make_simulate_runner(LI2021, "speed", 1e-3, 1e-5,
                              {"screw_speed": 100.0, "load_force": 5000.0},
                              {"initial_carrier_ratio": 0.0}),
     grid=standard_grid() + native_grid(),
     target_error=1e-6,
     speedup_to_beat=100.0,
-    auto=lambda tol: choose_for_start(SEED000, tol, "speed", (0.0, 5000.0), screw_speed=100.0,
+    auto=lambda tol: choose_for_start(LI2021, tol, "speed", (0.0, 5000.0), screw_speed=100.0,
                                       carrier_ratio=0.0, comm_step=1e-5),
 )
 
@@ -376,10 +376,10 @@ STARTUP = Scene(
 #: speed-up over restarted Radau depends on the communication step (a reduced grid)
 STARTUP_1US = Scene(
     name="startup_1us",
-    title="seed 000 start-up as above, communication step 1 µs (sensitivity to the "
+    title="Li et al. (2021) start-up as above, communication step 1 µs (sensitivity to the "
           "communication step; reduced grid)",
     t_end=1e-3, comm_step=1e-6,
-    run=make_simulate_runner(SEED000, "speed", 1e-3, 1e-6,
+    run=make_simulate_runner(LI2021, "speed", 1e-3, 1e-6,
                              {"screw_speed": 100.0, "load_force": 5000.0},
                              {"initial_carrier_ratio": 0.0}),
     grid=(standard_grid(("dynamic",), substeps=(1, 2), rtols=(1e-5, 1e-6, 1e-7),

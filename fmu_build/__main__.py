@@ -24,7 +24,7 @@ from .native import structural_start
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
                "DIR: PRSM2 by default, any of the standard FMUs by name or all with --all, or "
                "an FMU from any preset of prsm_fmu.presets with --preset NAME --name ID (ID "
-               "is the FMI modelIdentifier, e.g. PRSM2_seed002). Each FMU is checked with "
+               "is the FMI modelIdentifier, e.g. PRSM2_assembly). Each FMU is checked with "
                "fmpy validate and the project's modelDescription rules unless --no-validate. "
                "With --native: the native C FMU <name>-native.fmu (kinematic, quasi-static and "
                "dynamic levels, needs gcc; runs without Python). "
@@ -38,7 +38,7 @@ def build_parser() -> ArgumentParser:
                     help=f"FMUs to build, of {', '.join(FMUS)} (default: PRSM2)")
     ap.add_argument("--all", action="store_true", help="build every standard FMU")
     ap.add_argument("--preset", help="build from this preset of prsm_fmu.presets instead")
-    ap.add_argument("--name", help="FMU name (modelIdentifier) for --preset, e.g. PRSM2_seed002")
+    ap.add_argument("--name", help="FMU name (modelIdentifier) for --preset, e.g. PRSM2_assembly")
     ap.add_argument("--dest", type=writable_dir, default="dist", metavar="DIR",
                     help="output directory (default: dist)")
     ap.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
                 ap.error("argument --preset: needs --name ID and no FMU names or --all")
             if not args.name.isidentifier():
                 ap.error(f"argument --name: {args.name!r} is not allowed: must be a valid "
-                         "identifier (the FMI modelIdentifier), e.g. PRSM2_seed002")
+                         "identifier (the FMI modelIdentifier), e.g. PRSM2_assembly")
             try:
                 params = presets.load(args.preset)
             except ValueError as exc:

@@ -6,7 +6,7 @@ mechanics and, at the dynamic level, the same ROS34PW2 with the FMU's tuned opti
 operation for operation, so that its states equal those of :func:`prsm_fmu.steppers.make_stepper`
 ``("rosenbrock", model, **tuned_stepper_options("rosenbrock", rtol, atol))`` bit for bit
 (tests/test_native_stepper.py).  It is what the dynamic level costs without Python: the
-work-precision study times the seed 000 start-up with it.
+work-precision study times the Li et al. (2021) start-up with it.
 
 The C is compiled with gcc, with the geometry of the model's preset built in
 (:func:`fmu_build.native.constants_header`), into a shared library cached by the hash of its

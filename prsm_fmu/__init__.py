@@ -3,7 +3,7 @@
 Entry points (DESIGN.md §3)::
 
     from prsm_fmu import presets, simulate, steady_state
-    p = presets.load("seed000_two_stage")
+    p = presets.load("li2021_two_stage")
     ss = steady_state(p, screw_speed=100.0, load_force=5000.0)
     res = simulate(p, fidelity="dynamic", drive="speed", screw_speed=100.0, load_force=5000.0,
                    t_end=1e-3, output_interval=1e-6)

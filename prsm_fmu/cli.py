@@ -2,10 +2,10 @@
 
 Subcommands::
 
-    prsm-fmu startup [--preset seed000_two_stage] [--fidelity dynamic|auto|...]
+    prsm-fmu startup [--preset li2021_two_stage] [--fidelity dynamic|auto|...]
                      [--tolerance 1e-8] [--speed 100] [--load 5000] [--t-end 1e-3]
                      [--interval 1e-6] [--out out]
-    prsm-fmu steady  [--preset seed000_two_stage] [--speed 100] [--load 5000]
+    prsm-fmu steady  [--preset li2021_two_stage] [--speed 100] [--load 5000]
     prsm-fmu presets
     prsm-fmu sweep   STUDY.toml [--out DIR] [--workers N | --scheduler tcp://host:port |
                      --no-dask] [--backend fmu|model] [--fmu-dir DIR] [--rerun-all]
@@ -15,12 +15,12 @@ Subcommands::
                      [--set NAME=VALUE] [--out DIR]
     prsm-fmu plot    RESULT.csv --fmu PRSM2.fmu [--out RESULT.png] [--variables NAME ...]
 
-``startup`` runs the start-up scenario of seed 000 §3.1 (the screw speed stepped at t = 0 with
+``startup`` runs the start-up scenario of Li et al. (2021) §3.1 (the screw speed stepped at t = 0 with
 the carriers at rest, a constant load on the last nut), prints a table, the carriers' settling
 times and the run's cost and energy balance, and writes ``startup.csv`` and ``startup.png``.
 ``steady`` prints the steady state found by root finding (:func:`prsm_fmu.steady_state`).
 ``sweep`` runs a parameter study (:mod:`prsm_fmu.sweep`, docs/sweeps.md) and ``check`` the
-design checks of seed 001 (:mod:`prsm_fmu.design_checks`).  ``regress`` compares the built
+design checks of the two-stage kinematics article (:mod:`prsm_fmu.design_checks`).  ``regress`` compares the built
 FMU's outputs with the stored baselines (:mod:`prsm_fmu.regress`, docs/regression.md).
 ``plot`` draws the result CSV of ``fmpy simulate`` with the FMU's units
 (:mod:`prsm_fmu.result_plot`).  A bad argument is answered with one line naming it and its
@@ -100,7 +100,7 @@ def _n_stages(res: Mapping[str, np.ndarray]) -> int:
 
 def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str,
                  title: str = "") -> None:
-    """Save a 2×2 figure like seed 000 Fig. 3 for one or more start-up runs.
+    """Save a 2×2 figure like Li et al. (2021) Fig. 3 for one or more start-up runs.
 
     Panels: (a) carrier speed ratios ζ_k; (b) driven torques M_Sk [N.m]; (c) axial contact
     forces per roller F_Srzk [N]; (d) efficiency η [1] (left axis) and spline friction f_Sk
@@ -256,7 +256,7 @@ def _preset(text: str) -> MechanismParams:
 # subcommands
 # ---------------------------------------------------------------------------------------------
 def cmd_startup(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    """Run the seed 000 §3.1 start-up scenario; print a table; write CSV and PNG.
+    """Run the Li et al. (2021) §3.1 start-up scenario; print a table; write CSV and PNG.
 
     The screw speed is stepped to ``args.speed`` [rad/s] at t = 0 with the carriers at rest
     (drive "speed") under a constant ``args.load`` [N] on the last nut, simulated to
@@ -445,7 +445,7 @@ def _fractions(text: str) -> tuple[float, ...]:
 
 
 def cmd_check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    """Print the seed 001 design checks of a preset (optionally modified with ``--set``).
+    """Print the design checks of the two-stage kinematics article for a preset (optionally modified with ``--set``).
 
     Returns
     -------
@@ -480,9 +480,9 @@ def cmd_check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         option = next((o for f, o in _CHECK_OPTIONS.items() if str(exc).startswith(f)), "")
         parser.error(f"argument {option}: {exc}" if option else str(exc))
     if args.load is None:
-        print(f"(axial load: {load:g} N, the largest load of {args.preset}'s seed scenario; "
+        print(f"(axial load: {load:g} N, the largest load of {args.preset}'s paper scenario; "
               "--load to change)" if load is not None else
-              f"(axial load: none — {args.preset}'s seed scenario gives no load, so strength "
+              f"(axial load: none — {args.preset}'s paper scenario gives no load, so strength "
               "and buckling report the allowable load only; --load F_a [N] checks them)")
     print(format_report(report, _CHECK_INPUTS))
     return 0 if report.valid else 1
@@ -510,11 +510,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser(
-        "startup", help="seed 000 §3.1 start-up: screw speed step, carriers at rest",
-        description="Step the screw speed at t = 0 with the carriers at rest (seed 000 §3.1), "
+        "startup", help="Li et al. (2021) §3.1 start-up: screw speed step, carriers at rest",
+        description="Step the screw speed at t = 0 with the carriers at rest (Li et al. (2021) §3.1), "
                     "print a table, the carriers' settling times and the energy balance, and "
                     "write OUT/startup.csv and OUT/startup.png.")
-    p.add_argument("--preset", type=_preset, default="seed000_two_stage",
+    p.add_argument("--preset", type=_preset, default="li2021_two_stage",
                    help="preset name (see 'prsm-fmu presets'); default %(default)s")
     p.add_argument("--fidelity", choices=FIDELITIES + ("auto",), default="dynamic",
                    help="model level (auto: dynamic while the carriers lag, quasi-static once "
@@ -540,7 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("steady", help="steady state at constant speed and load",
                        description="Print the steady state (root finding, no time stepping).")
-    p.add_argument("--preset", type=_preset, default="seed000_two_stage",
+    p.add_argument("--preset", type=_preset, default="li2021_two_stage",
                    help="preset name; default %(default)s")
     p.add_argument("--speed", type=nonzero_float, default=100.0,
                    help="screw speed [rad/s], non-zero; default %(default)g")
@@ -582,14 +582,14 @@ def build_parser() -> argparse.ArgumentParser:
     from .design_checks import END_FACTORS, MATERIALS
 
     p = sub.add_parser(
-        "check", help="seed 001 design checks of a preset: meshing, lead, gears, strength, "
+        "check", help="design checks of a preset after the two-stage kinematics article: meshing, lead, gears, strength, "
                       "buckling",
-        description="Check a preset against seed 001's parameter-matching conditions and "
+        description="Check a preset against the two-stage kinematics article's parameter-matching conditions and "
                     "print a verdict naming every violated condition (exit status 1 if one "
                     "is violated). Always checked: geometric meshing and lead matching of "
                     "every stage. Gear engagement needs --teeth. Strength of every screw needs "
-                    "an axial load: --load, or else the largest load of the preset's seed "
-                    "scenario if it has one (seed000, seed002 and seed003 do; seed001's "
+                    "an axial load: --load, or else the largest load of the preset's paper "
+                    "scenario if it has one (li2021_two_stage, assembly_two_stage and friction_single_stage do; kinematics_two_stage's "
                     "scenario has none, so its default run reports the allowable loads and "
                     "leaves strength and buckling not checked). Buckling needs the load and "
                     "--length; with the load only, the longest stable extension is reported. "
@@ -598,7 +598,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("preset", metavar="PRESET", help="preset name (see 'prsm-fmu presets')")
     p.add_argument("--load", type=float_in(0.0, lo_open=True, unit="N"), default=None,
                    help="axial load F_a [N] (compressive for buckling); default: the largest "
-                        "load of the preset's seed scenario, if any")
+                        "load of the preset's paper scenario, if any")
     p.add_argument("--length", type=float_in(0.0, lo_open=True, unit="m"), default=None,
                    help="extended (unsupported) length L of the screw column [m]")
     p.add_argument("--material", choices=tuple(MATERIALS), default="carbon_steel",

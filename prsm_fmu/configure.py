@@ -74,7 +74,7 @@ TOLERANCE_RANGE = (1e-12, 0.1)
 #: starting step and one rejection; ``substeps`` (fixed steps) must not exceed it either
 MAX_SUBSTEPS_RANGE = (10, 100_000)
 #: |initial_screw_speed| [rad/s] at most: 10^4 rad/s (95,000 rpm) is 20x beyond any PRSM
-#: (critical speeds of the seeds' screws are a few thousand rpm)
+#: (critical speeds of the papers' screws are a few thousand rpm)
 MAX_INITIAL_SPEED = 1e4
 #: |initial_screw_angle| [rad] at most: beyond 10^6 rad a step's angle increment of 1 µrad
 #: loses its last digits to the magnitude of the angle (10^6 * 2.2e-16 = 2e-10 rad)

@@ -1,6 +1,6 @@
-"""Design checks of a multi-stage PRSM after seed 001's parameter-matching method.
+"""Design checks of a multi-stage PRSM after the two-stage kinematics article's parameter-matching method.
 
-Source: ``shared/seeds/001_522b7300c6bc9387.txt``, "Parameter Matching Design Methodology" and
+Source: the two-stage kinematics article, "Parameter Matching Design Methodology" and
 its table of conditions.  A multi-stage design must satisfy, per stage, the single-stage
 matching conditions and, for the mechanism, two added ones:
 
@@ -13,7 +13,7 @@ matching conditions and, for the mechanism, two added ones:
    given, otherwise the required ring teeth are reported.
 4. **Strength** of the screws under the axial load F_a, [σ] = σ_s / K:
    σ_1 = 4 F_a / (π d_01²) < [σ] (solid screw 1) and, for the hollow screw k ≥ 2 that slides
-   over screw k−1, σ_k = 4 F_a / (π (d_0k² − d_0(k−1)²)) < [σ] (seed 001 writes k = 2; the
+   over screw k−1, σ_k = 4 F_a / (π (d_0k² − d_0(k−1)²)) < [σ] (the two-stage kinematics article writes k = 2; the
    same holds down the chain).  d_0k = 2 r_Sk are the pitch diameters.  Every screw carries
    the full load (the stages are in series).
 5. **Buckling** of the extended column: slenderness λ = µ L / r_min with the critical stress
@@ -34,8 +34,8 @@ matching conditions and, for the mechanism, two added ones:
    reported instead.
 
 Material constants (a, b, λ_p, λ_s) are those of the straight-line formula in the usual
-mechanics-of-materials tables; seed 001 names them without values, so :data:`MATERIALS`,
-the safety factors and the end condition are inputs with stated defaults, not seed data.
+mechanics-of-materials tables; the two-stage kinematics article names them without values, so :data:`MATERIALS`,
+the safety factors and the end condition are inputs with stated defaults, not the article's data.
 SI units throughout (Pa, N, m).
 """
 
@@ -190,7 +190,7 @@ class DesignReport:
 # buckling
 # ---------------------------------------------------------------------------------------------
 def critical_stress(slenderness: float, material: Material) -> tuple[float, str]:
-    """σ_cr [Pa] for slenderness λ and the regime's name (seed 001's piecewise formula)."""
+    """σ_cr [Pa] for slenderness λ and the regime's name (the two-stage kinematics article's piecewise formula)."""
     lam = slenderness
     m = material
     if lam < m.lambda_s:
@@ -483,7 +483,7 @@ def check_design(params: MechanismParams, inputs: DesignInputs | None = None) ->
 
 
 def default_load(preset: str) -> float | None:
-    """The largest axial load of a preset's seed scenario (its module's ``SCENARIO``), if any."""
+    """The largest axial load of a preset's paper scenario (its module's ``SCENARIO``), if any."""
     from . import presets
 
     try:
@@ -521,7 +521,7 @@ def format_report(report: DesignReport, inputs_named: Mapping[str, str] | None =
     """
     names = {**_INPUT_NAMES, **(inputs_named or {})}
     inp = report.inputs
-    lines = [f"design checks (seed 001): {report.mechanism}",
+    lines = [f"design checks (the two-stage kinematics article): {report.mechanism}",
              f"axial load F_a = {'not given' if inp.axial_load is None else _kn(inp.axial_load)}, "
              f"extended length L = "
              f"{'not given' if inp.extended_length is None else f'{inp.extended_length:g} m'}"]

@@ -13,7 +13,7 @@ is exactly Coulomb, so a contact whose slip direction is fixed transmits a force
 the slip speed (the quasi-static level then has exactly piecewise-constant accelerations).
 Stiction is not modelled. The dissipated power µ|N| v² φ(v) is never negative.
 
-Two more terms act at the screw–roller contacts (seed ``003_e265d1d1167b0d4b.txt``):
+Two more terms act at the screw–roller contacts (the friction-torque article):
 
 * viscous (lubricant shear): f = −µ_1 n_t s per roller, µ_1 [N·s/m] per engaged thread and n_t
   engaged threads (:func:`viscous_coefficient`); linear through zero slip, so it needs no
@@ -70,7 +70,7 @@ def regularised_sign(v: float, v_scale: float) -> float:
 def viscous_coefficient(mu_viscous: float, n_rollers: int, threads_per_roller: int) -> float:
     """Viscous coefficient of a stage's rollers together, N_R µ_1 n_t [N·s/m].
 
-    Seed 003's lubricant term F_fs1 = µ_1 n_R n_t v_sr: each engaged thread contributes µ_1.
+    The friction-torque article's lubricant term F_fs1 = µ_1 n_R n_t v_sr: each engaged thread contributes µ_1.
 
     Parameters
     ----------

@@ -3,8 +3,8 @@
 The screw–roller contact of a PRSM does not lie in the axial plane through the screw and
 roller axes: because the two threads have helix angles of opposite slope at the mesh, the
 point where a straight-flank screw thread and a convex (circular-arc) roller thread share a
-point *and* a normal is offset from the pitch point.  The dynamic model (seed
-``000_a07c98907360be8b.txt`` Eqs. 14–25) needs that point's radii and angles
+point *and* a normal is offset from the pitch point.  The dynamic model (Li et al.
+(2021) Eqs. 14–25) needs that point's radii and angles
 (r_Sr, φ_Sr, r_Rs, φ_Rs) and the contact normal; this module computes them from the thread
 surfaces (method of Jones & Velinsky 2013, "Contact kinematics in the roller screw
 mechanism", and Fu et al. 2017) instead of taking them as typed-in data.
@@ -97,7 +97,7 @@ def screw_helix_angle(stage: StageParams) -> float:
 def ideal_axial_normal_fraction(stage: StageParams, radius: float) -> float:
     """Axial component of the unit normal of the straight-flank screw thread at a radius.
 
-    This is the factor of seed 000 Eq. 25 that converts the normal contact force F_Sr into
+    This is the factor of Li et al. (2021) Eq. 25 that converts the normal contact force F_Sr into
     its axial component, F_Srz = F_Sr · fraction.  For the straight-flank helicoid used here
     it is exact at every point of the flank at that radius.
 
@@ -154,7 +154,7 @@ class ContactGeometry:
         r_Rs, distance of the point from the roller axis in the xy-plane [m].
     roller_offset_angle : float
         φ_Rs [rad], defined by point − c = r_Rs (−cos φ_Rs, sin φ_Rs), c = (a, 0) (this is
-        the convention of seed 000 Eq. 14).
+        the convention of Li et al. (2021) Eq. 14).
     roller_axis_distance : float
         a = r_S + r_R [m], the distance between screw and roller axes.
     lead_per_radian : float
@@ -220,7 +220,7 @@ class ContactGeometry:
             b = −ẑ × P + n_S ẑ × (P − c)
 
         (the roller spins at −n_S ω_P relative to the carrier because it rolls on the nut,
-        r_N = n_S r_R).  Written with (r_Sr, φ_Sr, r_Rs, φ_Rs) this is seed 000 Eq. 14.
+        r_N = n_S r_R).  Written with (r_Sr, φ_Sr, r_Rs, φ_Rs) this is Li et al. (2021) Eq. 14.
         Both vectors are tangent to the contact (``normal · a = normal · b = 0``).
 
         Returns

@@ -1,18 +1,18 @@
 """Ideal (rigid, slip-free) kinematics of roller screws in closed form, in SI units.
 
 What this module is for: the reference motion against which the kinematic, quasi-static and
-dynamic models are checked, and the seeds' "theory" columns are reproduced.  The derivations
-and the comparison with the seeds are in ``docs/kinematics.md``.
+dynamic models are checked, and the papers' "theory" columns are reproduced.  The derivations
+and the comparison with the papers are in ``docs/kinematics.md``.
 
 Two mechanisms:
 
-* the **standard multi-stage PRSM** (seed ``000_a07c98907360be8b.txt`` §2.1 Eqs. 1–5, seed
-  ``001_522b7300c6bc9387.txt`` "Theoretical Kinematic Model"), described by
+* the **standard multi-stage PRSM** (Li et al. (2021) §2.1 Eqs. 1–5; the two-stage kinematics
+  article, "Theoretical Kinematic Model"), described by
   :class:`prsm_fmu.params.MechanismParams`;
-* the **recirculating roller screw** (seed ``004_3a9056c434204b67.txt``), whose grooved rollers
+* the **recirculating roller screw** (the recirculating-screw article), whose grooved rollers
   have no helix, described by :class:`RecirculatingParams`.
 
-Conventions (those of seed 000 and of the whole project): z is the screw axis, threads are
+Conventions (those of Li et al. (2021) and of the whole project): z is the screw axis, threads are
 right-handed, angular velocities are signed about +z by the right-hand rule [rad/s].  A nut's
 axial velocity ż_N is given in that z convention, so a positive screw speed drives the nuts
 towards −z; the *rod* velocity is −ż_N of the last nut, so a positive screw speed extends the rod.
@@ -29,7 +29,7 @@ TWO_PI = 2.0 * math.pi
 
 #: largest accepted misfit |d_n − d_s − 2 d_r| of a recirculating screw, relative to d_n.
 #: The closed forms below do not need the fit (see docs/kinematics.md); the check only catches
-#: gross input errors (a radius typed for a diameter misfits by > 7 %).  Seed 004's Table 2
+#: gross input errors (a radius typed for a diameter misfits by > 7 %).  The recirculating-screw article's Table 2
 #: misfits by 0.25 mm = 0.57 % of d_n.
 RECIRCULATING_FIT_RTOL = 0.01
 
@@ -40,7 +40,7 @@ RECIRCULATING_FIT_RTOL = 0.01
 def nut_velocities(params: MechanismParams, screw_speed: float) -> tuple[float, ...]:
     """Axial velocity of every nut, for the ideal motion at a given screw speed.
 
-    Seed 000 Eq. 2: ż_Nk = −θ̇_S / (2π) · Σ_{i≤k} L_Si.  Nut k carries screw k+1 (Eq. 3), and
+    Li et al. (2021) Eq. 2: ż_Nk = −θ̇_S / (2π) · Σ_{i≤k} L_Si.  Nut k carries screw k+1 (Eq. 3), and
     all screws turn at θ̇_S (Eq. 1), so the leads add up.
 
     Parameters
@@ -67,7 +67,7 @@ def nut_velocities(params: MechanismParams, screw_speed: float) -> tuple[float, 
 def screw_axial_velocities(params: MechanismParams, screw_speed: float) -> tuple[float, ...]:
     """Axial velocity of every screw, for the ideal motion at a given screw speed.
 
-    Seed 000 Eq. 3: ż_Sk = ż_N(k−1) for k > 1; screw 1 is axially fixed (ż_S1 = 0).
+    Li et al. (2021) Eq. 3: ż_Sk = ż_N(k−1) for k > 1; screw 1 is axially fixed (ż_S1 = 0).
 
     Parameters
     ----------
@@ -126,7 +126,7 @@ def ideal_carrier_speed_ratio(stage: StageParams) -> float:
     Relative to the carrier, pure rolling at the screw–roller pitch point gives
     (θ̇_S − θ̇_P) r_S = −(θ̇_R − θ̇_P) r_R and at the nut–roller pitch point (nut not turning)
     −θ̇_P r_N = (θ̇_R − θ̇_P) r_R; eliminating the roller spin θ̇_R gives
-    θ̇_P / θ̇_S = r_S / (r_S + r_N) = r_S / (2 (r_S + r_R)) (seed 001: ω_c = ω_s d_0s / (2 (d_0s + d_0R))).
+    θ̇_P / θ̇_S = r_S / (r_S + r_N) = r_S / (2 (r_S + r_R)) (the two-stage kinematics article: ω_c = ω_s d_0s / (2 (d_0s + d_0R))).
 
     Parameters
     ----------
@@ -145,7 +145,7 @@ def roller_spin_relative_to_carrier_ratio(stage: StageParams) -> float:
     """Roller spin relative to the carrier per unit carrier speed, from rolling on the nut.
 
     Rolling without slip at the nut–roller pitch point gives (θ̇_R − θ̇_P) r_R = −θ̇_P r_N.
-    Seed 001's "rotation" ω_R = (d_0s + 2 d_0R) / d_0R · ω_c is the magnitude of this quantity.
+    The two-stage kinematics article's "rotation" ω_R = (d_0s + 2 d_0R) / d_0R · ω_c is the magnitude of this quantity.
 
     Parameters
     ----------
@@ -163,7 +163,7 @@ def roller_spin_relative_to_carrier_ratio(stage: StageParams) -> float:
 def roller_absolute_spin_ratio(stage: StageParams) -> float:
     """Absolute roller spin (about the roller's own axis, inertial frame) per unit carrier speed.
 
-    Seed 000 Eq. 5: θ̇_R = −(n_S − 1) θ̇_P.  It equals 1 − r_N / r_R, the value implied by
+    Li et al. (2021) Eq. 5: θ̇_R = −(n_S − 1) θ̇_P.  It equals 1 − r_N / r_R, the value implied by
     :func:`roller_spin_relative_to_carrier_ratio`, exactly when r_N = n_S r_R (the roller then
     rolls on the nut without axial drift), a condition ``StageParams.validate`` enforces.
 
@@ -254,12 +254,12 @@ def ideal_kinematics(params: MechanismParams, screw_speed: float) -> MechanismKi
 
 
 # ---------------------------------------------------------------------------------------------
-# recirculating roller screw (seed 004)
+# recirculating roller screw (the recirculating-screw article)
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class RecirculatingParams:
     """Geometry of a recirculating roller screw: grooved rollers without helix, nut with a
-    non-threaded window and a cam ring that resets the rollers (seed 004).
+    non-threaded window and a cam ring that resets the rollers (the recirculating-screw article).
 
     Parameters
     ----------
@@ -337,7 +337,7 @@ def recirculating_carrier_speed(params: RecirculatingParams, screw_speed: float)
 
     Pure rolling at both pitch circles, relative to the carrier (Willis):
     (ω_s − ω_c) d_s = −(ω_r − ω_c) d_r and −ω_c d_n = (ω_r − ω_c) d_r, hence
-    ω_c = ω_s d_s / (d_s + d_n), i.e. seed 004's ω_c = ω_s d_s / (2 d_c) with d_c = (d_s + d_n)/2.
+    ω_c = ω_s d_s / (d_s + d_n), i.e. the recirculating-screw article's ω_c = ω_s d_s / (2 d_c) with d_c = (d_s + d_n)/2.
 
     Parameters
     ----------
@@ -359,7 +359,7 @@ def recirculating_roller_spin(params: RecirculatingParams, screw_speed: float) -
     """Absolute spin of a roller about its own axis in a recirculating roller screw.
 
     From rolling on the nut: ω_r = ω_c (1 − d_n / d_r); identical, by construction of ω_c, to
-    seed 004's ω_r = (d_s/d_r + 1) ω_c − (d_s/d_r) ω_s (rolling on the screw).
+    the recirculating-screw article's ω_r = (d_s/d_r + 1) ω_c − (d_s/d_r) ω_s (rolling on the screw).
 
     Parameters
     ----------
@@ -382,7 +382,7 @@ def recirculating_nut_velocity(params: RecirculatingParams, screw_speed: float) 
 
     The grooved roller follows the screw thread and the nut thread at its azimuth; with equal
     leads of the same hand the carrier angle cancels: ż_n = −ω_s L / (2π), independent of the
-    carrier speed (seed 004: v_n = n p ω_s / (2π) in magnitude).
+    carrier speed (the recirculating-screw article: v_n = n p ω_s / (2π) in magnitude).
 
     Parameters
     ----------
@@ -394,7 +394,7 @@ def recirculating_nut_velocity(params: RecirculatingParams, screw_speed: float) 
     Returns
     -------
     float
-        ż_n [m/s] in the z convention of seed 000 (right-handed threads).
+        ż_n [m/s] in the z convention of Li et al. (2021) (right-handed threads).
     """
     return -screw_speed * params.screw_lead / TWO_PI
 

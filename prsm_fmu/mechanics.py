@@ -21,7 +21,7 @@ The contact coefficients per unit of transmitted axial force (κ: torque on the 
 generalized force on the carrier, π: friction power) follow from the contact geometry
 (:mod:`prsm_fmu.geometry`) and the friction laws (:mod:`prsm_fmu.friction`): the regularised
 Coulomb force µF_N along the slip, the lubricant's viscous force µ_1 n_t s per roller and the
-differential-sliding torque µ_3 F_N on the screw (seed ``003_e265d1d1167b0d4b.txt``;
+differential-sliding torque µ_3 F_N on the screw (the friction-torque article;
 docs/model.md §3).  The viscous force does not scale with the normal force: its axial part
 V_z = N_R µ_1 n_t ω ℓ adds to the axial force the threads carry, so every per-unit quantity is
 taken per unit of the *effective* axial force Ã = A + V_z (N_R F_N = Ã q), and the viscous
@@ -138,9 +138,9 @@ class Solution:
         A_k, axial force the rollers of stage k take from screw k [N] (all rollers).
     contact_force : list of float
         Axial component of the screw–roller contact force per roller [N], signed: > 0 when the
-        flank that resists extension carries the load (seed 000's F_Srzk, Eq. 25).
+        flank that resists extension carries the load (Li et al.'s (2021) F_Srzk, Eq. 25).
     normal_force : list of float
-        Magnitude of the screw–roller normal contact force per roller [N] (seed 000's F_Srk).
+        Magnitude of the screw–roller normal contact force per roller [N] (Li et al.'s (2021) F_Srk).
     driven_torque : list of float
         M_Sk, torque driving screw k [N·m] (M_S1 is the motor torque).
     spline_friction : list of float
@@ -249,7 +249,7 @@ class Mechanism:
         return j
 
     def kinetic_energy(self, omega: float, carrier_speeds) -> float:
-        """Kinetic energy of the whole mechanism [J] (seed 000 Eq. 11)."""
+        """Kinetic energy of the whole mechanism [J] (Li et al. (2021) Eq. 11)."""
         t = 0.5 * self._j_eq * omega * omega
         if self.zeta is None:
             for s, wp in zip(self.stages, carrier_speeds):

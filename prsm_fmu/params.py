@@ -3,7 +3,7 @@
 Conventions (stated once here, in README.md and in docs/model.md):
 
 * Stage 1 is driven by the motor; stage ``n`` carries the output (the rod).
-* Screws, rollers and nuts are right-handed (seed ``000_a07c98907360be8b.txt`` §2.1).
+* Screws, rollers and nuts are right-handed (Li et al. (2021) §2.1).
 * A *standard* PRSM stage has a single-start roller whose lead equals the screw pitch
   ``L_S / n_S``, a nut with the screw's number of starts, and radii that satisfy both
   ``r_N = r_S + 2 r_R`` (the rollers fit between screw and nut) and ``r_N = n_S r_R``
@@ -23,12 +23,12 @@ from typing import Any
 GEOMETRY_RTOL = 1e-6
 
 #: largest differential-sliding coefficient µ_3 [m]: a moment arm of rolling resistance is at most
-#: a contact half-width, well below a millimetre for thread contacts (seed 003: ~1e-6 m)
+#: a contact half-width, well below a millimetre for thread contacts (the friction-torque article: ~1e-6 m)
 MAX_MU_DIFFERENTIAL = 1e-3
 
 #: largest viscous coefficient µ_1 per engaged thread [N·s/m]: 1e5 N·s/m puts 1e4 N on one thread
 #: at 0.1 m/s of slip, the order of the largest normal force a thread carries; a lubricant film
-#: that resists more than that is no film (seed 003: 0.001 N·s/m; its own load table needs ~580)
+#: that resists more than that is no film (the friction-torque article: 0.001 N·s/m; its own load table needs ~580)
 MAX_MU_VISCOUS = 1e5
 
 #: most engaged thread turns per roller [-]: a roller 1 m long (the length bound) at 1 mm pitch
@@ -41,7 +41,7 @@ def _check_positive(name: str, value: float) -> None:
 
 
 #: upper bounds of a stage's sizes: no PRSM has a radius or a lead of a metre, a part of ten
-#: tonnes or a moment of inertia of 1000 kg.m2 (the seeds' largest: 27.5 mm, 18 kg,
+#: tonnes or a moment of inertia of 1000 kg.m2 (the papers' largest: 27.5 mm, 18 kg,
 #: 1.7e-4 kg.m2); beyond them the model's numbers lose their meaning before they overflow
 MAX_SIZE = {"m": 1.0, "kg": 1e4, "kg.m2": 1e3}
 #: unit of each bounded StageParams field
@@ -72,7 +72,7 @@ SPLINE_RADIUS_MIN_FRACTION = 0.01
 
 
 def _check_spline_radius(k: int, stage: "StageParams") -> None:
-    """Bounds of the spline radius r_SSk of stage k > 1 (seed ``000_a07c98907360be8b.txt``, eq. 12).
+    """Bounds of the spline radius r_SSk of stage k > 1 (Li et al. (2021), eq. 12).
 
     The internal spline teeth are cut in the bore of screw #k, so r_SSk lies inside its pitch
     radius r_Sk.  The spline friction f_Sk = µ_SS |M_Sk| / r_SSk grows without bound as
@@ -125,10 +125,10 @@ class StageParams:
         Effective friction radius r_NS of the thrust bearing between this stage's nut and the
         next stage's screw [m]; unused for the last stage.
     carriers : int
-        Carriers per stage (one at each roller end in seed 000), default 2.
+        Carriers per stage (one at each roller end in Li et al. (2021)), default 2.
     threads_per_roller : int
-        Engaged thread turns per roller at the screw–roller mesh, n_t [-] (seed
-        ``003_e265d1d1167b0d4b.txt``'s "thread pitches per roller"), default 1.  Enters only the
+        Engaged thread turns per roller at the screw–roller mesh, n_t [-] (the
+        friction-torque article's "thread pitches per roller"), default 1.  Enters only the
         viscous friction (``MechanismParams.mu_viscous`` acts per engaged thread).
     """
 
@@ -254,20 +254,20 @@ class MechanismParams:
         Coulomb coefficient µ_SS between the spline teeth of consecutive screws [-], in [0, 1).
     mu_nut_screw : float
         Coulomb coefficient µ_NS of the thrust bearings between nut k and screw k+1 [-]
-        (seed ``002_dfce4e5c6f831e77.txt``), in [0, 1).
+        (the multi-stage assembly article), in [0, 1).
     slip_velocity_scale : float
         Velocity v_ε [m/s] below which Coulomb friction is regularised (it becomes viscous
         with coefficient 2µ·F/v_ε), so that the friction force is continuous through zero slip.
     mu_viscous : float
         Lubricant viscous coefficient µ_1 at the screw–roller contacts [N·s/m] per engaged
-        thread, in [0, inf): each roller feels µ_1 n_t |s| against its slip s (seed
-        ``003_e265d1d1167b0d4b.txt``, F_fs1 = µ_1 n_R n_t v_sr).  0 (default): no viscous term.
+        thread, in [0, inf): each roller feels µ_1 n_t |s| against its slip s (the
+        friction-torque article, F_fs1 = µ_1 n_R n_t v_sr).  0 (default): no viscous term.
     mu_differential : float
         Differential-sliding coefficient µ_3 [m], in [0, 1e-3]: a torque µ_3·F_N on each screw
-        against its rotation, F_N the stage's total screw–roller normal force (seed 003,
+        against its rotation, F_N the stage's total screw–roller normal force (the friction-torque article,
         M_fs3 = −µ_3 F_nf, µ_3 ~ 1e-6 m).  0 (default): no differential-sliding term.
     name, source : str
-        Registry key and citation (seed file and section) of the data.
+        Registry key and citation (paper and section, as docs/references.md) of the data.
     """
 
     stages: tuple[StageParams, ...]
@@ -334,7 +334,7 @@ class MechanismParams:
                 and 0.0 <= m3 <= MAX_MU_DIFFERENTIAL):
             raise ValueError(
                 f"mu_differential = {m3!r} m is out of range: must be in [0, "
-                f"{MAX_MU_DIFFERENTIAL:g}] m (a moment arm, ~1e-6 m in seed 003; at most a contact "
+                f"{MAX_MU_DIFFERENTIAL:g}] m (a moment arm, ~1e-6 m in the friction-torque article; at most a contact "
                 "half-width)")
         for k, st in enumerate(self.stages, start=1):
             if not isinstance(st, StageParams):

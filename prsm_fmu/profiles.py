@@ -53,7 +53,7 @@ class SpeedProfile:
 
 class ConstantSpeed(SpeedProfile):
     """ω(t) = ω₀ [rad/s] from t = 0 (a step from rest at t = 0 when the run starts from rest,
-    seed 000's start-up)."""
+    Li et al.'s (2021) start-up)."""
 
     kind = "constant"
 
@@ -108,7 +108,7 @@ class TableSpeed(SpeedProfile):
 
 class RampSpeed(TableSpeed):
     """ω(t) rising linearly from ω₀ to ω₁ [rad/s] over [t_start, t_start + duration] [s], constant
-    before and after (seed 003's 0 → 1 rad/s in t_a).
+    before and after (the friction-torque article's 0 → 1 rad/s in t_a).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Regenerate ``docs/paper_comparison.md``: the model's numbers beside the seed papers'.
+"""Regenerate ``docs/paper_comparison.md``: the model's numbers beside the papers'.
 
 Usage::
 
@@ -7,16 +7,16 @@ Usage::
 It writes ``OUT/paper_comparison.md`` and the figures ``OUT/figures/*.png``:
 
 * Li et al. (2021) §3.1 start-up (settling times, efficiencies, orderings) at the base case µ_SR = 0.1
-  (the ``seed000_two_stage`` preset), with the settling band's effect and µ_SR ∈ {0.05, 0.1, 0.2};
+  (the ``li2021_two_stage`` preset), with the settling band's effect and µ_SR ∈ {0.05, 0.1, 0.2};
 * Li et al. (2021) §3.2 friction grid µ_SR ∈ {0.1, 0.2} × µ_SS ∈ {0.2, 0.3};
 * Li et al. (2021) §3.3 pitches summing to 4 mm;
-* the seed 002 steady-state table (``seed002_two_stage``, 7000 N, 100 rad/s).
+* the multi-stage assembly article's steady-state table (``assembly_two_stage``, 7000 N, 100 rad/s).
 
 Steady values come from :func:`prsm_fmu.steady_state` (root finding); transients from
 :func:`prsm_fmu.simulate` at the dynamic level with its default stepper, the screw speed
 stepped at t = 0 with the carriers at rest.  Errors of either are not caught.  Every number in
 the generated text is computed here; the papers' numbers are quoted from
-``shared/seeds/000_a07c98907360be8b.txt`` §3 and ``002_dfce4e5c6f831e77.txt``.
+Li et al. (2021) §3 and the multi-stage assembly article.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from . import presets
 from .cli import plot_startup
 from .results import energy_balance_residual
 from .params import MechanismParams
-from .presets import seed002
+from .presets import assembly_article
 from .simulate import DEFAULT_STEPPER, simulate
 from .steady_state import steady_state
 from .sweep.metrics import settle, value_at
@@ -47,9 +47,9 @@ __all__ = ["main", "generate", "COMMAND"]
 #: the command that regenerates the document
 COMMAND = "python -m prsm_fmu.report"
 
-SPEED = 100.0           # screw speed after the step [rad/s] (Li et al. (2021) §3.1, seed 002)
-LOAD_000 = 5000.0       # seed 000 load on nut 2 [N]
-LOAD_002 = 7000.0       # seed 002 load on nut 2 [N]
+SPEED = 100.0           # screw speed after the step [rad/s] (Li et al. (2021) §3.1, the multi-stage assembly article)
+LOAD_000 = 5000.0       # Li et al. (2021) load on nut 2 [N]
+LOAD_002 = 7000.0       # the multi-stage assembly article load on nut 2 [N]
 T_END = 2e-3            # simulated time [s] (> 20 time constants of the slower carrier)
 INTERVAL = 1e-6         # output interval [s]
 T_CONTACT = 0.75e-3     # Li et al. (2021) §3.2 compares the contact force at t = 0 and t = 0.75 ms [s]
@@ -58,13 +58,13 @@ T_CONTACT = 0.75e-3     # Li et al. (2021) §3.2 compares the contact force at t
 PAPER_SETTLE = (0.14e-3, 0.46e-3)   # carrier 1, carrier 2 [s]
 PAPER_ETA_START = 0.45              # "less than 0.45 at the beginning"
 PAPER_ETA_END = 0.80                # "nearly to 0.80 at the steady state"
-#: settling band of the comparisons with seed 000 [-] and the tolerances of the verdicts: the
+#: settling band of the comparisons with Li et al. (2021) [-] and the tolerances of the verdicts: the
 #: paper reads times off a figure at an unstated band (±20 %), "nearly 0.80" (±0.01)
 PAPER_BAND = 1e-3
 PAPER_SETTLE_TOL = 0.20
 PAPER_ETA_TOL = 0.01
 
-# seed 002 steady-state table: scenario → (µ_SS, µ_NS, η, ζ1, ζ2, F_RG1 [N], F_RG2 [N])
+# the multi-stage assembly article steady-state table: scenario → (µ_SS, µ_NS, η, ζ1, ζ2, F_RG1 [N], F_RG2 [N])
 PAPER_002 = {
     "base": (0.10, 0.005, 0.872, 0.195, 0.198, 12.3, 8.7),
     "high_mu_ss": (0.20, 0.005, 0.870, 0.195, 0.198, 12.4, 8.7),
@@ -77,7 +77,7 @@ SCENARIO_LABEL = {"base": "base", "high_mu_ss": "high µ_SS", "high_mu_ns": "hig
 # helpers
 # ---------------------------------------------------------------------------------------------
 def _run(params: MechanismParams, load: float) -> dict[str, np.ndarray]:
-    """The seed 000 start-up at the dynamic level: step to SPEED at t = 0, carriers at rest."""
+    """The Li et al. (2021) start-up at the dynamic level: step to SPEED at t = 0, carriers at rest."""
     return simulate(params, fidelity="dynamic", drive="speed", screw_speed=SPEED,
                     load_force=load, t_end=T_END, output_interval=INTERVAL)
 
@@ -135,11 +135,11 @@ def plot_runs(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str,
 # ---------------------------------------------------------------------------------------------
 def _section_startup(p0: MechanismParams, runs: dict[float, dict], fig_dir: str,
                      fig_rel: str) -> str:
-    """Seed 000 §3.1: the base-case start-up against the paper's statements, the settling
+    """Li et al. (2021) §3.1: the base-case start-up against the paper's statements, the settling
     band's effect, and the µ_SR sensitivity (µ_SS = 0.2)."""
     r = runs[0.1]
     plot_startup([("µ_SR 0.1", r), ("µ_SR 0.05", runs[0.05])],
-                 os.path.join(fig_dir, "seed000_startup.png"),
+                 os.path.join(fig_dir, "li2021_startup.png"),
                  title="Li et al. (2021) §3.1 start-up: 100 rad/s step, 5000 N "
                        "(solid µ_SR 0.1, dashed µ_SR 0.05; µ_SS 0.2)")
     ts1, ts2 = _settle(r, 1), _settle(r, 2)
@@ -192,7 +192,7 @@ def _section_startup(p0: MechanismParams, runs: dict[float, dict], fig_dir: str,
                f"{n_agree} of {len(checks)} statements agree; these differ: {'; '.join(differ)}.")
     return f"""## 1. Li et al. (2021) §3.1: start-up transient
 
-Scenario: the Li et al. (2021) §3.1 two-stage PRSM (preset `seed000_two_stage`: µ_SR = 0.1,
+Scenario: the Li et al. (2021) §3.1 two-stage PRSM (preset `li2021_two_stage`: µ_SR = 0.1,
 µ_SS = 0.2, µ_NS = 0), screw speed stepped to {SPEED:g} rad/s at t = 0 with both carriers at
 rest, F_N2 = {LOAD_000:g} N, dynamic level, outputs every {INTERVAL * 1e6:g} µs over
 {T_END * 1e3:g} ms.  Settling time: the first time after which |ζ − ζ_final| stays within
@@ -206,7 +206,7 @@ Regenerate: `{COMMAND}` (the µ_SR = 0.1 run alone: `prsm-fmu startup --out out`
 
 {verdict}
 
-![Li et al. (2021) §3.1 start-up]({fig_rel}/seed000_startup.png)
+![Li et al. (2021) §3.1 start-up]({fig_rel}/li2021_startup.png)
 
 The carriers approach their equilibrium exponentially, so the settling time depends on the
 band (base case):
@@ -225,7 +225,7 @@ losses.
 
 def _section_grid(p0: MechanismParams, runs: dict[tuple[float, float], dict], fig_dir: str,
                   fig_rel: str, zetas_seen: list[float]) -> str:
-    """Seed 000 §3.2: µ_SR ∈ {0.1, 0.2} × µ_SS ∈ {0.2, 0.3}."""
+    """Li et al. (2021) §3.2: µ_SR ∈ {0.1, 0.2} × µ_SS ∈ {0.2, 0.3}."""
     ss = {key: steady_state(p0.with_changes(mu_screw_roller=key[0], mu_spline=key[1]),
                             SPEED, LOAD_000) for key in runs}
     rows = []
@@ -245,7 +245,7 @@ def _section_grid(p0: MechanismParams, runs: dict[tuple[float, float], dict], fi
                     "f_S2 [N]", "F_Srz1: t = 0 → 0.75 ms [N]", "F_Srz2: t = 0 → 0.75 ms [N]",
                     "t_s1 [ms]", "t_s2 [ms]"], rows)
     plot_runs([(f"µ_SR {k[0]:g}, µ_SS {k[1]:g}", runs[k]) for k in sorted(runs)],
-              os.path.join(fig_dir, "seed000_friction_grid.png"),
+              os.path.join(fig_dir, "li2021_friction_grid.png"),
               title="Li et al. (2021) §3.2 friction grid: 100 rad/s step, 5000 N")
 
     mus_sr = sorted({k[0] for k in runs})
@@ -308,13 +308,13 @@ dynamic start-up of §1. Regenerate: `{COMMAND}`.
 
 {trends}
 
-![Li et al. (2021) §3.2 friction grid]({fig_rel}/seed000_friction_grid.png)
+![Li et al. (2021) §3.2 friction grid]({fig_rel}/li2021_friction_grid.png)
 """
 
 
 def _section_pitch(p0: MechanismParams, fig_dir: str, fig_rel: str,
                    zetas_seen: list[float]) -> str:
-    """Seed 000 §3.3: pitches of screws 1 and 2 summing to 4 mm, 5 starts each."""
+    """Li et al. (2021) §3.3: pitches of screws 1 and 2 summing to 4 mm, 5 starts each."""
     pitches = [1.0, 1.5, 2.0, 2.5, 3.0]
     rows, vals, runs = [], [], []
     for p1 in pitches:
@@ -336,7 +336,7 @@ def _section_pitch(p0: MechanismParams, fig_dir: str, fig_rel: str,
                      f"{vals[-1]['z1']:.5f}", f"{vals[-1]['z2']:.5f}", f"{vals[-1]['f1']:.1f}",
                      f"{vals[-1]['f2']:.1f}", f"{vals[-1]['eta']:.4f}", f"{vals[-1]['fs']:.1f}",
                      _ms(t1), _ms(t2)])
-    plot_runs(runs, os.path.join(fig_dir, "seed000_pitches.png"),
+    plot_runs(runs, os.path.join(fig_dir, "li2021_pitches.png"),
               title="Li et al. (2021) §3.3 pitches (p1 + p2 = 4 mm): 100 rad/s step, 5000 N")
     table = markdown_table(["pitch 1 [mm]", "pitch 2 [mm]", "L_S1 [mm]", "L_S2 [mm]", "ζ_PS1", "ζ_PS2",
                     "F_Srz1 [N]", "F_Srz2 [N]", "η", "f_S2 [N]", "t_s1 [ms]", "t_s2 [ms]"], rows)
@@ -376,16 +376,16 @@ radii, rollers and masses unchanged, µ_SR = 0.1, µ_SS = 0.2). Steady values fr
 
 {trends}
 
-![Li et al. (2021) §3.3 pitches]({fig_rel}/seed000_pitches.png)
+![Li et al. (2021) §3.3 pitches]({fig_rel}/li2021_pitches.png)
 """
 
 
 def _section_002(fig_rel: str, zetas_seen: list[float]) -> str:
-    """Seed 002 steady-state table at 7000 N, 100 rad/s."""
+    """The multi-stage assembly article steady-state table at 7000 N, 100 rad/s."""
     rows, trans = [], []
     ss, settle_002 = {}, {}
     for sc, (mu_ss, mu_ns, eta_p, z1_p, z2_p, rg1, rg2) in PAPER_002.items():
-        params = seed002.two_stage(sc).validate()
+        params = assembly_article.two_stage(sc).validate()
         s = steady_state(params, SPEED, LOAD_002)
         ss[sc] = s
         zetas_seen.extend([s["stage[1].carrier_speed_ratio"], s["stage[2].carrier_speed_ratio"]])
@@ -404,13 +404,13 @@ def _section_002(fig_rel: str, zetas_seen: list[float]) -> str:
     ttable = markdown_table(["scenario", "η(0) model (paper ≈ 0.60)",
                      "t_s1 model [ms] (paper ≈ 50 ms)", "t_s2 model [ms] (paper ≈ 150 ms)",
                      f"η({T_END * 1e3:g} ms) model"], trans)
-    base = presets.load("seed002_two_stage")
+    base = presets.load("assembly_two_stage")
     st1, st2 = base.stages
     roll1 = st1.screw_radius / (st1.screw_radius + st1.nut_radius)
     roll2 = st2.screw_radius / (st2.screw_radius + st2.nut_radius)
     d_eta_ss_model = ss["base"]["efficiency"] - ss["high_mu_ss"]["efficiency"]
     d_eta_ns_model = ss["base"]["efficiency"] - ss["high_mu_ns"]["efficiency"]
-    high_ns = seed002.two_stage("high_mu_ns").validate()
+    high_ns = assembly_article.two_stage("high_mu_ns").validate()
     r_ns = st1.bearing_radius
 
     def eta_at(radius: float) -> float:
@@ -430,8 +430,8 @@ def _section_002(fig_rel: str, zetas_seen: list[float]) -> str:
         "thrust-bearing radius")
     return f"""## 4. The assembly article: steady-state table (two-stage, 7000 N, 100 rad/s)
 
-Preset `seed002_two_stage` (µ_SR = 0.05; thrust-bearing radius r_NS1 = {r_ns * 1e3:g} mm, an
-assumption stated in `prsm_fmu/presets/seed002.py`) and its variants high µ_SS and high µ_NS;
+Preset `assembly_two_stage` (µ_SR = 0.05; thrust-bearing radius r_NS1 = {r_ns * 1e3:g} mm, an
+assumption stated in `prsm_fmu/presets/assembly_article.py`) and its variants high µ_SS and high µ_NS;
 F_N2 = {LOAD_002:g} N, {SPEED:g} rad/s. Steady values from `steady_state`. Regenerate:
 `{COMMAND}`.
 
@@ -494,7 +494,7 @@ def generate(out_dir: str = "docs") -> str:
     fig_rel = "figures"
     fig_dir = os.path.join(out_dir, fig_rel)
     os.makedirs(fig_dir, exist_ok=True)
-    p0 = presets.load("seed000_two_stage")
+    p0 = presets.load("li2021_two_stage")
     mu_ss0 = p0.mu_spline
 
     # one dynamic start-up per (µ_SR, µ_SS) pair; §1 and §2 share them
@@ -506,7 +506,7 @@ def generate(out_dir: str = "docs") -> str:
 
     zetas_seen: list[float] = []
     parts = [
-        "# The model beside the seed papers\n",
+        "# The model beside the papers\n",
         f"Generated by `{COMMAND}` (do not edit by hand; rerun it after changing the model). "
         "Papers (full references in [references.md](references.md)): Li, Liu, Fu and Ma, "
         "\"Lagrange-method-based dynamic analysis of multi-stage planetary roller screw "
@@ -541,7 +541,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m prsm_fmu.report",
         description="Regenerate paper_comparison.md (and figures/) with the model's numbers "
-                    "beside the seed papers'.")
+                    "beside the papers'.")
     parser.add_argument("--out", default="docs",
                         help="output directory (figures in OUT/figures); default %(default)s")
     args = parser.parse_args(argv)

@@ -51,7 +51,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     Parameters
     ----------
     params : MechanismParams
-        The mechanism (e.g. ``presets.load("seed000_two_stage")``).
+        The mechanism (e.g. ``presets.load("li2021_two_stage")``).
     fidelity : {"kinematic", "quasi-static", "dynamic", "auto"}
         Model level.  ``auto`` chooses once per run, at its start, the cheapest level whose
         estimated model error is ≤ ``rtol`` (operating point: the inputs at t = 0, the initial
@@ -85,7 +85,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         Torque drive: screw speed at t = 0 [rad/s] (the speed drive starts at the profile's).
     initial_carrier_ratio : float or None
         Dynamic level: carrier speeds at t = 0 as a fraction of the screw speed; ``None`` puts
-        them at equilibrium.  Default 0 (carriers at rest, seed 000's start).
+        them at equilibrium.  Default 0 (carriers at rest, Li et al.'s (2021) start).
     model_options, stepper_options : dict, optional
         Passed to the model (e.g. ``efficiency``) and the stepper (e.g. ``substeps``).
 

@@ -139,7 +139,7 @@ STAGE_FIELDS: dict[str, tuple] = {
     "bearing_radius": ("Real", "m", "friction radius of the thrust bearing between this nut and the "
                        "next screw (last stage: unused; > 0 if mu_nut_screw > 0)", 0.0, None),
     "carriers": ("Integer", None, "carriers per stage: 1 or 2 (one at each end of the rollers)", 1, 2),
-    # seed 003's friction terms (003_e265d1d1167b0d4b.txt): engaged threads per roller
+    # the friction-torque article's friction terms: engaged threads per roller
     "threads_per_roller": ("Integer", None, "engaged thread turns per roller n_t (the viscous "
                            "friction acts per engaged thread), in [1, 1000]", 1,
                            MAX_THREADS_PER_ROLLER),
@@ -155,7 +155,7 @@ MECHANISM_FIELDS: dict[str, tuple] = {
                      "nut k and screw k+1, in [0, 1)", 0.0, 1.0),
     "slip_velocity_scale": ("Real", "m/s", "sliding speed below which Coulomb friction is "
                             "regularised (viscous)", 0.0, None),
-    # seed 003's friction terms (003_e265d1d1167b0d4b.txt)
+    # the friction-torque article's friction terms
     "mu_viscous": ("Real", "N.s/m", "lubricant viscous coefficient at the screw-roller contacts "
                    "per engaged thread (force mu_viscous * threads_per_roller * slip per roller), "
                    "in [0, 1e5] N.s/m", 0.0, MAX_MU_VISCOUS),
@@ -432,7 +432,7 @@ class PRSMSlave(Fmi2Slave):
     #: parameter name -> start value (every parameter of :func:`variable_table`)
     defaults: dict[str, Any] | None = None
     #: registry key of the preset the defaults come from (documentation, fallback defaults)
-    preset: str = "seed000_two_stage"
+    preset: str = "li2021_two_stage"
     author = "prsm-fmu"
     version = __version__
 

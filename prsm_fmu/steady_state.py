@@ -15,14 +15,14 @@ Unknowns for an n-stage mechanism at screw speed ω ≠ 0 and load F (4n − 1 o
 
 Residuals (4n − 1), with s_k = ω a_k + ζ_k ω b_k, u_k = s_k φ(|s_k|) (friction.py),
 f_k = −µ_SR F_k u_k − µ_1 n_tk s_k (Coulomb spin sliding and the lubricant's viscous force per
-roller, seed 003), ℓ_k = L_Sk / 2π, A_n = F and A_k = B_k (k < n):
+roller, the friction-torque article), ℓ_k = L_Sk / 2π, A_n = F and A_k = B_k (k < n):
 
 * carrier k:           G_Pk = N_Rk f_k · b_k = 0;
 * rollers of stage k:  N_Rk (F_k n_z + f_k,z) − A_k = 0;
 * screw k ≥ 2, axial:  B_(k−1) − A_k − h_k + h_(k+1) = 0,
   h_k = µ_SS |M_Sk| / r_SSk · sgñ(ω ℓ_(k−1)), h_1 = h_(n+1) = 0;
 * screw k, torque:     M_Sk − M_S(k+1) + N_Rk [P_k × (F_k n_k + f_k)]_z + T_b,k + T_d,k = 0,
-  T_b,k = −µ_NS |B_(k−1)| r_NS,(k−1) sgñ(ω r_NS,(k−1)) (k ≥ 2), M_S(n+1) = 0, and seed 003's
+  T_b,k = −µ_NS |B_(k−1)| r_NS,(k−1) sgñ(ω r_NS,(k−1)) (k ≥ 2), M_S(n+1) = 0, and the friction-torque article's
   differential-sliding torque T_d,k = −µ_3 N_Rk F_k sgñ(ω r_k), r_k = |P_k,xy| the contact
   radius;
 
@@ -337,7 +337,7 @@ def steady_state(params: MechanismParams, screw_speed: float, load_force: float,
     screw_speed : float
         Screw 1 speed ω [rad/s], finite and non-zero.
     load_force : float
-        Load F on the last nut [N] along +z; positive resists extension (seed 000's F_N).
+        Load F on the last nut [N] along +z; positive resists extension (Li et al.'s (2021) F_N).
     initial_guess : sequence of float, optional
         Physical starting values in the order of :func:`unknown_names`; default
         :func:`default_initial_guess`.  The solution does not depend on it.
@@ -352,13 +352,13 @@ def steady_state(params: MechanismParams, screw_speed: float, load_force: float,
         (positive on the "+" flank), ``stage[k].driven_torque`` M_Sk [N·m] (M_S1 for k = 1),
         ``stage[k].spline_friction`` h_k [N] (0 for k = 1); ``efficiency`` [-], the ratio of
         the power delivered to the power supplied: F v_rod / (M_S1 ω) in forward drive
-        (seed 000 Eq. 28), M_S1 ω / (F v_rod) when the load drives the motor (back-driving),
+        (Li et al. (2021) Eq. 28), M_S1 ω / (F v_rod) when the load drives the motor (back-driving),
         NaN when no power flows (F = 0); ``friction_power`` M_S1 ω − F v_rod [W] (≥ 0);
         ``friction_power_coulomb``, ``friction_power_viscous``, ``friction_power_differential``
         and ``friction_power_joints`` [W], the same power from each term's own law at the
         solution (screw–roller µ_SR F_k u_k·s_k, µ_1 n_t |s_k|² and µ_3 F_k ω sgñ(ω r_k) per
         roller; splines and thrust bearings), whose sum equals ``friction_power`` when the
-        balances hold; ``screw_friction_torque`` M_S1 − F ΣL/2π [N·m] (seed 003's M_f at steady
+        balances hold; ``screw_friction_torque`` M_S1 − F ΣL/2π [N·m] (the friction-torque article's M_f at steady
         state); ``residual_norm``, the 2-norm of the dimensionless residual vector [-].
 
     Raises

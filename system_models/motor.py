@@ -62,7 +62,7 @@ class MotorParams:
 
     * ``pole_pairs = 4``: common for servo PMSMs of this size (8 poles).
     * ``torque_constant = 1.5`` N·m/A (peak phase current, i_d = 0): with the 20 A current limit
-      the peak torque is 30 N·m, enough to drive the seed 000 screw (20 mm per revolution,
+      the peak torque is 30 N·m, enough to drive the Li et al. (2021) screw (20 mm per revolution,
       efficiency ≈ 0.8) against ≈ 7.5 kN, or to accelerate the reflected inertia at 2e4 rad/s².
       ψ = k_t/(1.5 p) = 0.25 Wb, so the back-EMF is 1.0 V per rad/s (phase peak).
     * ``resistance = 0.5`` Ω, ``inductance = 2e-3`` H (per phase): electrical time constant

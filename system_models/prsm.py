@@ -31,8 +31,8 @@ __all__ = ["PRSMConfig", "PythonPRSM", "make_prsm_block", "prsm_output_names", "
            "MECHANISMS", "DEFAULT_STEPPER", "AUTO_FIDELITY", "ATOL_FACTOR"]
 
 #: FMU name -> preset it is built from (fmu_build.mechanisms; PRSM3 is built by fmu_build)
-MECHANISMS = {"PRSM1": "seed003_single_stage", "PRSM2": "seed000_two_stage",
-              "PRSM3": "seed000_three_stage"}
+MECHANISMS = {"PRSM1": "friction_single_stage", "PRSM2": "li2021_two_stage",
+              "PRSM3": "li2021_three_stage"}
 
 
 # the FMU's Real outputs in its order; units from prsm_fmu.units (the FMU's spellings)

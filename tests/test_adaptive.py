@@ -17,7 +17,7 @@ from prsm_fmu.models import AdaptiveModel, make_model
 from prsm_fmu.models.auto import MARGIN, carrier_time_constants
 from prsm_fmu.steppers import make_stepper
 
-SEED000 = presets.load("seed000_two_stage")
+LI2021 = presets.load("li2021_two_stage")
 OUTPUTS = ("screw_speed", "screw_acceleration", "stage[1].contact_force", "stage[2].contact_force",
            "stage[1].driven_torque", "stage[2].driven_torque", "stage[2].spline_friction",
            "stage[1].carrier_speed", "stage[2].carrier_speed", "friction_power")
@@ -52,10 +52,10 @@ def test_lag_integrated_along_the_run_matches_the_dynamic_carriers():
     speed and load, against the dynamic level's carriers after 2 ms (≈ 60 τ of the slower
     carrier)."""
     torque, load, h = 25.0, 5000.0, 1e-5
-    res = simulate(SEED000, "dynamic", "torque", screw_torque=torque, load_force=load,
+    res = simulate(LI2021, "dynamic", "torque", screw_torque=torque, load_force=load,
                    t_end=2e-3, output_interval=h, initial_screw_speed=100.0,
                    initial_carrier_ratio=None, rtol=1e-10, atol=1e-12)
-    m = AdaptiveModel(SEED000, "torque", tolerance=1e-3)
+    m = AdaptiveModel(LI2021, "torque", tolerance=1e-3)
     w, a = res["screw_speed"], res["screw_acceleration"]
     d = [0.0, 0.0]
     for i in range(len(w) - 1):
@@ -68,17 +68,17 @@ def test_lag_integrated_along_the_run_matches_the_dynamic_carriers():
 
 
 def test_startup_switches_once_to_quasi_static_after_the_carriers_settle_and_costs_less():
-    """Seed 000 start-up (carriers at rest, ω stepped to 100 rad/s, 5 kN): dynamic while the
+    """Li et al. (2021) start-up (carriers at rest, ω stepped to 100 rad/s, 5 kN): dynamic while the
     carriers spin up, then quasi-static for good; the outputs stay within the tolerance of
     the dynamic level's own run with the same stepper, for fewer rhs calls."""
     tol, h, n = 1e-6, 1e-5, 100
     kw = dict(screw_speed=100.0, load_force=5000.0, t_end=n * h, output_interval=h,
               initial_carrier_ratio=0.0, stepper="explicit_adaptive", rtol=tol, atol=tol * 1e-3)
-    auto = simulate(SEED000, "auto", "speed", **kw)
-    dyn = simulate(SEED000, "dynamic", "speed", **kw)
+    auto = simulate(LI2021, "auto", "speed", **kw)
+    dyn = simulate(LI2021, "dynamic", "speed", **kw)
     assert _error(auto, dyn) <= tol / MARGIN
     u = (0.0, 5000.0)          # speed drive: constant prescribed speed, 5 kN
-    m = make_model(SEED000, "auto", "speed", tolerance=tol, inputs=u, comm_step=h,
+    m = make_model(LI2021, "auto", "speed", tolerance=tol, inputs=u, comm_step=h,
                    screw_speed=100.0, carrier_ratio=0.0)
     st, xs, modes, rhs = _run(m, "explicit_adaptive", lambda t: u,
                               m.initial_state(u, screw_speed=100.0, carrier_ratio=0.0), h, n,
@@ -101,7 +101,7 @@ def test_a_strong_acceleration_switches_back_to_dynamic_and_keeps_the_tolerance(
     dynamic and stays within the tolerance of the dynamic level; the quasi-static level alone
     does not."""
     tol, h, n, load = 1e-4, 1e-5, 300, 1000.0
-    qs = make_model(SEED000, "quasi-static", "torque")
+    qs = make_model(LI2021, "quasi-static", "torque")
     # the torque that holds 100 rad/s, from the quasi-static level's balance (α = 0)
     t_ss = qs.mechanism.solve(100.0, (), load, acceleration=0.0).motor_torque
 
@@ -110,18 +110,18 @@ def test_a_strong_acceleration_switches_back_to_dynamic_and_keeps_the_tolerance(
 
     kw = dict(screw_torque=lambda t: u_of_t(t)[0], load_force=load, t_end=n * h,
               output_interval=h, initial_screw_speed=100.0, initial_carrier_ratio=None)
-    ref = simulate(SEED000, "dynamic", "torque", rtol=1e-9, atol=1e-11, **kw)
-    m = make_model(SEED000, "auto", "torque", tolerance=tol, inputs=u_of_t(0.0), comm_step=h,
+    ref = simulate(LI2021, "dynamic", "torque", rtol=1e-9, atol=1e-11, **kw)
+    m = make_model(LI2021, "auto", "torque", tolerance=tol, inputs=u_of_t(0.0), comm_step=h,
                    screw_speed=100.0, carrier_ratio=None)
     assert m.start == "quasi-static"
     x0 = m.initial_state(u_of_t(0.0), screw_speed=100.0, carrier_ratio=None)
     _, _, modes, _ = _run(m, "rosenbrock", u_of_t, x0, h, n, rtol=tol * 1e-2, atol=tol * 1e-4)
     assert set(modes[:100]) == {"quasi-static"} and "dynamic" in modes[100:]
     # the model error alone: the dynamic steps at a tolerance far below the model's
-    auto = simulate(SEED000, "auto", "torque", rtol=tol, atol=tol * 1e-2,
+    auto = simulate(LI2021, "auto", "torque", rtol=tol, atol=tol * 1e-2,
                     stepper_options={"rtol": tol * 1e-2, "atol": tol * 1e-4}, **kw)
     assert _error(auto, ref) <= tol
-    assert _error(simulate(SEED000, "quasi-static", "torque", **kw), ref) > tol
+    assert _error(simulate(LI2021, "quasi-static", "torque", **kw), ref) > tol
 
 
 def test_energy_balance_closes_across_the_switches():
@@ -129,7 +129,7 @@ def test_energy_balance_closes_across_the_switches():
     energy gained, through a dynamic → quasi-static switch (the carriers' residual deviation
     at the switch carries energy of the order of its square)."""
     tol = 1e-6
-    res = simulate(SEED000, "auto", "torque", screw_torque=25.0, load_force=5000.0, t_end=2e-3,
+    res = simulate(LI2021, "auto", "torque", screw_torque=25.0, load_force=5000.0, t_end=2e-3,
                    output_interval=1e-5, initial_screw_speed=100.0, initial_carrier_ratio=0.0,
                    rtol=tol, atol=tol * 1e-2)
     w_in, w_out, w_f = res["input_work"], res["output_work"], res["friction_work"]
@@ -140,7 +140,7 @@ def test_energy_balance_closes_across_the_switches():
 
 def _memory_round_trip(stepper_name: str, k: int) -> None:
     u = (0.0, 5000.0)          # speed drive: constant prescribed speed, 5 kN
-    m = make_model(SEED000, "auto", "speed", tolerance=1e-6, inputs=u, comm_step=1e-5,
+    m = make_model(LI2021, "auto", "speed", tolerance=1e-6, inputs=u, comm_step=1e-5,
                    screw_speed=100.0, carrier_ratio=0.0)
     st = make_stepper(stepper_name, m, rtol=1e-6, atol=1e-9)
     x = m.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
@@ -165,7 +165,7 @@ def test_a_saved_memory_reproduces_the_run_bit_for_bit(k):
 
 
 def test_a_memory_of_another_stepper_is_refused_with_a_clear_error():
-    m = make_model(SEED000, "auto", "torque", tolerance=1e-6)
+    m = make_model(LI2021, "auto", "torque", tolerance=1e-6)
     st = make_stepper("rosenbrock", m)
     with pytest.raises(ValueError, match="not a memory"):
         st.set_memory((None,))
@@ -190,7 +190,7 @@ def test_default_dynamic_steps_by_the_carriers_time_constant_and_zero_speed(h, o
     from carrier_time_constants, and the exponential stepper (carriers' linear part exact)
     beyond it."""
     u = (0.0, load)            # speed drive: constant prescribed speed
-    m = make_model(SEED000, "auto", "speed", tolerance=1e-6, inputs=u, screw_speed=omega,
+    m = make_model(LI2021, "auto", "speed", tolerance=1e-6, inputs=u, screw_speed=omega,
                    carrier_ratio=0.0)
     st = make_stepper("default", m, rtol=1e-6, atol=1e-8)
     mem = st.get_memory()      # (mode, lags, scale, wait, backoff, gain, switches, alpha, ...)
@@ -198,5 +198,5 @@ def test_default_dynamic_steps_by_the_carriers_time_constant_and_zero_speed(h, o
     x = m.initial_state(u, screw_speed=omega, carrier_ratio=None)
     assert st.dynamic_for(x, u, h).name == expected
     if omega and load and alpha == 0.0:
-        tau = min(carrier_time_constants(SEED000, omega, load))
+        tau = min(carrier_time_constants(LI2021, omega, load))
         assert (h <= 3.3 * tau) == (expected == "explicit_adaptive")

@@ -26,20 +26,20 @@ from benchmark_modules import load_benchmark as _load  # noqa: E402
 
 
 wp = _load("work_precision")
-SEED000 = presets.load("seed000_two_stage")
+LI2021 = presets.load("li2021_two_stage")
 
 
 # ---- the estimate's ingredients ----------------------------------------------------------
 
 @pytest.mark.parametrize("omega, load", [(100.0, 5000.0), (1.0, 10000.0), (-30.0, 2000.0)])
 def test_fastest_finite_difference_time_constant_is_the_closed_form_one(omega, load):
-    taus = carrier_time_constants(SEED000, omega, load)
-    assert min(taus) == pytest.approx(carrier_time_constant(SEED000, omega, load), rel=1e-6)
+    taus = carrier_time_constants(LI2021, omega, load)
+    assert min(taus) == pytest.approx(carrier_time_constant(LI2021, omega, load), rel=1e-6)
 
 
 def test_carrier_time_constant_is_proportional_to_speed_over_load():
-    t1 = max(carrier_time_constants(SEED000, 50.0, 2000.0))
-    t2 = max(carrier_time_constants(SEED000, 100.0, 1000.0))
+    t1 = max(carrier_time_constants(LI2021, 50.0, 2000.0))
+    t2 = max(carrier_time_constants(LI2021, 100.0, 1000.0))
     assert t2 == pytest.approx(4.0 * t1, rel=1e-3)
 
 
@@ -48,13 +48,13 @@ def test_carriers_in_steady_acceleration_trail_equilibrium_by_zeta_alpha_tau():
     dynamic level's carriers lag ζ*ω by ζ*·α·τ (linearised first-order lag), τ at the axial
     force that presses the threads: the load plus the last nut's inertia force."""
     torque, load = 25.0, 5000.0
-    res = simulate(SEED000, "dynamic", "torque", screw_torque=torque, load_force=load,
+    res = simulate(LI2021, "dynamic", "torque", screw_torque=torque, load_force=load,
                    t_end=2e-3, output_interval=1e-4, initial_screw_speed=100.0,
                    initial_carrier_ratio=None, rtol=1e-10, atol=1e-12)
-    mech = Mechanism(SEED000, "dynamic")
+    mech = Mechanism(LI2021, "dynamic")
     w, a = res["screw_speed"][-1], res["screw_acceleration"][-1]
     assert a > 1e3                                       # a real, steady acceleration
-    taus = carrier_time_constants(SEED000, w, effective_load(SEED000, load, a))
+    taus = carrier_time_constants(LI2021, w, effective_load(LI2021, load, a))
     for k, (s, tau) in enumerate(zip(mech.stages, taus), start=1):
         lag = s.zeta_geometric * w - res[f"stage[{k}].carrier_speed"][-1]
         assert lag == pytest.approx(s.zeta_geometric * a * tau, rel=0.03), k
@@ -64,35 +64,35 @@ def test_carriers_in_steady_acceleration_trail_equilibrium_by_zeta_alpha_tau():
 
 def test_choice_is_the_cheapest_level_within_tolerance():
     op = dict(screw_speed=100.0, load_force=5000.0, acceleration=1000.0, comm_step=1e-4)
-    est = choose_fidelity(SEED000, 1.0, **op)
+    est = choose_fidelity(LI2021, 1.0, **op)
     assert est.errors["dynamic"] == 0.0
     assert est.errors["kinematic"] >= est.errors["quasi-static"] > 0.0
     for tol, level in ((2.0 * MARGIN * est.errors["kinematic"], "kinematic"),
                        (1.01 * MARGIN * est.errors["quasi-static"], "quasi-static"),
                        (0.99 * MARGIN * est.errors["quasi-static"], "dynamic")):
-        assert choose_fidelity(SEED000, tol, **op).fidelity == level
+        assert choose_fidelity(LI2021, tol, **op).fidelity == level
 
 
 def test_kinematic_estimate_is_the_friction_loss():
-    qs = make_model(SEED000, "quasi-static", "speed")
+    qs = make_model(LI2021, "quasi-static", "speed")
     u = (0.0, 1000.0)          # speed drive: 100 rad/s held, 1 kN
     eta = qs.outputs(0.0, qs.initial_state(u, screw_speed=100.0), u)["efficiency"]
-    c = choose_fidelity(SEED000, 1e-3, screw_speed=0.0, load_force=0.0)
+    c = choose_fidelity(LI2021, 1e-3, screw_speed=0.0, load_force=0.0)
     assert c.terms["friction_loss"] == pytest.approx(1.0 - eta, rel=1e-12)
     assert 0.1 < c.terms["friction_loss"] < 0.3
 
 
 def test_make_model_auto_needs_a_tolerance_and_reports_its_choice():
     with pytest.raises(ValueError, match="tolerance"):
-        make_model(SEED000, "auto", "torque")
-    m = make_model(SEED000, "auto", "speed", tolerance=1e-3, inputs=(0.0, 5000.0),
+        make_model(LI2021, "auto", "torque")
+    m = make_model(LI2021, "auto", "speed", tolerance=1e-3, inputs=(0.0, 5000.0),
                    screw_speed=100.0, carrier_ratio=0.0, comm_step=1e-5)
     assert m.fidelity == "auto" and m.start == "dynamic" == m.auto_choice.fidelity
-    m = make_model(SEED000, "auto", "torque", tolerance=1e-6)      # at rest, no load
+    m = make_model(LI2021, "auto", "torque", tolerance=1e-6)      # at rest, no load
     assert m.start == "quasi-static" == m.auto_choice.fidelity
     # a mechanism without spline friction, a kinematic efficiency equal to its own: the
     # kinematic level's estimate is only the carrier ratio's offset
-    one = presets.load("seed003_single_stage")
+    one = presets.load("friction_single_stage")
     eta = steady_efficiency(one)
     m = make_model(one, "auto", "torque", tolerance=0.5, efficiency=eta)
     assert m.fidelity == "kinematic" == m.auto_choice.fidelity
@@ -100,26 +100,26 @@ def test_make_model_auto_needs_a_tolerance_and_reports_its_choice():
 
 def test_kinematic_estimate_covers_its_missing_friction_outputs():
     """The kinematic level has no spline friction: over the FMU's outputs its error is 1 on
-    seed 000 (measured on a steady run against the quasi-static level), and so is its estimate,
+    Li et al. (2021) (measured on a steady run against the quasi-static level), and so is its estimate,
     whatever its constant efficiency."""
     u = (0.0, 5000.0)          # speed drive: 100 rad/s held, 5 kN
     y = {}
     for fid, opts in (("kinematic", {"efficiency": 0.8}), ("quasi-static", {})):
-        m = make_model(SEED000, fid, "speed", **opts)
+        m = make_model(LI2021, fid, "speed", **opts)
         y[fid] = m.outputs(0.0, m.initial_state(u, screw_speed=100.0), u)
     measured = abs(y["kinematic"]["stage[2].spline_friction"]
                    - y["quasi-static"]["stage[2].spline_friction"]) \
         / abs(y["quasi-static"]["stage[2].spline_friction"])
     assert measured == 1.0
     for eff in (1.0, 0.8):
-        c = choose_fidelity(SEED000, 1.0, screw_speed=100.0, load_force=5000.0,
+        c = choose_fidelity(LI2021, 1.0, screw_speed=100.0, load_force=5000.0,
                             kinematic_efficiency=eff)
         assert c.errors["kinematic"] >= measured and c.fidelity != "kinematic"
 
 
 def test_fmu_default_start_selects_the_documented_auto_level():
     """The FMU's start values (at rest, no inputs) make auto pick slave.AUTO_FIDELITY."""
-    c = choose_for_start(SEED000, 1e-6, "torque", (0.0, 0.0), carrier_ratio=0.0)
+    c = choose_for_start(LI2021, 1e-6, "torque", (0.0, 0.0), carrier_ratio=0.0)
     assert c.fidelity == "quasi-static"
 
 

@@ -20,8 +20,8 @@ from prsm_fmu.models import make_model
 from prsm_fmu.steppers import ClosedForm, make_stepper
 from prsm_fmu.steppers.band import ScalarExponential, phi_functions
 
-SEED000 = presets.load("seed000_two_stage")
-SEED003 = presets.load("seed003_single_stage")   # with the viscous term
+LI2021 = presets.load("li2021_two_stage")
+FRICTION_ARTICLE = presets.load("friction_single_stage")   # with the viscous term
 
 
 @pytest.mark.parametrize("z", [1e-9, 1e-3, 0.5, -0.99, 1.0, -1.0, 2.0, -50.0, 30.0, -1e6])
@@ -74,7 +74,7 @@ def _holding_speed(params, torque: float, load: float) -> float:
     def excess(w):
         return speed_model.outputs(0.0, [0.0, w, 0.0, 0.0, 0.0], (0.0, load))["screw_torque"] - torque
 
-    # the band of seed 000 is |ω| < v_ε / (ℓ_1) = 1e-3 m/s / (10 mm / 2π) = 0.0628 rad/s
+    # the band of Li et al. (2021) is |ω| < v_ε / (ℓ_1) = 1e-3 m/s / (10 mm / 2π) = 0.0628 rad/s
     return brentq(excess, -0.0628, 0.0628, xtol=1e-15, rtol=1e-15)
 
 
@@ -94,7 +94,7 @@ def _balance_residual(model, xs, u) -> float:
     return res / max(abs(x[2]) for x in xs)
 
 
-# 2 kN on seed 000 (20 mm per screw turn): 6.37 N·m turns into 2 kN × 3.18 mm/rad without
+# 2 kN on Li et al. (2021) (20 mm per screw turn): 6.37 N·m turns into 2 kN × 3.18 mm/rad without
 # friction; at 0.06 rad/s (the band's edge) the screw needs 7.90 N·m forward, 5.16 N·m back-driven
 # (speed-drive outputs); these torques hold the load creeping inside the band, back-driven (5.5,
 # 6.0: near zero speed, where the friction is stiffest) and forward (7.5)
@@ -102,9 +102,9 @@ def _balance_residual(model, xs, u) -> float:
 @pytest.mark.parametrize("h,n", [(1e-4, 300), (1e-2, 5)])
 def test_holding_speed_is_the_balance_root_and_energy_closes(torque, h, n):
     load = 2000.0
-    w_star = _holding_speed(SEED000, torque, load)
+    w_star = _holding_speed(LI2021, torque, load)
     assert 0.0 < abs(w_star) < 0.0628
-    model = make_model(SEED000, "quasi-static", "torque")
+    model = make_model(LI2021, "quasi-static", "torque")
     u = (torque, load)
     st = ClosedForm(model, rtol=1e-6, atol=1e-8)
     xs, rhs = _run(st, model, [0.0, 0.0, 0.0, 0.0, 0.0], u, h, n)
@@ -129,9 +129,9 @@ def _max_error(xs, ref) -> float:
 # ~1 ms (tests/test_slaved.py) and the load then back-drives it through the band; holding: 6 N·m
 # against 2 kN from rest (above)
 CASES = {
-    "reversal": (SEED000, (5.0, 5000.0), 30.0, 2e-3),
-    "holding": (SEED000, (6.0, 2000.0), 0.0, 3e-2),
-    "viscous reversal": (SEED003, (-2.0, 3000.0), 20.0, 4e-3),
+    "reversal": (LI2021, (5.0, 5000.0), 30.0, 2e-3),
+    "holding": (LI2021, (6.0, 2000.0), 0.0, 3e-2),
+    "viscous reversal": (FRICTION_ARTICLE, (-2.0, 3000.0), 20.0, 4e-3),
 }
 
 
@@ -149,9 +149,9 @@ def test_band_path_error_against_radau_is_within_tolerance_and_no_worse_than_dor
     old, rhs_old = _run(ClosedForm(model, band="explicit", **opts), model, x0, u, h, n)
     err_new, err_old = _max_error(new, ref), _max_error(old, ref)
     assert err_new <= 1e-6
-    if params is SEED000:
+    if params is LI2021:
         # the Coulomb band: the exponential path is also no less accurate than Dormand-Prince;
-        # with the viscous term (seed 003) it is order 3 against order 5 on a rhs that is not
+        # with the viscous term (the friction-torque article) it is order 3 against order 5 on a rhs that is not
         # affine in the work integrals, and its error, within the tolerance, can be the larger
         assert max(err_new, 1e-12) <= max(err_old, 1e-12)
     # and cheaper in rhs calls (a count, not a time)
@@ -159,7 +159,7 @@ def test_band_path_error_against_radau_is_within_tolerance_and_no_worse_than_dor
 
 
 def test_speed_drive_through_zero_speed_follows_the_prescribed_ramp_exactly():
-    model = make_model(SEED000, "quasi-static", "speed")
+    model = make_model(LI2021, "quasi-static", "speed")
     # −20 rad/s² from 0.05 rad/s over 5 ms: through the band's breaks and zero, to −0.05 rad/s
     u, h, n = (-20.0, 3000.0), 1e-3, 5
     xs, _ = _run(ClosedForm(model, rtol=1e-6, atol=1e-8), model, [0.0, 0.05, 0.0, 0.0, 0.0], u, h, n)
@@ -173,7 +173,7 @@ def test_speed_drive_through_zero_speed_follows_the_prescribed_ramp_exactly():
 
 
 def test_memory_restores_the_next_advance_bit_for_bit():
-    model = make_model(SEED000, "quasi-static", "torque")
+    model = make_model(LI2021, "quasi-static", "torque")
     st = ClosedForm(model, rtol=1e-6, atol=1e-8)
     x, _ = st.advance(0.0, [0.0, 0.0, 0.0, 0.0, 0.0], (6.0, 2000.0), 1e-3)
     mem = st.get_memory()
@@ -185,8 +185,8 @@ def test_memory_restores_the_next_advance_bit_for_bit():
 
 
 def test_bad_band_method_and_unsuitable_model_are_refused_with_the_reason():
-    model = make_model(SEED000, "quasi-static", "torque")
+    model = make_model(LI2021, "quasi-static", "torque")
     with pytest.raises(ValueError, match="band = 'implicit' is not allowed"):
         ClosedForm(model, band="implicit")
     with pytest.raises(ValueError, match="exactly one state that is not a quadrature"):
-        ScalarExponential(make_model(SEED000, "dynamic", "torque"))
+        ScalarExponential(make_model(LI2021, "dynamic", "torque"))

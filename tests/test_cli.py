@@ -57,7 +57,7 @@ def test_startup_prints_table_settling_and_cost(tmp_path, capsys):
     (["startup", "--t-end", "1e-3", "--interval", "3e-4"], "--t-end"),
     (["startup", "--load", "abc"], "--load"),
     (["startup", "--preset", "no_such_preset"], "--preset"),
-    (["startup", "--preset", "seed004_recirculating"], "--preset"),
+    (["startup", "--preset", "recirculating_screw"], "--preset"),
     (["startup", "--fidelity", "exact"], "--fidelity"),
     (["steady", "--speed", "0"], "--speed"),
 ])
@@ -69,14 +69,14 @@ def test_bad_arguments_exit_2_naming_the_argument(argv, name, tmp_path, capsys):
 
 
 def test_steady_and_presets(capsys):
-    assert main(["steady", "--preset", "seed000_two_stage", "--speed", "100",
+    assert main(["steady", "--preset", "li2021_two_stage", "--speed", "100",
                  "--load", "5000"]) == 0
     text = capsys.readouterr().out
     line = next(ln for ln in text.splitlines() if ln.startswith("efficiency"))
     assert 0.5 < float(line.split()[1]) < 1.0
     assert main(["presets"]) == 0
     names = capsys.readouterr().out.split()
-    assert "seed000_two_stage" in names and "seed002_two_stage" in names
+    assert "li2021_two_stage" in names and "assembly_two_stage" in names
 
 
 def test_settling_time_helper():

@@ -1,6 +1,6 @@
-"""Seed 001 design checks (prsm_fmu.design_checks) and ``prsm-fmu check``.
+"""The two-stage kinematics article design checks (prsm_fmu.design_checks) and ``prsm-fmu check``.
 
-Expected values: seed 001's formulas evaluated by hand (σ = 4F/(πd²), the hollow-screw area),
+Expected values: the two-stage kinematics article's formulas evaluated by hand (σ = 4F/(πd²), the hollow-screw area),
 closed forms of column buckling (Euler's loads of uniform columns; the characteristic equation
 tan(k_t ℓ_t)·tan(k_b ℓ_b) = k_t/k_b of a fixed–free two-step column), the continuity of the
 piecewise critical stress, and the presets' geometry.
@@ -27,7 +27,7 @@ from prsm_fmu.design_checks import (
     stepped_column_load,
 )
 from prsm_fmu.params import MechanismParams
-from prsm_fmu.presets import seed003
+from prsm_fmu.presets import friction_article
 
 E = 206e9
 
@@ -38,8 +38,8 @@ def _check(report, name):
     return found[0]
 
 
-@pytest.mark.parametrize("name", ["seed000_two_stage", "seed001_two_stage", "seed002_two_stage",
-                                  "seed003_single_stage"])
+@pytest.mark.parametrize("name", ["li2021_two_stage", "kinematics_two_stage", "assembly_two_stage",
+                                  "friction_single_stage"])
 def test_every_preset_passes_the_geometric_conditions(name):
     p = presets.load(name)
     report = check_design(p, DesignInputs(axial_load=1000.0, extended_length=0.3))
@@ -52,9 +52,9 @@ def test_every_preset_passes_the_geometric_conditions(name):
     assert report.valid
 
 
-def test_seed003_published_set_fails_meshing_and_lead_matching_by_name():
+def test_friction_article_published_set_fails_meshing_and_lead_matching_by_name():
     """The paper's own table (r_n0 = 15 mm, one start) is not a standard PRSM."""
-    bad = MechanismParams(stages=(seed003.published_stage(),), name="seed003 as published")
+    bad = MechanismParams(stages=(friction_article.published_stage(),), name="friction-torque article as published")
     report = check_design(bad, DesignInputs(teeth=(20, 60)))
     assert not report.valid
     msgs = [c.message for c in report.failures]
@@ -68,15 +68,15 @@ def test_seed003_published_set_fails_meshing_and_lead_matching_by_name():
 
 
 def test_gear_engagement_needs_the_thread_ratio():
-    p = presets.load("seed000_two_stage")              # n_S = 5: z_ig = 5 z_R
+    p = presets.load("li2021_two_stage")              # n_S = 5: z_ig = 5 z_R
     assert check_design(p, DesignInputs(teeth=(18, 90))).valid
     report = check_design(p, DesignInputs(teeth=(18, 89)))
     bad = _check(report, "stage 1: gear engagement")
     assert bad.failed and "z_ig / z_R = r_N / r_R is violated" in bad.message
 
 
-def test_strength_follows_seed001_formulas():
-    p = presets.load("seed001_two_stage")               # d_01 = 30 mm, d_02 = 42 mm
+def test_strength_follows_kinematics_article_formulas():
+    p = presets.load("kinematics_two_stage")               # d_01 = 30 mm, d_02 = 42 mm
     inputs = DesignInputs(axial_load=340e3, material=MATERIALS["carbon_steel"],
                           safety_factor=2.0)
     report = check_design(p, inputs)
@@ -95,7 +95,7 @@ def test_strength_follows_seed001_formulas():
 
 
 def test_a_hollow_screw_without_wall_fails_strength():
-    p = presets.load("seed000_two_stage").with_stage(2, screw_radius=0.009)
+    p = presets.load("li2021_two_stage").with_stage(2, screw_radius=0.009)
     report = check_design(p, DesignInputs(axial_load=1000.0, extended_length=0.5))
     c = _check(report, "screw 2: strength (hollow)")
     assert c.failed and "no wall" in c.message
@@ -144,7 +144,7 @@ def test_stepped_fixed_free_column_solves_the_characteristic_equation():
 
 
 def test_buckling_verdict_and_longest_stable_length():
-    p = presets.load("seed000_two_stage")
+    p = presets.load("li2021_two_stage")
     inp = DesignInputs(axial_load=5000.0)
     c = _check(check_design(p, inp), "column: buckling (stepped section)")
     assert c.verdict == "not checked"
@@ -165,7 +165,7 @@ def test_buckling_verdict_and_longest_stable_length():
 
 
 def test_inputs_out_of_range_are_named():
-    p = presets.load("seed000_two_stage")
+    p = presets.load("li2021_two_stage")
     with pytest.raises(ValueError, match="safety_factor"):
         check_design(p, DesignInputs(safety_factor=0.5))
     with pytest.raises(ValueError, match="ends"):
@@ -175,17 +175,17 @@ def test_inputs_out_of_range_are_named():
 
 
 def test_default_load_comes_from_the_seed_scenario():
-    assert default_load("seed000_two_stage") == 5000.0
-    assert default_load("seed002_two_stage") == 7000.0
-    assert default_load("seed003_single_stage") == 5000.0     # the largest of its load table
-    assert default_load("seed001_two_stage") is None
+    assert default_load("li2021_two_stage") == 5000.0
+    assert default_load("assembly_two_stage") == 7000.0
+    assert default_load("friction_single_stage") == 5000.0     # the largest of its load table
+    assert default_load("kinematics_two_stage") is None
 
 
 def test_cli_check_valid_and_invalid(capsys):
-    assert main(["check", "seed000_two_stage", "--length", "0.5"]) == 0
+    assert main(["check", "li2021_two_stage", "--length", "0.5"]) == 0
     out = capsys.readouterr().out
     assert "verdict: VALID" in out and "PASS" in out and "5000 N" in out
-    code = main(["check", "seed000_two_stage", "--set", "stage[2].nut_radius=0.03",
+    code = main(["check", "li2021_two_stage", "--set", "stage[2].nut_radius=0.03",
                  "--load", "60000", "--length", "0.5"])
     out = capsys.readouterr().out
     assert code == 1
@@ -194,20 +194,20 @@ def test_cli_check_valid_and_invalid(capsys):
     assert "stage 2: lead matching r_N = n_S r_R is violated" in out
     assert "screw 1: strength" in out
     assert main(["check", "no_such_preset"]) == 2
-    assert main(["check", "seed000_two_stage", "--set", "load_force=3"]) == 2
+    assert main(["check", "li2021_two_stage", "--set", "load_force=3"]) == 2
 
 
 def test_cli_check_default_run_does_what_its_help_says(capsys):
-    """seed001's scenario has no load: the default run says so, and its verdict lists every
-    check it did not do with the option that would do it (the help says the same); seed000's
-    scenario load (seed 000 §3.1: 5000 N on nut 2) is used and checks screw 1's strength:
-    σ_1 = 4 F / (π d_01²) = 4 · 5000 / (π · 0.0195²) = 16.74 MPa (r_S1 = 9.75 mm, seed 000)."""
-    assert main(["check", "seed001_two_stage"]) == 0
+    """kinematics_two_stage's scenario has no load: the default run says so, and its verdict lists every
+    check it did not do with the option that would do it (the help says the same); li2021's
+    scenario load (Li et al. (2021) §3.1: 5000 N on nut 2) is used and checks screw 1's strength:
+    σ_1 = 4 F / (π d_01²) = 4 · 5000 / (π · 0.0195²) = 16.74 MPa (r_S1 = 9.75 mm, Li et al. (2021))."""
+    assert main(["check", "kinematics_two_stage"]) == 0
     out = capsys.readouterr().out
     lines = out.splitlines()
     not_checked = [ln for ln in lines if ln.lstrip().startswith("not checked")]
     assert len(not_checked) == 5                  # 2 gear engagements, 2 strengths, buckling
-    assert "seed scenario gives no load" in out
+    assert "paper scenario gives no load" in out
     verdict = out[out.index("verdict:"):]
     for name in ("stage 1: gear engagement", "stage 2: gear engagement",
                  "screw 1: strength", "screw 2: strength", "column: buckling"):
@@ -215,8 +215,8 @@ def test_cli_check_default_run_does_what_its_help_says(capsys):
         assert ("--teeth" if "gear" in name else "--load") in reason, reason
     assert main(["check", "--help"]) == 0
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "seed001's scenario has none" in help_text and "needs --teeth" in help_text
-    assert main(["check", "seed000_two_stage"]) == 0
+    assert "kinematics_two_stage's scenario has none" in help_text and "needs --teeth" in help_text
+    assert main(["check", "li2021_two_stage"]) == 0
     out = capsys.readouterr().out
     assert "5000 N, the largest load" in out
     assert "σ_1 = 16.74 MPa" in out
@@ -232,11 +232,11 @@ def test_cli_check_default_run_does_what_its_help_says(capsys):
 def test_cli_check_set_values_are_validated_like_the_parameters(value, name, allowed, capsys):
     """A --set value out of its parameter's range is refused in one line naming it and the
     range, before any check is printed (a negative radius used to print d = −2000 mm)."""
-    assert main(["check", "seed001_two_stage", "--set", value]) == 2
+    assert main(["check", "kinematics_two_stage", "--set", value]) == 2
     cap = capsys.readouterr()
     assert cap.out == ""
     err = cap.err.strip().splitlines()
     assert len(err) == 1 and name in err[0] and allowed in err[0] and "--set" in err[0]
     # a value in range that breaks the meshing is graded, not refused
-    assert main(["check", "seed001_two_stage", "--set", "stage[1].nut_radius=0.03"]) == 1
+    assert main(["check", "kinematics_two_stage", "--set", "stage[1].nut_radius=0.03"]) == 1
     assert "geometric meshing r_N = r_S + 2 r_R is violated" in capsys.readouterr().out

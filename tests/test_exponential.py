@@ -290,15 +290,15 @@ def test_bad_memory_is_refused(bad):
 
 # ---- the PRSM's carriers ----------------------------------------------------------------------
 
-SEED000 = presets.load("seed000_two_stage")
+LI2021 = presets.load("li2021_two_stage")
 
 
 def test_stiff_carriers_settle_on_their_equilibrium_at_10_ms_steps():
     # torque drive at the steady torque of 100 rad/s under 5 kN (lead / 2π · F / η with the
-    # seed's η ≈ 0.806), carrier 1 disturbed by 0.1 %: the carriers' time constants are ~14 µs
+    # preset's η ≈ 0.806), carrier 1 disturbed by 0.1 %: the carriers' time constants are ~14 µs
     # and ~30 µs, so a 10 ms step is ~700 of them; one exponential step per communication step
-    model = make_model(SEED000, "dynamic", "torque")
-    u = (SEED000.total_lead / (2 * math.pi) * 5000.0 / 0.806, 5000.0)
+    model = make_model(LI2021, "dynamic", "torque")
+    u = (LI2021.total_lead / (2 * math.pi) * 5000.0 / 0.806, 5000.0)
     x = model.initial_state(u, screw_speed=100.0, carrier_ratio=None)
     x[2] *= 0.999
     st = make_stepper("exponential", model, fixed_substeps=1)

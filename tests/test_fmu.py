@@ -358,7 +358,7 @@ def test_variable_communication_steps_equal_the_python_model(fidelity):
             got.append(host.get_real(host.outputs))
     finally:
         host.free()
-    model = make_model(presets.load("seed000_two_stage"), fidelity, "torque")
+    model = make_model(presets.load("li2021_two_stage"), fidelity, "torque")
     name = DEFAULT_STEPPER[fidelity]
     st = make_stepper(name, model, **tuned_stepper_options(name, TOLERANCE, 0.01 * TOLERANCE))
     x, ref, t = model.initial_state((0.0, 0.0)), [], 0.0
@@ -376,14 +376,14 @@ def test_fixed_substeps_are_passed_to_the_stepper():
         got = run_fmu(host, 20, ["screw_speed", "step_rhs_calls", "step_substeps"])
     finally:
         host.free()
-    ref = run_python(presets.load("seed000_two_stage"), "dynamic", 20, ["screw_speed"], "rk4",
+    ref = run_python(presets.load("li2021_two_stage"), "dynamic", 20, ["screw_speed"], "rk4",
                      substeps=50)
     assert [r[0] for r in got] == [r[0] for r in ref]
     assert all(r[1:] == [200, 50] for r in got)                     # 4 rhs calls per RK4 step
 
 
 def test_two_instances_in_one_process_do_not_share_state():
-    params = presets.load("seed000_two_stage")
+    params = presets.load("li2021_two_stage")
     names = ["screw_speed", "rod_position", "stage[2].contact_force", "friction_work"]
     a = Host("PRSM2", "a")
     b = Host("PRSM2", "b", start={"fidelity": "dynamic", "stage[1].nut_mass": 5.0})
@@ -478,7 +478,7 @@ def test_a_state_taken_before_initialization_brings_the_instance_back_there():
         assert "not allowed before fmi2ExitInitializationMode" in a.messages[-1][1]
         a.fmu.exitInitializationMode()
         assert run_fmu(a, 5, ["screw_speed"]) == run_python(
-            presets.load("seed000_two_stage"), "dynamic", 5, ["screw_speed"])
+            presets.load("li2021_two_stage"), "dynamic", 5, ["screw_speed"])
     finally:
         a.free()
 
@@ -635,7 +635,7 @@ def test_a_parameter_cannot_change_after_initialization_nor_an_output_be_set():
         assert host.step(0.0) == DISCARD               # the refused calls, reported once
         assert "5 earlier call(s) since the last step were refused" in host.messages[-1][1]
         assert run_fmu(host, 5, ["screw_speed"]) == \
-            run_python(presets.load("seed000_two_stage"), "quasi-static", 5, ["screw_speed"])
+            run_python(presets.load("li2021_two_stage"), "quasi-static", 5, ["screw_speed"])
     finally:
         host.free()
 
@@ -807,7 +807,7 @@ def test_auto_fidelity_runs_the_documented_level():
         assert any(f"starts with '{AUTO_FIDELITY}'" in m for _, m in host.messages)
     finally:
         host.free()
-    want = run_python(presets.load("seed000_two_stage"), "auto", 50,
+    want = run_python(presets.load("li2021_two_stage"), "auto", 50,
                       ["screw_speed", "stage[1].contact_force", "mode"])
     codes = {"quasi-static": 1, "dynamic": 2}
     assert [r[:2] for r in got] == [r[:2] for r in want]
@@ -864,7 +864,7 @@ def test_fmpy_simulate_cli_50_runs_under_cpu_load_all_exit_cleanly(fmus, tmp_pat
 
 
 def test_a_state_without_rigid_contact_solution_is_refused_and_flagged():
-    """Seed 000 with every inertia 1000x too small (kg·mm² taken as 1e-9 kg·m²: J_S = 55e-9 and
+    """Li et al. (2021) with every inertia 1000x too small (kg·mm² taken as 1e-9 kg·m²: J_S = 55e-9 and
     170e-9, J_R = 0.08e-9 and 0.48e-9, J_P = 3e-9 and 12e-9 kg·m²), torque-driven from −1 rad/s
     with the carriers at rest, +20 N·m against 500 N: no acceleration balances the torque
     (Painlevé).  The FMU refuses the step with the cause named, its state unchanged, and

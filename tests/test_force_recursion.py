@@ -1,7 +1,7 @@
 """An independent check of the force recursion of mechanics.py.
 
 Every body's balance of docs/model.md §3 is written out here plainly, from first principles,
-as one system in the 4n − 1 unknowns of seed 000 (000_a07c98907360be8b.txt, after Eq. 26):
+as one system in the 4n − 1 unknowns of Li et al. (2021) (after Eq. 26):
 per stage the normal force per roller F_k and the carrier acceleration ω̇_Pk, the driven
 torques M_Sk and bearing forces B_(k−1) of stages k ≥ 2, and the screw acceleration α (torque
 drive) or the motor torque M_S1 (speed drive).  For a fixed state (ω, ω_Pk) the slip velocity
@@ -15,7 +15,7 @@ in test_geometry.py) and the parameters.
 The bodies (forces on the body named; Φ_k = F_k (n − µ u) − µ_1 n_t s is the force one roller
 puts on screw k, u the regularised slip direction of docs/model.md §5, s = ω a + ω_P b the slip
 of the screw's material point relative to the roller's, a = ẑ × P + ℓ ẑ,
-b = −ẑ × P + n_S ẑ × (P − c); seed 003's viscous force µ_1 n_t s per roller (µ_1 per engaged
+b = −ẑ × P + n_S ẑ × (P − c); the friction-torque article's viscous force µ_1 n_t s per roller (µ_1 per engaged
 thread, n_t threads) and differential-sliding torque µ_3 F on the screw per roller, against its
 rotation: −µ_3 F sgñ(ω r) with r = |P_xy| the contact radius):
 
@@ -47,8 +47,8 @@ from prsm_fmu.params import MechanismParams
 
 
 def _three_stage_with_bearings() -> MechanismParams:
-    """Seed 000's stages plus a third, with every friction on (thrust bearings included)."""
-    p = presets.load("seed000_two_stage")
+    """Li et al.'s (2021) stages plus a third, with every friction on (thrust bearings included)."""
+    p = presets.load("li2021_two_stage")
     s1, s2 = p.stages
     s3 = s2.__class__(**{**s2.__dict__, "screw_radius": 24e-3, "roller_radius": 8e-3,
                           "nut_radius": 40e-3, "screw_lead": 12e-3, "spline_radius": 20e-3,
@@ -59,7 +59,7 @@ def _three_stage_with_bearings() -> MechanismParams:
 
 
 def _three_stage_all_terms() -> MechanismParams:
-    """The three-stage mechanism with seed 003's viscous and differential terms as well, strong
+    """The three-stage mechanism with the friction-torque article's viscous and differential terms as well, strong
     enough (µ_1 = 5 N·s/m per thread, 8 threads, µ_3 = 50 µm) that the viscous axial force
     N_R µ_1 n_t ℓ ω reaches the loads drawn (up to ~2 kN at 300 rad/s) and so decides flanks."""
     p = _three_stage_with_bearings()
@@ -69,11 +69,11 @@ def _three_stage_all_terms() -> MechanismParams:
 
 
 MECHANISMS = {
-    "seed000": lambda: presets.load("seed000_two_stage"),
-    "seed002": lambda: presets.load("seed002_two_stage"),      # thrust-bearing friction
+    "li2021": lambda: presets.load("li2021_two_stage"),
+    "assembly_article": lambda: presets.load("assembly_two_stage"),      # thrust-bearing friction
     "three_stage": _three_stage_with_bearings,
     "three_stage_all_terms": _three_stage_all_terms,           # + viscous, differential
-    "seed003": lambda: presets.load("seed003_single_stage"),   # seed 003's own µ_1, µ_3
+    "friction_article": lambda: presets.load("friction_single_stage"),   # the friction-torque article's own µ_1, µ_3
 }
 
 

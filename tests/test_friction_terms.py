@@ -1,4 +1,4 @@
-"""Seed 003's friction terms (003_e265d1d1167b0d4b.txt): viscous, Coulomb spin sliding and
+"""The friction-torque article's friction terms: viscous, Coulomb spin sliding and
 differential sliding, at every level, in the steady state and in the energy balance.
 
 Closed forms are written out here from the contact geometry alone (the contact point P and the
@@ -12,7 +12,7 @@ u_z = ℓ/|σ|.  The roller's axial balance gives the normal force of all roller
 
     F_N = (F + N_R µ_1 n_t ℓ ω) / (n_z − µ_2 ℓ/|σ|)
 
-(the viscous force's axial part adds to the load the threads carry), and seed 003's M_f,ss
+(the viscous force's axial part adds to the load the threads carry), and the friction-torque article's M_f,ss
 structure — viscous µ_1 n_R n_t v_sr·∂v_sr/∂θ̇_s, spin µ_2 F_nf (v_sr/|v_sr|)·∂v_sr/∂θ̇_s and
 differential µ_3 F_nf, each summed over the N_R n_t contacts — reads at this geometry
 
@@ -37,18 +37,18 @@ from prsm_fmu.profiles import RampSpeed, TableSpeed
 TERMS = ("coulomb", "viscous", "differential", "joints")
 
 
-def seed003(**changes):
-    """The seed 003 preset (µ_1 = 0.001 N·s/m, n_t = 10, µ_2 = 0.05, µ_3 = 1e-6 m) with changes."""
-    return presets.load("seed003_single_stage").with_changes(**changes).validate()
+def friction_article(**changes):
+    """The friction-torque article's preset (µ_1 = 0.001 N·s/m, n_t = 10, µ_2 = 0.05, µ_3 = 1e-6 m) with changes."""
+    return presets.load("friction_single_stage").with_changes(**changes).validate()
 
 
-#: the terms made strong enough to be seen next to each other: µ_1 = 580 N·s/m is what seed 003's
+#: the terms made strong enough to be seen next to each other: µ_1 = 580 N·s/m is what the friction-torque article's
 #: load table's 0.093 N·m intercept would need (docs/sweeps.md), µ_3 = 0.1 mm
 STRONG = {"mu_viscous": 580.0, "mu_differential": 1e-4}
 
 
 def closed_form(params, omega: float, load: float) -> dict:
-    """Seed 003's M_f,ss terms at the contact geometry (module docstring), ω > 0, F ≥ 0."""
+    """The friction-torque article's M_f,ss terms at the contact geometry (module docstring), ω > 0, F ≥ 0."""
     st = params.stages[0]
     geo = contact_geometry(st)
     p = np.array(geo.point, dtype=float)
@@ -76,8 +76,8 @@ def closed_form(params, omega: float, load: float) -> dict:
     ("differential", {"mu_screw_roller": 0.0, "mu_viscous": 0.0, "mu_differential": 1e-4}),
 ])
 @pytest.mark.parametrize("level", ["quasi-static", "dynamic", "steady_state"])
-def test_each_terms_steady_screw_torque_equals_seed003_closed_form_to_1e_9(term, changes, level):
-    params = seed003(**changes)
+def test_each_terms_steady_screw_torque_equals_friction_article_closed_form_to_1e_9(term, changes, level):
+    params = friction_article(**changes)
     omega, load = 2.0, 1000.0
     ref = closed_form(params, omega, load)
     if level == "steady_state":
@@ -89,12 +89,12 @@ def test_each_terms_steady_screw_torque_equals_seed003_closed_form_to_1e_9(term,
     assert abs((torque - ref["ell"] * load) - ref[term]) <= 1e-9 * ref[term]
 
 
-@pytest.mark.parametrize("changes", [{}, STRONG], ids=["seed003_values", "strong"])
+@pytest.mark.parametrize("changes", [{}, STRONG], ids=["friction_article_values", "strong"])
 @pytest.mark.parametrize("level", ["quasi-static", "dynamic"])
 def test_all_three_terms_together_and_each_terms_power_match_the_closed_form(changes, level):
-    """With the three terms on at once (the seed's own values, then strong ones), the screw
+    """With the three terms on at once (the article's own values, then strong ones), the screw
     torque is ℓF + Σ terms and each term's power output over ω is that term's torque."""
-    params = seed003(**changes)
+    params = friction_article(**changes)
     omega, load = 1.0, 1000.0
     ref = closed_form(params, omega, load)
     model = make_model(params, level, "speed")
@@ -120,7 +120,7 @@ def test_all_three_terms_together_and_each_terms_power_match_the_closed_form(cha
 def test_kinematic_level_carries_each_term_through_its_loss_torque(term, changes):
     """The kinematic level has no thread friction (µ_2 acts only through its efficiency η₀);
     its viscous and differential loss torques are the closed forms with µ_2 = 0."""
-    params = seed003(**changes)
+    params = friction_article(**changes)
     omega, load = 2.0, 1000.0
     ref = closed_form(params.with_changes(mu_screw_roller=0.0), omega, load)
     model = make_model(params, "kinematic", "speed", efficiency=1.0)
@@ -133,7 +133,7 @@ def test_kinematic_level_carries_each_term_through_its_loss_torque(term, changes
 def test_viscous_term_holds_the_carriers_at_equilibrium_without_load():
     """At zero load Coulomb friction leaves the carriers neutral; the lubricant's force along
     the slip holds them at ζ* = −a·b/b·b (where s ⟂ b): the steady state needs no limit."""
-    params = seed003(**STRONG)
+    params = friction_article(**STRONG)
     ref = closed_form(params, 3.0, 0.0)
     ss = steady_state(params, 3.0, 0.0)
     assert abs(ss["stage[1].carrier_speed_ratio"] - ref["zeta"]) <= 1e-12
@@ -154,10 +154,10 @@ def _energy_residual(res) -> float:
 @pytest.mark.parametrize("fidelity", ["dynamic", "quasi-static", "kinematic"])
 @pytest.mark.parametrize("run", ["accelerating", "reversal"])
 def test_energy_balance_with_all_three_terms_closes_within_1e_9(fidelity, run):
-    """W_in = W_out + W_f + ΔT to 1e-9 of W_in on seed 003's ramp 0 → 1 rad/s in 20 ms and on a
+    """W_in = W_out + W_f + ΔT to 1e-9 of W_in on the friction-torque article's ramp 0 → 1 rad/s in 20 ms and on a
     reversal 1 → −1 rad/s through zero slip; every term's power is ≥ 0 at every sample (no
     energy created at the reversal) and the terms sum to the friction power."""
-    params = seed003(**STRONG)
+    params = friction_article(**STRONG)
     if run == "accelerating":
         speed = RampSpeed(0.0, 1.0, 0.02)
     else:
@@ -180,7 +180,7 @@ def test_friction_power_through_zero_slip_is_never_negative_at_any_term():
     """Sweep the carrier speed of the dynamic level through the point where the slip vanishes
     (ω_P = −(a·b)/(b·b)·ω only makes s ⟂ b; s = 0 needs ω = 0 and ω_P = 0: sweep both through
     zero) and check every term's power is ≥ 0, including inside the regularisation band."""
-    params = seed003(**STRONG)
+    params = friction_article(**STRONG)
     mech = Mechanism(params, "dynamic")
     v_eps = params.slip_velocity_scale
     for omega in np.linspace(-3e-2, 3e-2, 61):
@@ -193,8 +193,8 @@ def test_friction_power_through_zero_slip_is_never_negative_at_any_term():
 
 # ---- efficiency outputs ------------------------------------------------------------------------
 def test_overall_efficiency_is_the_work_ratio_and_instantaneous_efficiency_the_power_ratio():
-    """Seed 003: η(t) = F p_s θ̇_s / (T_in θ̇_s) and η_overall = ∫P_out dt / ∫P_in dt."""
-    params = seed003()
+    """The friction-torque article: η(t) = F p_s θ̇_s / (T_in θ̇_s) and η_overall = ∫P_out dt / ∫P_in dt."""
+    params = friction_article()
     res = simulate(params, "dynamic", "speed", screw_speed=RampSpeed(0.0, 1.0, 0.02),
                    load_force=1000.0, t_end=0.04, output_interval=1e-3)
     moving = res["screw_speed"] > 0.0
@@ -211,11 +211,11 @@ def test_overall_efficiency_is_the_work_ratio_and_instantaneous_efficiency_the_p
                                         ("mu_differential", -1e-6), ("mu_differential", 2e-3)])
 def test_out_of_range_friction_parameter_is_refused_naming_it(name, value):
     with pytest.raises(ValueError, match=name):
-        seed003(**{name: value})
+        friction_article(**{name: value})
 
 
 def test_threads_per_roller_below_one_is_refused():
-    p = presets.load("seed003_single_stage")
+    p = presets.load("friction_single_stage")
     with pytest.raises(ValueError, match=r"stage\[1\]\.threads_per_roller"):
         p.with_stage(1, threads_per_roller=0).validate()
 
@@ -231,12 +231,12 @@ def test_fmu_table_has_the_terms_with_units_and_ranges():
             rows["mu_differential"].max) == ("m", 0.0, 1e-3)
     assert (rows["stage[1].threads_per_roller"].type, rows["stage[1].threads_per_roller"].min) \
         == ("Integer", 1)
-    start = parameter_defaults(presets.load("seed003_single_stage"))
-    # seed 003's table: µ_1 = 0.001 N·s/m, µ_3 = 1e-6 m, 10 thread pitches per roller
+    start = parameter_defaults(presets.load("friction_single_stage"))
+    # the friction-torque article's table: µ_1 = 0.001 N·s/m, µ_3 = 1e-6 m, 10 thread pitches per roller
     assert (start["mu_viscous"], start["mu_differential"], start["stage[1].threads_per_roller"]) \
         == (0.001, 1e-6, 10)
-    # seed 000's mechanism keeps its behaviour: no new term
-    start = parameter_defaults(presets.load("seed000_two_stage"))
+    # Li et al.'s (2021) mechanism keeps its behaviour: no new term
+    start = parameter_defaults(presets.load("li2021_two_stage"))
     assert start["mu_viscous"] == 0.0 and start["mu_differential"] == 0.0
 
 
@@ -250,7 +250,7 @@ def test_the_loop_carries_the_terms_into_its_prsm_block():
     assert (p.mu_viscous, p.mu_differential, p.stages[0].threads_per_roller) == (580.0, 1e-4, 10)
     # the torque-driven block at 1 rad/s and 1 kN: the motor torque ℓF + the closed-form terms
     # holds the screw at constant speed: |α| J ≤ 1e-9 of the friction torque, with J at least
-    # the screw's own ½ m r² = ½ · 1 kg · (10 mm)² = 5e-5 kg·m² (seed 003's screw)
+    # the screw's own ½ m r² = ½ · 1 kg · (10 mm)² = 5e-5 kg·m² (the friction-torque article's screw)
     ref = closed_form(p, 1.0, 1000.0)
     total = ref["viscous"] + ref["coulomb"] + ref["differential"]
     y = block.model.outputs(0.0, [0.0, 1.0, 0.0, 0.0, 0.0],

@@ -1,7 +1,7 @@
 """Tests of prsm_fmu.geometry: screw–roller contact of a PRSM stage.
 
 Every expected value is computed here from the thread-surface definitions (written out again
-below, independently of the module), from seed 000 (Eqs. 14 and 25, §3.1) or from seed 002
+below, independently of the module), from Li et al. (2021) (Eqs. 14 and 25, §3.1) or from the multi-stage assembly article
 (helix angles), never from the code under test.
 """
 
@@ -26,7 +26,7 @@ MM = 1e-3
 
 def make_stage(r_s_mm: float, r_r_mm: float, r_n_mm: float, lead_mm: float = 10.0,
                beta_deg: float = 45.0, **masses: float) -> StageParams:
-    """A stage of seed 000 §3.1 (masses and inertias: any positive numbers)."""
+    """A stage of Li et al. (2021) §3.1 (masses and inertias: any positive numbers)."""
     kw = dict(screw_mass=0.5, nut_mass=2.5, roller_mass=0.017, carrier_mass=0.1,
               screw_inertia=55e-9, roller_inertia=0.08e-9,
               carrier_inertia=3e-9)
@@ -36,7 +36,7 @@ def make_stage(r_s_mm: float, r_r_mm: float, r_n_mm: float, lead_mm: float = 10.
                        flank_angle=math.radians(beta_deg), n_rollers=7, **kw)
 
 
-# seed 000 §3.1 two-stage example
+# Li et al. (2021) §3.1 two-stage example
 STAGE1 = make_stage(9.75, 3.25, 16.25, screw_mass=0.5, nut_mass=2.5, roller_mass=0.017,
                     screw_inertia=55e-9, roller_inertia=0.08e-9, carrier_inertia=3e-9)
 STAGE2 = make_stage(16.5, 5.5, 27.5, screw_mass=0.77, nut_mass=18.0, roller_mass=0.04,
@@ -157,7 +157,7 @@ def test_slip_is_tangent_to_contact(st):
 
 
 @pytest.mark.parametrize("st", STAGES)
-def test_slip_jacobians_reproduce_seed000_eq14(st):
+def test_slip_jacobians_reproduce_li2021_eq14(st):
     g = contact_geometry(st)
     x, y, _ = g.point
     a_dist = st.screw_radius + st.roller_radius
@@ -182,7 +182,7 @@ def test_slip_jacobians_reproduce_seed000_eq14(st):
         assert np.allclose(w_s * a + w_p * b, eq14, rtol=0, atol=1e-13 * (abs(w_s) + abs(w_p)))
 
 
-# ---- seed 000 Eq. 25 -------------------------------------------------------------------------
+# ---- Li et al. (2021) Eq. 25 -------------------------------------------------------------------------
 @pytest.mark.parametrize("st", STAGES)
 def test_axial_normal_component_is_eq25_factor(st):
     g = contact_geometry(st)
@@ -193,9 +193,9 @@ def test_axial_normal_component_is_eq25_factor(st):
     assert abs(ideal_axial_normal_fraction(st, r_sr) - eq25) < 1e-15
 
 
-# ---- seed 000 §3.1 qualitative claim ---------------------------------------------------------
+# ---- Li et al. (2021) §3.1 qualitative claim ---------------------------------------------------------
 def test_stage2_contact_closer_to_pitch_point():
-    """Seed 000 §3.1: screw 2's helix angle is smaller, so its contact point is closer to the
+    """Li et al. (2021) §3.1: screw 2's helix angle is smaller, so its contact point is closer to the
     point of tangency of the pitch circles.
 
     True in the angular sense (|φ_Sr|, |φ_Rs|) and relative to the stage size
@@ -270,10 +270,10 @@ def test_mirrored_flank(st):
     assert abs(np.dot(n, b)) < 1e-12 * np.linalg.norm(b)
 
 
-# ---- helix angles (seed 002) and helpers -----------------------------------------------------
+# ---- helix angles (the multi-stage assembly article) and helpers -----------------------------------------------------
 @pytest.mark.parametrize("st, expected_deg", [(STAGE1, 9.27), (STAGE2, 5.51)],
                          ids=["stage1", "stage2"])
-def test_helix_angles_seed002(st, expected_deg):
+def test_helix_angles_assembly_article(st, expected_deg):
     assert abs(math.degrees(screw_helix_angle(st)) - expected_deg) < 0.005
 
 

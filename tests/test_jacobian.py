@@ -5,8 +5,8 @@ The expected values are not the code's formulas: they are (rhs(x + d e_j) − rh
 whose truncation error is O(d²) ≈ 1e-12 relative for d = 1e-6·|x_j| on this smooth, piecewise
 rational rhs, plus round-off ≈ eps·|rhs|/d ≈ 1e-10 relative; 1e-6 leaves room for both and fails
 for any missing term (a dropped term of the chain changes an entry by O(1) relative).  The states
-cover the three presets' friction laws: seed 000 (Coulomb + spline), seed 002 (+ thrust-bearing
-friction: the 2×2 spline–bearing solve), seed 003 (viscous and differential-sliding terms), both
+cover the three presets' friction laws: Li et al. (2021) (Coulomb + spline), the multi-stage assembly article (+ thrust-bearing
+friction: the 2×2 spline–bearing solve), the friction-torque article (viscous and differential-sliding terms), both
 drives, speeds from 100 rad/s down into the friction band (1e-3 rad/s) and both directions.
 """
 
@@ -35,8 +35,8 @@ def _states(model, drive, n=18, seed=1):
 
 
 @pytest.mark.parametrize("drive", ["torque", "speed"])
-@pytest.mark.parametrize("preset", ["seed000_two_stage", "seed002_two_stage",
-                                    "seed003_single_stage"])
+@pytest.mark.parametrize("preset", ["li2021_two_stage", "assembly_two_stage",
+                                    "friction_single_stage"])
 def test_analytic_jacobian_matches_central_differences_within_1e_6(preset, drive):
     model = make_model(presets.load(preset), "dynamic", drive)
     checked = 0

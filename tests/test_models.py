@@ -14,11 +14,11 @@ import pytest
 
 from prsm_fmu.models import make_model
 from prsm_fmu.params import MechanismParams
-from prsm_fmu.presets.seed000 import two_stage
+from prsm_fmu.presets.li2021 import two_stage
 
 
 def three_stage() -> MechanismParams:
-    """Seed 000's stages plus a third, larger one, with every friction on (incl. bearings)."""
+    """Li et al.'s (2021) stages plus a third, larger one, with every friction on (incl. bearings)."""
     p = two_stage()
     s1, s2 = p.stages
     s3 = s2.__class__(**{**s2.__dict__, "screw_radius": 24e-3, "roller_radius": 8e-3,
@@ -29,7 +29,7 @@ def three_stage() -> MechanismParams:
     return p.with_changes(stages=stages, mu_nut_screw=0.02, name="three_stage_test").validate()
 
 
-MECHANISMS = {"seed000": two_stage, "three_stage": three_stage}
+MECHANISMS = {"li2021": two_stage, "three_stage": three_stage}
 
 
 def dT_dt(model, x, dx, u) -> float:
@@ -124,7 +124,7 @@ def test_equilibrium_ratio_is_independent_of_friction_and_load():
         p = base.with_changes(mu_screw_roller=mu_sr, mu_spline=mu_ss)
         got = [s.zeta_geometric for s in make_model(p, "quasi-static").mechanism.stages]
         assert got == pytest.approx(ref, rel=1e-13)
-    assert ref[1] > ref[0]  # seed 000 §3.1: carrier 2 faster than carrier 1 at steady state
+    assert ref[1] > ref[0]  # Li et al. (2021) §3.1: carrier 2 faster than carrier 1 at steady state
     # both slightly below pure rolling at the pitch circles, r_S/(r_S + r_N) = 0.375
     assert all(0.37 < z < 0.375 for z in ref)
 
@@ -226,7 +226,7 @@ def test_rigid_contact_solution_exists_near_the_carrier_equilibrium(mu_ns):
 
 
 def test_sign_iteration_converges_without_bracketing_when_bearing_force_is_negative():
-    # seed 000 has spline friction but no bearing friction: the sign of the bearing force is
+    # Li et al. (2021) has spline friction but no bearing friction: the sign of the bearing force is
     # irrelevant and must not keep a converged iteration from being accepted (regression: the
     # fallback root search ran at every evaluation of a braking heavy load)
     model = make_model(two_stage(), "quasi-static", "torque")

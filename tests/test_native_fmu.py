@@ -326,7 +326,7 @@ def test_generator_pins_unmodelled_parameters_to_zero_and_refuses_unknown_output
 
     with zipfile.ZipFile(built_fmus()["PRSM2"]) as z:
         md = z.read("modelDescription.xml")
-    params = presets.load("seed000_two_stage")
+    params = presets.load("li2021_two_stage")
 
     def with_variable(name: str, causality: str, start: str | None) -> bytes:
         root = ET.fromstring(md)
@@ -414,7 +414,7 @@ def test_c_host_runs_the_native_fmu_without_python_equal_to_python_fmu(native, c
 
 # ---- the regression suite and the actuator loop ---------------------------------------------------
 
-@pytest.mark.parametrize("case", ["startup_seed000_quasi-static", "startup_seed000_dynamic"])
+@pytest.mark.parametrize("case", ["startup_li2021_quasi-static", "startup_li2021_dynamic"])
 def test_regression_case_passes_with_the_native_fmu(native, case):
     from prsm_fmu.regress import core
 

@@ -27,7 +27,7 @@ def _single_stage():
     no viscous or differential-sliding term): two unknowns in the iteration matrix."""
     from dataclasses import replace
 
-    return replace(presets.load("seed003_single_stage"), mu_viscous=0.0, mu_differential=0.0)
+    return replace(presets.load("friction_single_stage"), mu_viscous=0.0, mu_differential=0.0)
 
 
 @pytest.mark.parametrize("drive,u,stages", [("speed", (0.0, 5000.0), 2),
@@ -35,7 +35,7 @@ def _single_stage():
                                             ("speed", (0.0, 5000.0), 1),
                                             ("speed", (0.0, 5000.0), 3)])
 def test_start_up_equals_the_python_rosenbrock_bit_for_bit(drive, u, stages):
-    """Seed 000's start-up (100 rad/s, carriers at rest, 5 kN; speed drive: the speed held,
+    """Li et al.'s (2021) start-up (100 rad/s, carriers at rest, 5 kN; speed drive: the speed held,
     torque drive: 19.75 N.m) over 1 ms in steps of 10 us: the carriers' transient is stiff
     (time constants of ~0.01-0.5 ms), so every part of the stepper runs (first-step bound,
     Jacobian reuse and refresh, continuation); and the same start-up of a single-stage PRSM
@@ -43,7 +43,7 @@ def test_start_up_equals_the_python_rosenbrock_bit_for_bit(drive, u, stages):
     general LU)."""
     from fmu_build.mechanisms import three_stage
 
-    params = {1: _single_stage, 2: lambda: presets.load("seed000_two_stage"),
+    params = {1: _single_stage, 2: lambda: presets.load("li2021_two_stage"),
               3: three_stage}[stages]()
     model = make_model(params, "dynamic", drive)
     x0 = model.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
@@ -62,7 +62,7 @@ def test_start_up_equals_the_python_rosenbrock_bit_for_bit(drive, u, stages):
 def test_rhs_equals_the_python_model_at_random_states(three, drive):
     from fmu_build.mechanisms import three_stage
 
-    params = three_stage() if three else presets.load("seed000_two_stage")
+    params = three_stage() if three else presets.load("li2021_two_stage")
     model = make_model(params, "dynamic", drive)
     nat = _native(model)
     rng = random.Random(25)
@@ -76,7 +76,7 @@ def test_rhs_equals_the_python_model_at_random_states(three, drive):
 
 
 def test_memory_round_trip_repeats_the_next_advance():
-    model = make_model(presets.load("seed000_two_stage"), "dynamic", "speed")
+    model = make_model(presets.load("li2021_two_stage"), "dynamic", "speed")
     u = (0.0, 5000.0)
     nat = _native(model)
     x = model.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
@@ -92,7 +92,7 @@ def test_memory_round_trip_repeats_the_next_advance():
 
 
 def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
-    params = presets.load("seed000_two_stage")
+    params = presets.load("li2021_two_stage")
     with pytest.raises(ValueError, match="drive = 'speed'"):
         _native(make_model(params, "quasi-static", "speed"))
     with pytest.raises(ValueError, match="rtol"):
@@ -109,7 +109,7 @@ def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
 
 
 def test_advance_many_equals_single_advances():
-    model = make_model(presets.load("seed000_two_stage"), "dynamic", "speed")
+    model = make_model(presets.load("li2021_two_stage"), "dynamic", "speed")
     u = (0.0, 5000.0)
     x0 = model.initial_state(u, screw_speed=100.0, carrier_ratio=0.0)
     one, many = _native(model), _native(model)
@@ -126,7 +126,7 @@ def test_quasi_static_level_equals_the_python_closed_form_explicit():
     """The slaved level in C: the closed form under held inputs and Dormand-Prince 5(4) where it
     declines (the screw starting from rest against a load: the friction band), against the Python
     stepper ``closed_form_explicit`` at the same tolerances."""
-    model = make_model(presets.load("seed000_two_stage"), "quasi-static", "torque")
+    model = make_model(presets.load("li2021_two_stage"), "quasi-static", "torque")
     u = (19.75, 5000.0)
     x0 = model.initial_state(u)
     py = make_stepper("closed_form_explicit", model,

@@ -1,4 +1,4 @@
-"""Presets: every registered parameter set loads, validates and carries the seeds' numbers;
+"""Presets: every registered parameter set loads, validates and carries the papers' numbers;
 invalid parameters are rejected with a message that names the field and its allowed range."""
 
 from __future__ import annotations
@@ -6,37 +6,56 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import math
-import re
+from pathlib import Path
 
 import pytest
 
 from prsm_fmu import presets
 from prsm_fmu.kinematics import RecirculatingParams
 from prsm_fmu.params import MechanismParams, StageParams
-from prsm_fmu.presets import seed002, seed003
+from prsm_fmu.presets import assembly_article, friction_article
 
-SEED_FILE = re.compile(r"00[0-4]_[0-9a-f]{16}\.txt")
+
+
+def _reference_short_names() -> tuple[str, ...]:
+    """The short names of docs/references.md's table (its first column), the names the
+    documentation, the code and the presets cite the papers by."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "references.md").read_text("utf-8")
+    rows = [line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| ")]
+    return tuple(name for name in rows if name and name != "short name")
+
+
+SHORT_NAMES = _reference_short_names()
+
+
+def _cites_a_paper(text: str) -> bool:
+    return any(name.lower() in text.lower() for name in SHORT_NAMES)
+
+
+def test_references_table_has_the_five_papers():
+    # docs/references.md: Li et al. (2021) and four technical articles
+    assert len(SHORT_NAMES) == 5, SHORT_NAMES
 
 
 # ---- registry -------------------------------------------------------------------------------
 def test_registry_lists_one_key_per_source_sorted():
-    assert presets.names() == ("seed000_two_stage", "seed001_two_stage", "seed002_two_stage",
-                               "seed003_single_stage", "seed004_recirculating")
+    assert presets.names() == ("assembly_two_stage", "friction_single_stage", "kinematics_two_stage",
+                               "li2021_two_stage", "recirculating_screw")
 
 
 @pytest.mark.parametrize("name", presets.names())
-def test_every_preset_loads_validates_and_cites_its_seed(name):
+def test_every_preset_loads_validates_and_cites_its_paper(name):
     params = presets.load(name)
     assert isinstance(params, (MechanismParams, RecirculatingParams))
     assert params.validate() is params
     assert params.name == name
-    assert SEED_FILE.search(params.source), params.source
+    assert _cites_a_paper(params.source), params.source
 
 
 @pytest.mark.parametrize("module_name", presets.MODULES)
-def test_every_preset_module_docstring_cites_its_seed_file(module_name):
+def test_every_preset_module_docstring_cites_its_paper(module_name):
     module = importlib.import_module(f"prsm_fmu.presets.{module_name}")
-    assert SEED_FILE.search(module.__doc__ or "")
+    assert _cites_a_paper(module.__doc__ or "")
     assert set(module.PRESETS) <= set(presets.names())
 
 
@@ -49,11 +68,11 @@ def test_unknown_preset_is_a_value_error_listing_the_known_names():
 
 # ---- validation rules, one per case ----------------------------------------------------------
 def _bad_stage(k: int, **changes):
-    return presets.load("seed002_two_stage").with_stage(k, **changes)
+    return presets.load("assembly_two_stage").with_stage(k, **changes)
 
 
 def _bad_mechanism(**changes):
-    return presets.load("seed002_two_stage").with_changes(**changes)
+    return presets.load("assembly_two_stage").with_changes(**changes)
 
 
 POSITIVE_STAGE_FIELDS = ("screw_radius", "roller_radius", "nut_radius", "screw_lead",
@@ -115,23 +134,23 @@ RECIRCULATING_CASES = [
 @pytest.mark.parametrize(("changes", "field", "allowed"), RECIRCULATING_CASES)
 def test_invalid_recirculating_parameter_is_rejected_naming_field_and_range(changes, field,
                                                                             allowed):
-    params = dataclasses.replace(presets.load("seed004_recirculating"), **changes)
+    params = dataclasses.replace(presets.load("recirculating_screw"), **changes)
     with pytest.raises(ValueError) as info:
         params.validate()
     assert str(info.value).startswith(field + " = "), str(info.value)
     assert allowed in str(info.value)
 
 
-# ---- the seeds' numbers ----------------------------------------------------------------------
+# ---- the papers' numbers ---------------------------------------------------------------------
 def _assert_stage_values(stage, expected: dict) -> None:
     for field, value in expected.items():
         assert getattr(stage, field) == pytest.approx(value, rel=1e-12), field
 
 
-def test_seed000_preset_holds_section_3_1_in_si():
-    # 000_a07c98907360be8b.txt §3.1.  Lengths: 1 mm = 1e-3 m.  Inertias: 1 kg·mm² =
+def test_li2021_preset_holds_section_3_1_in_si():
+    # Li et al. (2021) §3.1.  Lengths: 1 mm = 1e-3 m.  Inertias: 1 kg·mm² =
     # 1 kg × (1e-3 m)² = 1e-6 kg·m², so e.g. J_S1 = 55 kg·mm² = 55e-6 kg·m² = 5.5e-5 kg·m².
-    s1, s2 = presets.load("seed000_two_stage").stages
+    s1, s2 = presets.load("li2021_two_stage").stages
     _assert_stage_values(s1, {
         "screw_radius": 9.75e-3, "roller_radius": 3.25e-3, "nut_radius": 16.25e-3,
         "screw_lead": 10e-3, "screw_starts": 5, "n_rollers": 7,
@@ -158,9 +177,9 @@ def test_seed000_preset_holds_section_3_1_in_si():
     })
 
 
-def test_seed002_preset_holds_the_published_masses_and_inertias_in_si():
-    # 002_dfce4e5c6f831e77.txt, "numerical simulations" paragraph; kg·mm² × 1e-6 = kg·m²
-    p = presets.load("seed002_two_stage")
+def test_assembly_article_preset_holds_the_published_masses_and_inertias_in_si():
+    # the multi-stage assembly article, "numerical simulations" paragraph; kg·mm² × 1e-6 = kg·m²
+    p = presets.load("assembly_two_stage")
     s1, s2 = p.stages
     _assert_stage_values(s1, {
         "roller_mass": 0.014, "screw_mass": 0.051, "nut_mass": 2.2,
@@ -183,16 +202,16 @@ def test_seed002_preset_holds_the_published_masses_and_inertias_in_si():
 
 def test_preset_docstrings_state_the_carrier_masses_the_presets_hold():
     # the module docstrings quote m_P in kg to 3 significant figures; the fields must agree
-    from prsm_fmu.presets import seed000
-    for module, name, quoted in ((seed000, "seed000_two_stage", (0.0178, 0.0248)),
-                                 (seed002, "seed002_two_stage", (0.0175, 0.0411))):
+    from prsm_fmu.presets import li2021
+    for module, name, quoted in ((li2021, "li2021_two_stage", (0.0178, 0.0248)),
+                                 (assembly_article, "assembly_two_stage", (0.0175, 0.0411))):
         stages = presets.load(name).stages
         for k, q in enumerate(quoted):
             assert f"{q} kg" in module.__doc__
             assert stages[k].carrier_mass == pytest.approx(q, abs=5e-5), (name, k)
 
 
-def test_seed000_equivalent_inertia_from_section_3_1_by_hand():
+def test_li2021_equivalent_inertia_from_section_3_1_by_hand():
     # Eq. 11's θ̇_S² bracket with the carriers slaved at ζ (ζ ≈ 0.374, tested elsewhere):
     # J_S1 + J_S2                                = 55e-6 + 170e-6              = 2.25e-4
     # c_1 = 10 mm/2π = 1.59155e-3 m/rad: (m_N1 + N_R m_R1 + 2 m_P1) c_1²
@@ -202,47 +221,47 @@ def test_seed000_equivalent_inertia_from_section_3_1_by_hand():
     # m_S2 c_1² = 0.77 × 2.53303e-6                                         = 1.9504e-6
     # sum (without the carriers' own rotation)                             ≈ 4.1939e-4 kg·m²
     from prsm_fmu.models import make_model
-    model = make_model(presets.load("seed000_two_stage"), "dynamic")
+    model = make_model(presets.load("li2021_two_stage"), "dynamic")
     assert model.mechanism.equivalent_inertia() == pytest.approx(4.1939e-4, rel=2e-4)
 
 
-def test_seed002_lead_angles_reproduce_its_printed_helix_angles_within_rounding():
-    # seed 002 prints 9.27° and 5.51°: atan(L_S / (2π r_S)) to ±0.005° (rounding to 0.01°)
-    s1, s2 = presets.load("seed002_two_stage").stages
+def test_assembly_article_lead_angles_reproduce_its_printed_helix_angles_within_rounding():
+    # the multi-stage assembly article prints 9.27° and 5.51°: atan(L_S / (2π r_S)) to ±0.005° (rounding to 0.01°)
+    s1, s2 = presets.load("assembly_two_stage").stages
     for stage, printed in ((s1, 9.27), (s2, 5.51)):
         angle = math.degrees(math.atan(stage.screw_lead / (2 * math.pi * stage.screw_radius)))
         assert abs(angle - printed) <= 0.005
 
 
-def test_seed002_friction_scenarios_change_only_the_inter_stage_coefficients():
-    base = seed002.two_stage("base")
-    high_ns = seed002.two_stage("high_mu_ns").validate()
+def test_assembly_friction_scenarios_change_only_the_inter_stage_coefficients():
+    base = assembly_article.two_stage("base")
+    high_ns = assembly_article.two_stage("high_mu_ns").validate()
     assert (high_ns.mu_spline, high_ns.mu_nut_screw) == (0.10, 0.105)
     assert high_ns.stages == base.stages
     with pytest.raises(ValueError, match="scenario"):
-        seed002.two_stage("nope")
+        assembly_article.two_stage("nope")
 
 
-def test_seed003_published_set_is_rejected_on_nut_radius():
+def test_friction_article_published_set_is_rejected_on_nut_radius():
     with pytest.raises(ValueError, match=r"^stage\.nut_radius = 0\.015 m"):
-        seed003.published_stage().validate()
+        friction_article.published_stage().validate()
 
 
-def test_seed003_preset_is_the_nearest_standard_prsm():
-    (stage,) = presets.load("seed003_single_stage").stages
-    assert stage.screw_radius == seed003.PUBLISHED["screw_radius"]
-    assert stage.roller_radius == seed003.PUBLISHED["roller_radius"]
-    assert stage.pitch == pytest.approx(seed003.PUBLISHED["pitch"], rel=1e-12)
+def test_friction_article_preset_is_the_nearest_standard_prsm():
+    (stage,) = presets.load("friction_single_stage").stages
+    assert stage.screw_radius == friction_article.PUBLISHED["screw_radius"]
+    assert stage.roller_radius == friction_article.PUBLISHED["roller_radius"]
+    assert stage.pitch == pytest.approx(friction_article.PUBLISHED["pitch"], rel=1e-12)
     assert stage.screw_starts == 4
     assert stage.screw_lead == pytest.approx(8.0e-3, rel=1e-12)
     assert stage.nut_radius == pytest.approx(20.0e-3, rel=1e-12)
     assert stage.screw_radius == pytest.approx((stage.screw_starts - 2) * stage.roller_radius)
     for field in ("screw_mass", "nut_mass", "roller_mass", "carrier_mass"):
-        assert getattr(stage, field) == seed003.PUBLISHED[field]
+        assert getattr(stage, field) == friction_article.PUBLISHED[field]
 
 
-def test_seed004_preset_holds_table_2_in_si():
-    p = presets.load("seed004_recirculating")
+def test_recirculating_article_preset_holds_table_2_in_si():
+    p = presets.load("recirculating_screw")
     assert (p.screw_diameter, p.nut_diameter, p.roller_diameter) == pytest.approx(
         (31.13e-3, 44.14e-3, 6.63e-3), rel=1e-12)
     assert (p.screw_lead, p.screw_starts, p.n_rollers) == (pytest.approx(1.0e-3), 1, 12)

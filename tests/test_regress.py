@@ -51,12 +51,12 @@ def expected(case: str, output: str) -> bool | None:
     * the loop-held outputs (screw speed, rod position and velocity, load force in the loop
       scenes) change by what the controller lets through: reported, not asserted.
     """
-    if case == "startup_seed000_kinematic":
+    if case == "startup_li2021_kinematic":
         return True
     if output == "controller.reference":
         return True
     if output in RATIOS:
-        return case != "startup_seed000_dynamic"
+        return case != "startup_li2021_dynamic"
     if output == "load.force" and case.startswith("startup"):
         return True
     if output in FRICTION:
@@ -134,14 +134,14 @@ def test_update_reports_what_changed(tmp_path):
     where = tmp_path / "baselines"
     where.mkdir()
     shutil.copy(BASELINES / "tolerances.toml", where)
-    name = "startup_seed000_quasi-static"
+    name = "startup_li2021_quasi-static"
     base = core.read_csv((BASELINES / f"{name}.csv").read_text(encoding="utf-8"))
     moved = dict(base.values)
     moved["prsm.efficiency"] = moved["prsm.efficiency"] * 1.01      # an "old" baseline 1 % off
     core.write_csv(where / f"{name}.csv", base.time, moved, base.units)
-    text = regress.update(fmu, where, [name, "startup_seed000_kinematic"])
+    text = regress.update(fmu, where, [name, "startup_li2021_kinematic"])
     assert "**prsm.efficiency** left the old tube" in text
-    assert "startup_seed000_kinematic\n\nNew baseline" in text
+    assert "startup_li2021_kinematic\n\nNew baseline" in text
     assert (where / "REPORT.md").read_text(encoding="utf-8") == text
     new = core.read_csv((where / f"{name}.csv").read_text(encoding="utf-8"))
     assert np.allclose(new.values["prsm.efficiency"], base.values["prsm.efficiency"],

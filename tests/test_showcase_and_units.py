@@ -4,7 +4,7 @@
   exactly (``.venv/bin/`` is this interpreter's directory) in a directory holding
   ``dist/PRSM2.fmu``: the result CSV must show the mechanism moving the way its inputs push it
   (positive torque above the load's holding torque extends the rod), the rod position must be
-  the screw angle times the total lead / 2π (seed 000 Eq. 2, leads read from the FMU's own
+  the screw angle times the total lead / 2π (Li et al. (2021) Eq. 2, leads read from the FMU's own
   parameters), and the plot must be written.
 * Units: the FMU's modelDescription is the reference.  The headers of ``startup.csv``
   (``prsm-fmu startup``) and of a scene's CSV (``prsm-ema``'s writer), and every axis label of
@@ -118,7 +118,7 @@ def test_the_readme_fmu_showcase_moves_the_mechanism_and_plots_it(fmu, model_des
     assert t[-1] > t[0]
     assert np.all(np.diff(col["screw_speed"]) >= 0.0) and col["screw_speed"][-1] > 1.0
     assert rod[-1] > 1e-4                                       # more than 0.1 mm of travel
-    # rod travel = screw angle · ΣL / 2π (seed 000 Eq. 2), at every sample
+    # rod travel = screw angle · ΣL / 2π (Li et al. (2021) Eq. 2), at every sample
     np.testing.assert_allclose(rod, angle * total_lead / (2.0 * math.pi), rtol=1e-9,
                                atol=1e-12)
 
@@ -186,7 +186,7 @@ def test_csv_headers_and_plot_labels_spell_units_as_the_fmu(model_description, t
     assert startup["stage[1].driven_torque"] == fmu_units["stage[1].driven_torque"]
     _check_units("startup.csv", startup, fmu_units, defined)
     # a scene's CSV (prsm-ema's writer) and its figures, on a 0.2 ms run of the start-up scene
-    scene = load_scene("startup_seed000")
+    scene = load_scene("startup_li2021")
     scene = replace(scene, t_end=scene.t0 + 20 * scene.step)
     run = run_scene(scene, prsm="python")
     write_csv(run.result, tmp_path / "scene.csv")
@@ -196,7 +196,7 @@ def test_csv_headers_and_plot_labels_spell_units_as_the_fmu(model_description, t
     assert scene_units["prsm.stage[1].driven_torque"] == fmu_units["stage[1].driven_torque"]
     _check_units("scene.csv", scene_units, fmu_units, defined)
     # the sweep's figures, every time panel and a steady panel
-    res = simulate(presets.load("seed000_two_stage"), fidelity="quasi-static", drive="speed",
+    res = simulate(presets.load("li2021_two_stage"), fidelity="quasi-static", drive="speed",
                    screw_speed=100.0, load_force=5000.0, t_end=2e-5, output_interval=1e-5)
     plot_time_panels([("run", res)], str(tmp_path / "time.png"), tuple(PANELS))
     rows = [{"status": "ok", "mu_spline": m, "efficiency@end": 0.8, "friction_torque@max": 0.1,

@@ -15,11 +15,11 @@ from prsm_fmu import presets
 from prsm_fmu.models import make_model
 from prsm_fmu.steppers import make_stepper
 
-SEED000 = presets.load("seed000_two_stage")
-SEED002 = presets.load("seed002_two_stage")   # with thrust-bearing friction
+LI2021 = presets.load("li2021_two_stage")
+ASSEMBLY = presets.load("assembly_two_stage")   # with thrust-bearing friction
 
 
-@pytest.mark.parametrize("params", [SEED000, SEED002], ids=["seed000", "seed002"])
+@pytest.mark.parametrize("params", [LI2021, ASSEMBLY], ids=["li2021", "assembly_article"])
 @pytest.mark.parametrize("fidelity,opts", [("quasi-static", {}), ("kinematic", {"efficiency": 0.9})])
 @pytest.mark.parametrize("drive", ["torque", "speed"])
 def test_closed_form_step_equals_tight_integration(params, fidelity, opts, drive):
@@ -47,7 +47,7 @@ def test_closed_form_step_equals_tight_integration(params, fidelity, opts, drive
 
 
 def test_closed_form_declines_a_step_through_zero_speed():
-    model = make_model(SEED000, "quasi-static", "torque")
+    model = make_model(LI2021, "quasi-static", "torque")
     # 5 N·m against 5 kN (≈ 19.7 N·m needed at η ≈ 0.8) decelerates at ~3e4 rad/s² on an inertia
     # of ~4.3e-4 kg·m² (screws 55 + 170 kg·mm² = 2.25e-4; nut 2's 18 kg at c_2 = 20 mm/2π:
     # 18 × (3.18e-3)² = 1.8e-4): from 30 rad/s, zero is reached after ~1 ms
@@ -57,16 +57,16 @@ def test_closed_form_declines_a_step_through_zero_speed():
 
 
 def test_dynamic_level_offers_no_closed_form():
-    assert not hasattr(make_model(SEED000, "dynamic"), "closed_form_advance")
+    assert not hasattr(make_model(LI2021, "dynamic"), "closed_form_advance")
 
 
 def test_closed_form_stepper_falls_back_through_zero_speed_and_conserves_energy():
     from prsm_fmu import simulate
-    r = simulate(SEED000, "quasi-static", "torque", screw_torque=5.0, load_force=5000.0,
+    r = simulate(LI2021, "quasi-static", "torque", screw_torque=5.0, load_force=5000.0,
                  t_end=2e-3, output_interval=1e-4, initial_screw_speed=30.0, stepper="closed_form",
                  rtol=1e-9, atol=1e-12)
     assert r["screw_speed"][0] > 0 > r["screw_speed"][-1]
-    ref = simulate(SEED000, "quasi-static", "torque", screw_torque=5.0, load_force=5000.0,
+    ref = simulate(LI2021, "quasi-static", "torque", screw_torque=5.0, load_force=5000.0,
                    t_end=2e-3, output_interval=1e-4, initial_screw_speed=30.0, stepper="radau",
                    rtol=1e-12, atol=1e-14)
     assert r["screw_speed"] == pytest.approx(ref["screw_speed"], rel=1e-6, abs=1e-6)
@@ -77,4 +77,4 @@ def test_closed_form_stepper_falls_back_through_zero_speed_and_conserves_energy(
 def test_closed_form_stepper_refuses_a_model_without_a_closed_form():
     from prsm_fmu.steppers import make_stepper as mk
     with pytest.raises(ValueError, match="closed_form_advance"):
-        mk("closed_form", make_model(SEED000, "dynamic"))
+        mk("closed_form", make_model(LI2021, "dynamic"))

@@ -90,7 +90,7 @@ def test_explicit_stepper_is_correct_below_and_not_correct_above_the_predicted_l
 # ---- friction at zero speed: the classification ---------------------------------------------
 
 def test_reversal_rk4_at_one_step_per_communication_step_chatters_and_rosenbrock_passes():
-    p = maps.SEED000
+    p = maps.LI2021
     ref = maps.reversal_reference(p, 1e-12)
     assert ref["screw_speed"][0] > 0 > ref["screw_speed"][-1]
     rk4 = maps.classify_reversal(maps.reversal(p, "rk4", "substeps", 1), ref)

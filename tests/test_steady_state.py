@@ -1,6 +1,6 @@
 """Tests of prsm_fmu.steady_state: the steady state found by root finding.
 
-Expected values come from physics (virtual work, energy, symmetry), from seed 000 (§3.1, §3.2)
+Expected values come from physics (virtual work, energy, symmetry), from Li et al. (2021) (§3.1, §3.2)
 and from a direct back-substitution of the balances of docs/model.md §3 written out again below,
 never from the dynamic model.
 """
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from prsm_fmu.geometry import contact_geometry
-from prsm_fmu.presets import seed000, seed002
+from prsm_fmu.presets import li2021, assembly_article
 from prsm_fmu.steady_state import (
     carrier_equilibrium_ratio,
     default_initial_guess,
@@ -22,18 +22,18 @@ from prsm_fmu.steady_state import (
     unknown_names,
 )
 
-OMEGA, LOAD = 100.0, 5000.0          # seed 000 §3.1 operating point
+OMEGA, LOAD = 100.0, 5000.0          # Li et al. (2021) §3.1 operating point
 
 
 @pytest.fixture(scope="module")
 
 def p000():
-    return seed000.two_stage()
+    return li2021.two_stage()
 
 
 @pytest.fixture(scope="module")
 def p002():
-    return seed002.two_stage("high_mu_ns").validate()
+    return assembly_article.two_stage("high_mu_ns").validate()
 
 
 
@@ -46,8 +46,8 @@ def c_n(params) -> float:
 
 
 def three_stage():
-    """Seed 002 plus a third stage (a copy of stage 2) so that two bearings and splines act."""
-    p = seed002.two_stage("high_mu_ns")
+    """The multi-stage assembly article plus a third stage (a copy of stage 2) so that two bearings and splines act."""
+    p = assembly_article.two_stage("high_mu_ns")
     s2 = dataclasses.replace(p.stages[1], bearing_radius=27.5e-3)
     # spline radius 13 mm as stage 2's: inside the screw's 16.5 mm pitch radius (params.py)
     s3 = dataclasses.replace(p.stages[1], spline_radius=13e-3, bearing_radius=0.0)
@@ -100,7 +100,7 @@ def test_keys_and_convergence(p000):
     assert r["rod_velocity"] == pytest.approx(OMEGA * c_n(p000), rel=1e-15)
     assert r["screw_torque"] == r["stage[1].driven_torque"]
     assert r["stage[1].spline_friction"] == 0.0
-    # seed 000 Eq. 28 in forward drive
+    # Li et al. (2021) Eq. 28 in forward drive
     assert r["efficiency"] == pytest.approx(
         LOAD * r["rod_velocity"] / (r["screw_torque"] * OMEGA), rel=1e-14)
     assert len(unknown_names(p000)) == 4 * 2 - 1 == default_initial_guess(p000, LOAD).size
@@ -199,7 +199,7 @@ def test_frictionless_virtual_work(p000, w, load):
         assert r[f"stage[{k}].contact_force"] == pytest.approx(load / 7, rel=1e-12)
 
 
-# ---- carriers (seed 000 §3.1, §3.2) ----------------------------------------------------------
+# ---- carriers (Li et al. (2021) §3.1, §3.2) ----------------------------------------------------------
 def test_carrier_ratio_independent_of_friction_and_load(p000):
     ref = [carrier_equilibrium_ratio(p000, k) for k in (1, 2)]
     cases = [dict(mu_screw_roller=m) for m in (0.02, 0.1, 0.2)]
@@ -211,7 +211,7 @@ def test_carrier_ratio_independent_of_friction_and_load(p000):
                 for k in (1, 2):
                     assert r[f"stage[{k}].carrier_speed_ratio"] == pytest.approx(
                         ref[k - 1], rel=1e-12, abs=0.0)
-    assert ref[1] > ref[0]                                   # seed 000 §3.1
+    assert ref[1] > ref[0]                                   # Li et al. (2021) §3.1
     assert ref[0] < 0.375 and ref[1] < 0.375                # below pure rolling r_S/(r_S+r_N)
     # docs/model.md §4 quotes ζ*_1 = 0.37369, ζ*_2 = 0.37454
     assert ref[0] == pytest.approx(0.37369, abs=1e-5)
@@ -226,7 +226,7 @@ def test_carrier_ratio_same_on_both_flanks(p000):
                 carrier_equilibrium_ratio(p000, p000.stages.index(st) + 1), rel=1e-13)
 
 
-# ---- friction trends (seed 000 §3.1, §3.2) ---------------------------------------------------
+# ---- friction trends (Li et al. (2021) §3.1, §3.2) ---------------------------------------------------
 def test_efficiency_falls_with_screw_roller_friction(p000):
     etas = [steady_state(p000.with_changes(mu_screw_roller=m), OMEGA, LOAD)["efficiency"]
             for m in (0.0, 0.05, 0.1, 0.15, 0.2)]

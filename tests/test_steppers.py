@@ -918,7 +918,7 @@ def test_jacobian_reuse_does_not_trap_the_controller_in_a_friction_band():
     from prsm_fmu import presets
     from prsm_fmu.models import make_model
 
-    model = make_model(presets.load("seed000_two_stage"), "dynamic", "torque")
+    model = make_model(presets.load("li2021_two_stage"), "dynamic", "torque")
     u = (5.0, 5000.0)  # the load back-drives the screw after ~1.04 ms
     x0 = model.initial_state(u, screw_speed=30.0, carrier_ratio=None)
     calls, ends = [], []

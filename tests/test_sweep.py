@@ -1,7 +1,7 @@
-"""Parameter studies (issue 7): the seeds' trends read from the sweep's table, Dask execution
+"""Parameter studies (issue 7): the papers' trends read from the sweep's table, Dask execution
 with 1 and 2 workers, failed points, reruns, the FMU master and the study format.
 
-Expected values: the papers' statements (seed 000 §3.2–3.3, seed 002's table) as directions
+Expected values: the papers' statements (Li et al. (2021) §3.2–3.3, the multi-stage assembly article's table) as directions
 of change, the steady states found independently by root finding (:func:`steady_state`), the
 inertial torque J·α of a ramp from the kinetic energy, and the identity of tables.  The FMUs
 are built once in a child process (``python -m fmu_build``, see tests/test_fmu.py for why);
@@ -76,9 +76,9 @@ def _one(rows, **fixed):
 
 @pytest.fixture(scope="module")
 def friction(tmp_path_factory, fmu_dir):
-    """Seed 000 §3.2 on the FMU, on the default local cluster that run_study starts itself,
+    """Li et al. (2021) §3.2 on the FMU, on the default local cluster that run_study starts itself,
     with 2 workers and with 1."""
-    study = load_study(STUDIES / "seed000_friction.toml")
+    study = load_study(STUDIES / "li2021_friction.toml")
     two = run_study(study, str(tmp_path_factory.mktemp("friction2")), workers=2,
                     fmu_dir=fmu_dir, progress=None)
     one = run_study(study, str(tmp_path_factory.mktemp("friction1")), workers=1,
@@ -87,9 +87,9 @@ def friction(tmp_path_factory, fmu_dir):
 
 
 # ---------------------------------------------------------------------------------------------
-# seed 000 §3.2
+# Li et al. (2021) §3.2
 # ---------------------------------------------------------------------------------------------
-def test_seed000_friction_trends_from_the_table(friction):
+def test_li2021_friction_trends_from_the_table(friction):
     res = friction[0]
     rows = res.rows
     assert len(rows) == 4 and all(r["status"] == "ok" for r in rows)
@@ -131,9 +131,9 @@ def test_seed000_friction_trends_from_the_table(friction):
     assert max(r["speed_error@max"] for r in rows) < 1e-9
 
 
-def test_seed000_friction_end_values_equal_the_independent_steady_state(friction):
+def test_li2021_friction_end_values_equal_the_independent_steady_state(friction):
     """At t = 1 ms the FMU run has settled onto the steady state that root finding gives."""
-    base = presets.load("seed000_two_stage")
+    base = presets.load("li2021_two_stage")
     for r in friction[0].rows:
         ss = steady_state(base.with_changes(mu_screw_roller=r["mu_screw_roller"],
                                             mu_spline=r["mu_spline"]), 100.0, 5000.0)
@@ -178,10 +178,10 @@ def test_figures_and_report_are_written(friction):
 
 
 # ---------------------------------------------------------------------------------------------
-# seed 000 §3.3 and seed 002
+# Li et al. (2021) §3.3 and the multi-stage assembly article
 # ---------------------------------------------------------------------------------------------
-def test_seed000_pitch_trends_from_the_table(tmp_path, client, fmu_dir):
-    res = run_study(load_study(STUDIES / "seed000_pitches.toml"), str(tmp_path), client=client,
+def test_li2021_pitch_trends_from_the_table(tmp_path, client, fmu_dir):
+    res = run_study(load_study(STUDIES / "li2021_pitches.toml"), str(tmp_path), client=client,
                     fmu_dir=fmu_dir, progress=None, figures=False)
     rows = sorted(res.rows, key=lambda r: r["stage[1].pitch"])
     assert [r["stage[1].pitch"] for r in rows] == [0.001, 0.0015, 0.002, 0.0025, 0.003]
@@ -205,8 +205,8 @@ def test_seed000_pitch_trends_from_the_table(tmp_path, client, fmu_dir):
     assert all(t.agrees for t in res.trends)
 
 
-def test_seed002_friction_trends_from_the_table(tmp_path, client, fmu_dir):
-    res = run_study(load_study(STUDIES / "seed002_friction.toml"), str(tmp_path), client=client,
+def test_assembly_friction_trends_from_the_table(tmp_path, client, fmu_dir):
+    res = run_study(load_study(STUDIES / "assembly_friction.toml"), str(tmp_path), client=client,
                     fmu_dir=fmu_dir, progress=None, figures=False)
     rows = res.rows
     base = _one(rows, mu_spline=0.1, mu_nut_screw=0.005)
@@ -241,7 +241,7 @@ def _write_study(path: Path, grid: str, backend: str = "fmu", extra: str = "") -
     path.write_text(textwrap.dedent(f"""
         [study]
         name = "small"
-        preset = "seed000_two_stage"
+        preset = "li2021_two_stage"
         backend = "{backend}"
         [scenario]
         fidelity = "dynamic"
@@ -323,7 +323,7 @@ def test_a_point_the_fmu_refuses_records_the_fmus_own_reason(fmu_dir):
     from prsm_fmu.sweep.fmu_runner import FmuPointError, FmuRunner
 
     runner = FmuRunner(os.path.join(fmu_dir, "PRSM2.fmu"))
-    p = presets.load("seed000_two_stage")
+    p = presets.load("li2021_two_stage")
     with pytest.raises(FmuPointError) as refused:
         runner.run(p, "quasi-static", lambda t: 100.0, 0.0, math.nan, 1e-4, 1e-5)
     # the runner's own words name the torque it tried; the FMU's name the load input
@@ -340,7 +340,7 @@ def test_the_fmu_runner_recovers_after_a_refused_step(fmu_dir):
     from prsm_fmu.sweep.fmu_runner import FmuPointError, FmuRunner
 
     runner = FmuRunner(os.path.join(fmu_dir, "PRSM2.fmu"))
-    p = presets.load("seed000_two_stage")
+    p = presets.load("li2021_two_stage")
     with pytest.raises(FmuPointError, match="refused|failed"):
         runner.run(p, "quasi-static", lambda t: 100.0, 0.0, math.nan, 1e-4, 1e-5)
     assert runner.fmu is None
@@ -356,13 +356,13 @@ def test_the_fmu_runner_recovers_after_a_refused_step(fmu_dir):
 
 
 def test_a_tracked_ramp_carries_the_inertial_torque(fmu_dir):
-    """Seed 003's ramp on PRSM1: the speed meets the reference at every communication point,
+    """The friction-torque article's ramp on PRSM1: the speed meets the reference at every communication point,
     and the motor torque during the ramp exceeds the torque after it by J_eq·α, with J_eq from
     the kinetic energy (2 T / ω²) at the end."""
     from prsm_fmu.sweep.fmu_runner import FmuRunner
 
     runner = FmuRunner(os.path.join(fmu_dir, "PRSM1.fmu"))
-    p = presets.load("seed003_single_stage")
+    p = presets.load("friction_single_stage")
     ta, w, h = 0.01, 1.0, 1e-4
     res = runner.run(p, "dynamic", lambda t: w * min(t / ta, 1.0), w / ta, 1000.0, 0.015, h)
     runner.close()
@@ -377,7 +377,7 @@ def test_a_tracked_ramp_carries_the_inertial_torque(fmu_dir):
 
 
 def test_model_backend_agrees_with_the_fmu_at_steady_state(tmp_path, friction):
-    study = load_study(STUDIES / "seed000_friction.toml", backend="model")
+    study = load_study(STUDIES / "li2021_friction.toml", backend="model")
     res = run_study(study, str(tmp_path), executor="loop", progress=None, figures=False)
     fmu_rows = {(r["mu_screw_roller"], r["mu_spline"]): r for r in friction[0].rows}
     for r in res.rows:
@@ -415,17 +415,17 @@ expect = "rises"
 # ---------------------------------------------------------------------------------------------
 def test_shipped_studies_load_and_cover_the_seeds():
     names = {p.stem for p in STUDIES.glob("*.toml")}
-    assert {"seed000_friction", "seed000_pitches", "seed002_friction", "seed003_load",
-            "seed003_accel_time"} <= names
-    s = load_study(STUDIES / "seed000_friction.toml")
+    assert {"li2021_friction", "li2021_pitches", "assembly_friction", "friction_load",
+            "friction_accel_time"} <= names
+    s = load_study(STUDIES / "li2021_friction.toml")
     assert [p.values for p in s.points()] == [
         {"mu_screw_roller": 0.1, "mu_spline": 0.2}, {"mu_screw_roller": 0.1, "mu_spline": 0.3},
         {"mu_screw_roller": 0.2, "mu_spline": 0.2}, {"mu_screw_roller": 0.2, "mu_spline": 0.3}]
-    # seed 003: its own µ_1 and the one its load table's intercept needs, × its table's axis
-    s = load_study(STUDIES / "seed003_accel_time.toml")
+    # the friction-torque article: its own µ_1 and the one its load table's intercept needs, × its table's axis
+    s = load_study(STUDIES / "friction_accel_time.toml")
     assert [(p.values["mu_viscous"], p.values["accel_time"]) for p in s.points()] == [
         (mu1, ta) for mu1 in (0.001, 580.0) for ta in (0.01, 0.03, 0.06, 0.09)]
-    s = load_study(STUDIES / "seed003_load.toml")
+    s = load_study(STUDIES / "friction_load.toml")
     assert [(p.values["mu_viscous"], p.values["load_force"]) for p in s.points()] == [
         (mu1, f) for mu1 in (0.001, 580.0) for f in (500.0, 1000.0, 3000.0, 5000.0)]
     assert s.stage_counts() == {1}
@@ -441,7 +441,7 @@ def test_shipped_studies_load_and_cover_the_seeds():
 ])
 def test_malformed_studies_are_refused_naming_the_key(tmp_path, body, words):
     path = tmp_path / "bad.toml"
-    path.write_text('[study]\nname = "bad"\npreset = "seed000_two_stage"\n[scenario]\n'
+    path.write_text('[study]\nname = "bad"\npreset = "li2021_two_stage"\n[scenario]\n'
                     't_end = 1e-3\noutput_interval = 1e-5\n' + body + "\n", encoding="utf-8")
     with pytest.raises(StudyError) as exc:
         load_study(path)
@@ -454,7 +454,7 @@ def test_random_sampling_is_reproducible_and_within_its_ranges(tmp_path):
     path.write_text(textwrap.dedent("""
         [study]
         name = "r"
-        preset = "seed000_two_stage"
+        preset = "li2021_two_stage"
         [scenario]
         t_end = 1e-4
         output_interval = 1e-5
@@ -480,7 +480,7 @@ def test_random_sampling_is_reproducible_and_within_its_ranges(tmp_path):
 def test_pitch_and_stage_count_overrides():
     from prsm_fmu.sweep import apply_overrides
 
-    p = presets.load("seed000_two_stage")
+    p = presets.load("li2021_two_stage")
     q = apply_overrides(p, {"stage[1].pitch": 0.001, "stage[2].screw_starts": 4,
                             "stage[2].pitch": 0.003, "mu_spline": 0.3})
     assert q.stages[0].screw_lead == pytest.approx(0.005)

@@ -24,7 +24,7 @@ from system_models.progress import Progress
 from system_models.scenes import BUILTIN_DIR, list_scenes, load_scene, parse_scene
 from system_models.signals import make_profile
 
-SCENES = ("position_step", "sine_tracking", "load_step", "speed_reversal", "startup_seed000")
+SCENES = ("position_step", "sine_tracking", "load_step", "speed_reversal", "startup_li2021")
 
 
 # ---- toy blocks ------------------------------------------------------------------------------

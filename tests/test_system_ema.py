@@ -37,7 +37,7 @@ from system_models.prsm import (ATOL_FACTOR, AUTO_FIDELITY, DEFAULT_STEPPER,  # 
 from system_models.run import run_scene  # noqa: E402
 from system_models.scenes import load_scene  # noqa: E402
 
-SCENES = ("position_step", "sine_tracking", "load_step", "speed_reversal", "startup_seed000")
+SCENES = ("position_step", "sine_tracking", "load_step", "speed_reversal", "startup_li2021")
 
 
 def fmu() -> Path:
@@ -146,7 +146,7 @@ def test_recording_only_the_scenes_outputs_reads_fewer_fmu_variables_and_changes
         assert np.array_equal(part[name], full[name]), name
 
 
-@pytest.mark.parametrize("scene,fidelity", [("startup_seed000", None), ("speed_reversal", "dynamic")])
+@pytest.mark.parametrize("scene,fidelity", [("startup_li2021", None), ("speed_reversal", "dynamic")])
 def test_fmu_and_python_agree_to_1e_10_at_the_dynamic_level(scene, fidelity):
     a = run_scene(scene, prsm="fmu", fmu_path=fmu(), fidelity=fidelity).result
     b = run_scene(scene, prsm="python", fidelity=fidelity).result
@@ -192,7 +192,7 @@ def test_every_scene_meets_its_requirements_with_the_fmu(name):
 
 
 def test_startup_carriers_reach_the_independent_steady_state_ratio():
-    run = run_scene("startup_seed000", prsm="fmu", fmu_path=fmu())
+    run = run_scene("startup_li2021", prsm="fmu", fmu_path=fmu())
     ratios = [c for c in run.checks if c.kind == "final_value" and "carrier" in c.signal]
     assert len(ratios) == 2 and all(c.passed for c in ratios)
     r = run.result
@@ -222,7 +222,7 @@ def test_retry_with_smaller_steps_restores_the_fmu_state_and_matches_python():
     steps of the start-up (the carriers spinning up from rest); the master rolls every block back
     (the FMU with fmi2SetFMUstate) and retries with halved steps.  The FMU run equals the
     Python run."""
-    sc = load_scene("startup_seed000")
+    sc = load_scene("startup_li2021")
     sc = dataclasses.replace(sc, prsm={"parameters": {"max_substeps": 10, "tolerance": 1e-10}})
     with pytest.raises(CoSimulationError, match="max_substeps"):
         build_system(sc, prsm="fmu", fmu_path=fmu()).run()
@@ -317,7 +317,7 @@ def test_prsm_ema_builds_the_fmu_in_a_child_process_when_it_is_missing(tmp_path)
     assert ensure_fmu(target) == target and target.is_file()
     assert fmu_is_stale(target) is None
     # the console entry point runs from a fresh interpreter too
-    proc = subprocess.run([sys.executable, "-m", "system_models", "run", "--scene", "startup_seed000",
+    proc = subprocess.run([sys.executable, "-m", "system_models", "run", "--scene", "startup_li2021",
                            "--fmu", str(target), "--out", str(tmp_path / "out"), "--no-plots"],
                           env=subprocess_env(), capture_output=True, text=True, timeout=300,
                           cwd=tmp_path)

@@ -9,7 +9,7 @@ of it.  docs/accuracy.md §4 derives it and checks it against the work-precision
 * **dynamic**: 0 (it is the reference model).
 * **quasi-static**: the carriers' lag behind their equilibrium ζ*ω, which the quasi-static level
   drops.  With τ the *slowest* carrier's linearised time constant at the operating point
-  (:func:`carrier_time_constants`, carriers at equilibrium; τ ∝ ω/F: for seed 000 at 100 rad/s
+  (:func:`carrier_time_constants`, carriers at equilibrium; τ ∝ ω/F: for Li et al. (2021) at 100 rad/s
   and 5 kN 14.3 µs for carrier 1 — ``model.fastest_time_constant`` — and 31.5 µs for carrier 2):
 
   - a deviation d₀ = |ω_P/ω − ζ*|/ζ* present at the start shows undamped at the first output
@@ -27,9 +27,9 @@ of it.  docs/accuracy.md §4 derives it and checks it against the work-precision
 * **kinematic**: E_qs plus what the kinematic level leaves out on top: the friction loss
   |η/η₀ − 1| (η the quasi-static level's steady forward efficiency, independent of speed and load
   outside the friction band; η₀ the kinematic level's constant efficiency, 1 by default: then
-  it is 1 − η ≈ 0.2 for seed 000), the pure-rolling carrier ratio's offset from ζ*,
+  it is 1 − η ≈ 0.2 for Li et al. (2021)), the pure-rolling carrier ratio's offset from ζ*,
   max_k |ζ_ideal,k/ζ*_k − 1|, and its friction outputs (:func:`friction_output_gap`: no spline
-  friction at all, so 1 for a mechanism with spline friction such as seed 000's two stages —
+  friction at all, so 1 for a mechanism with spline friction such as Li et al.'s (2021) two stages —
   over the FMU's outputs the kinematic level is then never within a tolerance below 1).
 
 The communication step h enters only through the damping of input jumps; when it is not known

@@ -115,7 +115,7 @@ class Model(ABC):
             Initial screw angle [rad].
         carrier_ratio : float or None
             Initial carrier speed / screw speed [-] for the dynamic level; ``None`` puts the
-            carriers at their equilibrium ratio.  Default 0: carriers at rest (seed 000's start).
+            carriers at their equilibrium ratio.  Default 0: carriers at rest (Li et al.'s (2021) start).
 
         Returns
         -------
@@ -213,7 +213,7 @@ class Model(ABC):
                 terms[term] += p
         for term, key in self._term_keys:
             y[key] = terms[term]
-        # seed 003's M_f: the friction's generalized force on the screw angle, i.e. what the
+        # the friction-torque article's M_f: the friction's generalized force on the screw angle, i.e. what the
         # motor torque spends beyond the load's torque and the slaved parts' inertial torque
         y["screw_friction_torque"] = motor - load * c_out - self._j_eq * sol.screw_acceleration
         y["input_power"] = p_in
@@ -250,7 +250,7 @@ class Model(ABC):
 def efficiency(p_in: float, p_out: float) -> float:
     """Instantaneous efficiency [-] from motor power and load power [W].
 
-    Forward drive (motor delivers power, load absorbs it): P_out / P_in, which is seed 000
+    Forward drive (motor delivers power, load absorbs it): P_out / P_in, which is Li et al. (2021)
     Eq. 28 η = F_N Σ L / (2π M_S1).  Back-driving (load delivers power, motor absorbs it):
     P_in / P_out.  Otherwise (standstill, or both sides delivering or absorbing): 0.
     """
@@ -262,7 +262,7 @@ def efficiency(p_in: float, p_out: float) -> float:
 
 
 def overall_efficiency(input_work: float, output_work: float) -> float:
-    """Overall efficiency over an interval [-]: seed 003's work ratio ∫P_out dt / ∫P_in dt.
+    """Overall efficiency over an interval [-]: the friction-torque article's work ratio ∫P_out dt / ∫P_in dt.
 
     Parameters
     ----------

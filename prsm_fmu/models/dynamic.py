@@ -1,6 +1,6 @@
-"""Dynamic level: the Lagrange model of seed 000 §2 with one degree of freedom per carrier.
+"""Dynamic level: the Lagrange model of Li et al. (2021) §2 with one degree of freedom per carrier.
 
-Generalized coordinates: the screw angle and the carrier angles (seed 000 Eq. 21).  The carriers
+Generalized coordinates: the screw angle and the carrier angles (Li et al. (2021) Eq. 21).  The carriers
 are driven only by screw–roller friction; their time constants are ~0.01–0.5 ms, so the system
 is stiff: use the Rosenbrock stepper, or an explicit one with steps below the limit printed by
 ``benchmarks/step_cost.py``.  simulate and the FMU use the Rosenbrock stepper with the options

@@ -1,11 +1,11 @@
 """Kinematic level: ideal kinematics, all inertias, optional constant efficiency.
 
-Carriers turn at the pure-rolling ratio r_S/(r_S + r_N) (seed 001); no thread friction.  With
+Carriers turn at the pure-rolling ratio r_S/(r_S + r_N) (the two-stage kinematics article); no thread friction.  With
 ``efficiency`` η₀ < 1 a Coulomb torque (1/η₀ − 1)·|F_load|·ΣL/2π opposes the screw's rotation,
 so that the steady forward-drive efficiency is η₀ (and back-driving, 2 − 1/η₀).  It is the
 cheapest level and the `IdealGearR2T`-like baseline.
 
-Seed 003's other two friction terms reach this level through the same loss torque, lumped at
+The friction-torque article's other two friction terms reach this level through the same loss torque, lumped at
 their steady values with the carriers at their equilibrium ratio ζ*_k and frictionless normal
 forces (docs/model.md §4): a viscous torque C_v ω with C_v = Σ_k N_Rk µ_1 n_tk |a_k + ζ*_k b_k|²
 and a differential-sliding torque C_d |F_load| sgñ(ω ΣL/2π) with C_d = Σ_k µ_3 / |n_z,k|.  With

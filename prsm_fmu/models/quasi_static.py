@@ -3,9 +3,9 @@
 Each carrier turns at ζ*_k ω, the ratio at which the screw–roller slip has no component along
 the carrier's generalized direction (so the friction's generalized force on the carrier
 vanishes, docs/model.md §4).  ζ* depends only on the contact geometry, not on friction or load
-(seed 000 §3.2).  The carriers' inertia is carried by the screw (J_Pk ζ_k² added to screw k).
+(Li et al. (2021) §3.2).  The carriers' inertia is carried by the screw (J_Pk ζ_k² added to screw k).
 Contact forces and friction are algebraic.  Exact at steady state; in transients it misses the
-carriers' spin-up (seed 000 Fig. 3), which lasts ~5 carrier time constants.
+carriers' spin-up (Li et al. (2021) Fig. 3), which lasts ~5 carrier time constants.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ their power per unit speed times the angle travelled. The coefficients are taken
 general solver the first time a (sign ω, sign F) pair is met and re-validated against the sign
 pattern at every use; whenever the step would enter the band, change the sign of ω, or leave the
 pattern, :meth:`SlavedAdvance.advance` returns None and the caller integrates numerically.
-A viscous friction term (seed 003's µ_1) makes the forces depend on the speed itself, so the
+A viscous friction term (the friction-torque article's µ_1) makes the forces depend on the speed itself, so the
 acceleration is no longer constant under held inputs: with it the step is always declined
 (except at a constant prescribed speed, where the derivative is constant and one Euler step is
 exact).  The differential-sliding torque is Coulomb-like (∝ load, sign of ω) and keeps it exact.

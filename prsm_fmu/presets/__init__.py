@@ -1,7 +1,7 @@
-"""Registry of parameter sets taken from the seed papers.
+"""Registry of parameter sets taken from the papers.
 
-One module per source (``seed000`` … ``seed004``); each module's docstring cites the seed file
-and section and states every assumption, and each exposes ``PRESETS``: a mapping from registry
+One module per source (``li2021`` … ``recirculating_article``); each module's docstring cites the paper
+(as docs/references.md names it) and section and states every assumption, and each exposes ``PRESETS``: a mapping from registry
 key to a function returning the parameters.  :func:`load` returns them validated.
 """
 
@@ -17,7 +17,7 @@ from ..params import MechanismParams
 Params = Union[MechanismParams, RecirculatingParams]
 
 #: the source modules whose ``PRESETS`` the registry collects
-MODULES = ("seed000", "seed001", "seed002", "seed003", "seed004")
+MODULES = ("li2021", "kinematics_article", "assembly_article", "friction_article", "recirculating_article")
 
 
 @functools.cache
@@ -48,7 +48,7 @@ def load(name: str) -> Params:
     Parameters
     ----------
     name : str
-        Registry key, e.g. ``"seed000_two_stage"``; see :func:`names`.
+        Registry key, e.g. ``"li2021_two_stage"``; see :func:`names`.
 
     Returns
     -------

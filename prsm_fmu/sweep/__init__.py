@@ -3,7 +3,7 @@
 ::
 
     from prsm_fmu.sweep import load_study, run_study
-    study = load_study("studies/seed000_friction.toml")
+    study = load_study("studies/li2021_friction.toml")
     res = run_study(study)                       # local Dask cluster, one worker per core
     res = run_study(study, scheduler="tcp://host:8786")
     res.rows, res.trends, res.figures

@@ -1,6 +1,6 @@
 """One point of a study on the torque-driven FMU, with the screw speed prescribed by the master.
 
-The FMU (``PRSM<n>.fmu``, docs/fmu.md) takes the motor torque as its input; the seeds' studies
+The FMU (``PRSM<n>.fmu``, docs/fmu.md) takes the motor torque as its input; the papers' studies
 prescribe the screw speed (a step at t = 0, or a linear ramp).  :class:`FmuRunner` is the
 master that closes that gap exactly, without a controller's lag: on every communication step
 [t, t + h] it finds the torque T, held over the step, for which the FMU's screw speed at t + h

@@ -6,7 +6,7 @@ A metric is named ``<signal>@<reduction>``:
   friction costs at the input shaft, N·m; NaN at standstill), ``screw_torque`` (the motor's),
   and per stage ``stage[k].carrier_speed_ratio``, ``stage[k].contact_force``,
   ``stage[k].driven_torque``, ``stage[k].spline_friction``; on the model backend also
-  ``screw_friction_torque`` (seed 003's M_f, the friction's generalized force on the screw
+  ``screw_friction_torque`` (the friction-torque article's M_f, the friction's generalized force on the screw
   angle: the motor torque less the load's and the slaved parts' inertial torque, N·m; it also
   carries the torque that drives the carriers through friction) and
   ``friction_power_<term>`` (coulomb, viscous, differential, joints, W);
@@ -14,7 +14,7 @@ A metric is named ``<signal>@<reduction>``:
   time after which the signal stays within 1 % of its final value, NaN if it has not settled
   within the run, see :func:`settle`), and a time in seconds (the sample nearest to it).
 
-Besides those, ``efficiency@overall`` = W_out / W_in over the run (seed 003's overall
+Besides those, ``efficiency@overall`` = W_out / W_in over the run (the friction-torque article's overall
 efficiency), ``speed_error@max`` (largest |ω − ω_ref| / max|ω_ref| at the samples: 0 for the
 speed-driven model, the FMU master's tracking error otherwise), ``energy_residual``
 (|W_in − W_out − W_f − ΔT| / W_in at the end) and ``rhs_calls``.

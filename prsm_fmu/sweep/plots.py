@@ -2,7 +2,7 @@
 swept parameter.
 
 * :func:`plot_time_panels`: one panel per signal (default: carrier speed ratios, axial contact
-  forces per roller, efficiency, spline friction, as seed 000 Figs. 4–5), every run in its own
+  forces per roller, efficiency, spline friction, as Li et al. (2021) Figs. 4–5), every run in its own
   colour, stages told apart by line style.  :func:`prsm_fmu.report.plot_runs` is this function
   with the default panels.
 * :func:`plot_steady`: one panel per metric of the table against one swept parameter, one
@@ -44,7 +44,7 @@ PANELS: dict[str, tuple[str, str, bool, int]] = {
                                False, 0),
 }
 
-#: seed 000 Figs. 4 and 5: (a) ζ_PSk, (b) F_Srzk, (c) η, (d) f_S2
+#: Li et al. (2021) Figs. 4 and 5: (a) ζ_PSk, (b) F_Srzk, (c) η, (d) f_S2
 DEFAULT_PANELS = ("carrier_speed_ratio", "contact_force", "efficiency", "spline_friction")
 
 _LABELS = {

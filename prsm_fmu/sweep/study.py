@@ -3,10 +3,10 @@
 A study file (``studies/*.toml``; every value SI)::
 
     [study]
-    name = "seed000_friction"               # default output directory: out/sweeps/<name>
-    title = "Seed 000 §3.2: friction coefficients"
-    source = "000_a07c98907360be8b.txt §3.2, Fig. 4"
-    preset = "seed000_two_stage"            # prsm_fmu.presets key (or seed000_three_stage)
+    name = "li2021_friction"               # default output directory: out/sweeps/<name>
+    title = "Li et al. (2021) §3.2: friction coefficients"
+    source = "Li et al. (2021) §3.2, Fig. 4"
+    preset = "li2021_two_stage"            # prsm_fmu.presets key (or li2021_three_stage)
     backend = "fmu"                         # "fmu" (default) or "model" (prsm_fmu.simulate)
     notes = "..."                           # free text, copied into the report
 
@@ -135,7 +135,7 @@ def parameter_kind(name: str) -> str:
 
 
 def resolve_preset(name: str) -> MechanismParams:
-    """A preset by registry key; also ``seed000_three_stage`` (PRSM3's parameters).
+    """A preset by registry key; also ``li2021_three_stage`` (PRSM3's parameters).
 
     Raises
     ------

@@ -1,20 +1,20 @@
-"""Seed 002: the two-stage PRSM of the rigid-body Newton model with inter-stage friction.
+"""The multi-stage assembly article: the two-stage PRSM of the rigid-body Newton model with inter-stage friction.
 
-Source: ``002_dfce4e5c6f831e77.txt`` — the geometry table (radii, leads, starts, 7 rollers), the
+Source: the multi-stage assembly article — the geometry table (radii, leads, starts, 7 rollers), the
 "numerical simulations" paragraph (masses, moments of inertia, µ_RS = 0.05, the 100 rad/s step
 and the 7000 N load) and the steady-state table (base scenario µ_SS = 0.10, µ_NS = 0.005).
-The geometry is that of seed ``000_a07c98907360be8b.txt`` §3.1, which also gives what seed 002
+The geometry is that of Li et al. (2021) §3.1, which also gives what the multi-stage assembly article
 omits: the flank angle β = 45° and the spline radius r_SS2 = 13 mm.  Converted to SI
-(``units.py``): mm → m, kg·mm² → kg·m² (× 1e-6).  Seed 002's "helix angles" 9.27° and 5.51° are the lead angles
+(``units.py``): mm → m, kg·mm² → kg·m² (× 1e-6).  The multi-stage assembly article's "helix angles" 9.27° and 5.51° are the lead angles
 atan(L_S / (2π r_S)) of the two screws, and its 20° "pressure angle" belongs to the ring-gear
 teeth, which these parameters do not describe.
 
-Assumptions, each because seed 002 does not give the number:
+Assumptions, each because the multi-stage assembly article does not give the number:
 
-* Carrier masses: not given (nor in seed 000).  As in ``seed000.py``, a carrier ring whose
+* Carrier masses: not given (nor in Li et al. (2021)).  As in ``li2021.py``, a carrier ring whose
   radius of gyration is the roller orbit radius r_S + r_R: m_P = J_P / (r_S + r_R)², i.e.
   0.0175 kg and 0.0411 kg.  They enter only the axial kinetic energy of the carriers.
-* Carriers per stage: two (seed 000 Eq. 8, one at each roller end); J_P is per carrier.
+* Carriers per stage: two (Li et al. (2021) Eq. 8, one at each roller end); J_P is per carrier.
 * Thrust-bearing friction radius r_NS1 (nut 1 – screw 2): not given.  We take the nut 1 pitch
   radius, 16.25 mm, as the mean radius of a thrust bearing seated on nut 1.  Stage 2 has no
   bearing to a next stage (r_NS2 unused, 0).
@@ -30,10 +30,10 @@ from ..params import MechanismParams, StageParams
 from .units import MM, KG_MM2
 
 
-#: seed 002's operating point: screw speed [rad/s], load on nut 2 [N], simulated time [s]
+#: the multi-stage assembly article's operating point: screw speed [rad/s], load on nut 2 [N], simulated time [s]
 SCENARIO = {"screw_speed": 100.0, "load_force": 7000.0, "t_end": 0.5}
 
-#: seed 002's friction scenarios (µ_SS, µ_NS) of the steady-state table; µ_RS = 0.05 in all
+#: the multi-stage assembly article's friction scenarios (µ_SS, µ_NS) of the steady-state table; µ_RS = 0.05 in all
 FRICTION_SCENARIOS = {"base": (0.10, 0.005), "high_mu_ss": (0.20, 0.005),
                       "high_mu_ns": (0.10, 0.105)}
 
@@ -51,7 +51,7 @@ def _stage(r_s_mm: float, r_r_mm: float, r_n_mm: float, *, m_s: float, m_n: floa
 
 
 def two_stage(scenario: str = "base") -> MechanismParams:
-    """Seed 002's two-stage PRSM with the friction of one of its scenarios.
+    """The multi-stage assembly article's two-stage PRSM with the friction of one of its scenarios.
 
     Parameters
     ----------
@@ -74,10 +74,10 @@ def two_stage(scenario: str = "base") -> MechanismParams:
     return MechanismParams(
         stages=(stage1, stage2),
         mu_screw_roller=0.05, mu_spline=mu_ss, mu_nut_screw=mu_ns,
-        name="seed002_two_stage" + ("" if scenario == "base" else f"_{scenario}"),
-        source="002_dfce4e5c6f831e77.txt (tables and simulation paragraph); "
-               "000_a07c98907360be8b.txt §3.1 (flank angle, spline radius)",
+        name="assembly_two_stage" + ("" if scenario == "base" else f"_{scenario}"),
+        source="the multi-stage assembly article (tables and simulation paragraph); "
+               "Li et al. (2021) §3.1 (flank angle, spline radius)",
     )
 
 
-PRESETS = {"seed002_two_stage": two_stage}
+PRESETS = {"assembly_two_stage": two_stage}

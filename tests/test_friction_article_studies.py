@@ -1,11 +1,11 @@
-"""Seed 003's two studies (003_e265d1d1167b0d4b.txt, its load and acceleration-time tables) run
+"""The friction-torque article's two studies (its load and acceleration-time tables) run
 as studies on the accelerating speed drive, and its trends asserted from their tables.
 
-Both studies have two lines: µ_1 = 0.001 N·s/m (the seed's value, whose viscous torque at
-1 rad/s is ~1.6e-7 N·m) and µ_1 = 580 N·s/m, what the intercept of the seed's own load table
+Both studies have two lines: µ_1 = 0.001 N·s/m (the article's value, whose viscous torque at
+1 rad/s is ~1.6e-7 N·m) and µ_1 = 580 N·s/m, what the intercept of the article's own load table
 needs (least squares through its four points: 0.0931 N·m + 1.429e-4 N·m/N · F; at 1 rad/s the
 viscous torque is N_R n_t µ_1 |σ|² ω = 5 · 10 · µ_1 · 3.2167e-6 m², so µ_1 = 0.0931 / 1.608e-4
-≈ 579 N·s/m).  docs/sweeps.md §4 tables both beside the seed's.
+≈ 579 N·s/m).  docs/sweeps.md §4 tables both beside the article's.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from prsm_fmu import presets, steady_state
 from prsm_fmu.sweep import load_study, run_study
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
-SEED_MU1, FIT_MU1 = 0.001, 580.0
+ARTICLE_MU1, FIT_MU1 = 0.001, 580.0
 
 
 def run_table(name: str, tmp_path_factory) -> list[dict]:
@@ -31,12 +31,12 @@ def run_table(name: str, tmp_path_factory) -> list[dict]:
 
 @pytest.fixture(scope="module")
 def load_table(tmp_path_factory):
-    return run_table("seed003_load", tmp_path_factory)
+    return run_table("friction_load", tmp_path_factory)
 
 
 @pytest.fixture(scope="module")
 def accel_table(tmp_path_factory):
-    return run_table("seed003_accel_time", tmp_path_factory)
+    return run_table("friction_accel_time", tmp_path_factory)
 
 
 def line(rows, mu1, along):
@@ -48,7 +48,7 @@ def strictly(values, rising: bool) -> bool:
     return all((b > a) if rising else (b < a) for a, b in zip(values, values[1:]))
 
 
-@pytest.mark.parametrize("mu1", [SEED_MU1, FIT_MU1])
+@pytest.mark.parametrize("mu1", [ARTICLE_MU1, FIT_MU1])
 def test_peak_friction_torque_rises_with_load(load_table, mu1):
     peaks = [r["screw_friction_torque@max"] for r in line(load_table, mu1, "load_force")]
     assert strictly(peaks, rising=True)
@@ -70,29 +70,29 @@ def test_time_to_steady_state_with_the_seeds_own_viscous_coefficient(load_table)
     inertial drive through friction, ζ*² J_P α ≈ 0.1104 · 2.1375e-4 kg·m² · 50 rad/s² ≈
     1.2e-3 N·m, independent of the load: more than 1 % of M_f at 500 N (0.068 N·m), less at
     1000 N and above.  So 500 N settles when the ramp ends (20 ms) and the others as soon as the
-    slip leaves the regularisation band (~1 ms): a fall with load, but a step, not the seed's
+    slip leaves the regularisation band (~1 ms): a fall with load, but a step, not the article's
     gradual 35 → 18 ms."""
-    t_ss = [r["screw_friction_torque@settle"] for r in line(load_table, SEED_MU1, "load_force")]
+    t_ss = [r["screw_friction_torque@settle"] for r in line(load_table, ARTICLE_MU1, "load_force")]
     assert 0.02 <= t_ss[0] < 0.021
     assert all(t < 0.002 for t in t_ss[1:])
 
 
-@pytest.mark.parametrize("mu1", [SEED_MU1, FIT_MU1])
+@pytest.mark.parametrize("mu1", [ARTICLE_MU1, FIT_MU1])
 def test_friction_torque_at_the_end_is_the_independent_steady_state(load_table, mu1):
-    params = presets.load("seed003_single_stage").with_changes(mu_viscous=mu1)
+    params = presets.load("friction_single_stage").with_changes(mu_viscous=mu1)
     for r in line(load_table, mu1, "load_force"):
         ss = steady_state(params, 1.0, r["load_force"])
         assert r["screw_friction_torque@end"] == pytest.approx(ss["screw_friction_torque"],
                                                                rel=1e-6)
 
 
-@pytest.mark.parametrize("mu1", [SEED_MU1, FIT_MU1])
+@pytest.mark.parametrize("mu1", [ARTICLE_MU1, FIT_MU1])
 def test_max_friction_torque_rises_with_shorter_acceleration_time(accel_table, mu1):
     peaks = [r["screw_friction_torque@max"] for r in line(accel_table, mu1, "accel_time")]
     assert strictly(peaks, rising=False)          # falls as t_a grows
 
 
-@pytest.mark.parametrize("mu1", [SEED_MU1, FIT_MU1])
+@pytest.mark.parametrize("mu1", [ARTICLE_MU1, FIT_MU1])
 def test_min_instantaneous_efficiency_falls_with_shorter_acceleration_time(accel_table, mu1):
     eta_min = [r["efficiency@min"] for r in line(accel_table, mu1, "accel_time")]
     assert strictly(eta_min, rising=True)         # rises as t_a grows
@@ -100,10 +100,10 @@ def test_min_instantaneous_efficiency_falls_with_shorter_acceleration_time(accel
 
 def test_overall_efficiency_higher_for_shorter_ramps_only_without_a_strong_viscous_term(
         accel_table):
-    """Seed 003: a shorter ramp gives a higher overall efficiency (less time in the transient).
-    With the seed's µ_1 that holds; with µ_1 = 580 N·s/m the viscous loss grows with the speed,
+    """The friction-torque article: a shorter ramp gives a higher overall efficiency (less time in the transient).
+    With the article's µ_1 that holds; with µ_1 = 580 N·s/m the viscous loss grows with the speed,
     a longer ramp runs longer at low speed, and the overall efficiency rises with t_a."""
-    seed = [r["efficiency@overall"] for r in line(accel_table, SEED_MU1, "accel_time")]
+    seed = [r["efficiency@overall"] for r in line(accel_table, ARTICLE_MU1, "accel_time")]
     fit = [r["efficiency@overall"] for r in line(accel_table, FIT_MU1, "accel_time")]
     assert strictly(seed, rising=False)
     assert strictly(fit, rising=True)

@@ -1,6 +1,6 @@
-"""Seed 001: the two-stage PRSM whose kinematics were checked against an ADAMS model.
+"""The two-stage kinematics article: the two-stage PRSM whose kinematics were checked against an ADAMS model.
 
-Source: ``001_522b7300c6bc9387.txt`` — "Theoretical Kinematic Model" (ω_c, ω_R, v_N formulas)
+Source: the two-stage kinematics article — "Theoretical Kinematic Model" (ω_c, ω_R, v_N formulas)
 and "Simulation Results and Validation" (leads L_S1 = L_S2 = 20 mm = 5 starts × 4 mm pitch,
 800°/s input, ADAMS contact friction µ_s = 0.23 / µ_d = 0.16, theory column: carriers 300°/s,
 roller rotation 1500°/s, v_N1 = 44.44 mm/s, v_N2 = 88.88 mm/s).  Converted to SI.
@@ -12,7 +12,7 @@ The paper gives no radii, masses or inertias.  Assumptions:
   also what the 1500°/s = (r_N / r_R) · 300°/s roller rotation implies.  We choose
   r_R1 = 5 mm (r_S1 = 15, r_N1 = 25 mm) and, for the larger hollow screw that slides over the
   hexagonal end of screw 1, r_R2 = 7 mm (r_S2 = 21, r_N2 = 35 mm).
-* Flank angle 45° (seed 000's value; seed 001 gives none).  10 rollers per stage (the ADAMS
+* Flank angle 45° (Li et al.'s (2021) value; the two-stage kinematics article gives none).  10 rollers per stage (the ADAMS
   model kept 2 of them), 2 carriers per stage.
 * Masses and inertias: steel solids (ρ = 7850 kg/m³) of the sizes in :data:`SOLIDS`: rollers
   are solid cylinders of radius r_R; screw 1 a solid cylinder of radius r_S1; screw 2 a tube
@@ -35,7 +35,7 @@ from .units import MM
 
 STEEL_DENSITY = 7850.0  # kg/m³
 
-#: seed 001's kinematic check: screw speed [rad/s] and duration [s]
+#: the two-stage kinematics article's kinematic check: screw speed [rad/s] and duration [s]
 SCENARIO = {"screw_speed": 40.0 * math.pi / 9.0, "t_end": 1.0}
 
 #: sizes of the steel solids behind the masses and inertias [m], per stage
@@ -70,7 +70,7 @@ def _stage(k: int, r_r: float, spline_radius: float) -> StageParams:
 
 
 def two_stage() -> MechanismParams:
-    """Seed 001's two-stage PRSM with the radii and steel-solid masses stated in the docstring.
+    """The two-stage kinematics article's two-stage PRSM with the radii and steel-solid masses stated in the docstring.
 
     Returns
     -------
@@ -80,9 +80,9 @@ def two_stage() -> MechanismParams:
     return MechanismParams(
         stages=(_stage(1, 5.0 * MM, 0.0), _stage(2, 7.0 * MM, 13.0 * MM)),
         mu_screw_roller=0.16, mu_spline=0.0, mu_nut_screw=0.0,
-        name="seed001_two_stage",
-        source="001_522b7300c6bc9387.txt (Theoretical Kinematic Model; Simulation Results)",
+        name="kinematics_two_stage",
+        source="the two-stage kinematics article (Theoretical Kinematic Model; Simulation Results)",
     )
 
 
-PRESETS = {"seed001_two_stage": two_stage}
+PRESETS = {"kinematics_two_stage": two_stage}

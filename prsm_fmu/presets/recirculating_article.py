@@ -1,6 +1,6 @@
-"""Seed 004: the recirculating roller screw of the kinematic and ADAMS study.
+"""The recirculating-screw article: the recirculating roller screw of the kinematic and ADAMS study.
 
-Source: ``004_3a9056c434204b67.txt`` — Table 2 (12 grooved rollers of pitch diameter 6.63 mm;
+Source: the recirculating-screw article — Table 2 (12 grooved rollers of pitch diameter 6.63 mm;
 right-handed single-start screw and nut of lead 1 mm, pitch diameters 31.13 mm and 44.14 mm) and
 the simulation paragraph (4π rad/s counterclockwise for 1 s; loads 5, 10, 15 kN).  Converted to SI.
 
@@ -22,12 +22,12 @@ from .units import MM
 
 
 
-#: seed 004's run: screw speed in the paper's sign [rad/s], duration [s], loads on the nut [N]
+#: the recirculating-screw article's run: screw speed in the paper's sign [rad/s], duration [s], loads on the nut [N]
 SCENARIO = {"screw_speed": -4.0 * math.pi, "t_end": 1.0, "load_forces": (5e3, 10e3, 15e3)}
 
 
 def recirculating() -> RecirculatingParams:
-    """Seed 004's Table 2 recirculating roller screw.
+    """The recirculating-screw article's Table 2 recirculating roller screw.
 
     Returns
     -------
@@ -37,8 +37,8 @@ def recirculating() -> RecirculatingParams:
     return RecirculatingParams(
         screw_diameter=31.13 * MM, nut_diameter=44.14 * MM, roller_diameter=6.63 * MM,
         screw_lead=1.0 * MM, screw_starts=1, n_rollers=12,
-        name="seed004_recirculating", source="004_3a9056c434204b67.txt Table 2",
+        name="recirculating_screw", source="the recirculating-screw article Table 2",
     )
 
 
-PRESETS = {"seed004_recirculating": recirculating}
+PRESETS = {"recirculating_screw": recirculating}

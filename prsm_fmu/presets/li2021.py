@@ -1,6 +1,6 @@
-"""Seed 000 §3.1: the two-stage PRSM example of the multi-stage rigid-body Lagrange model.
+"""Li et al. (2021) §3.1: the two-stage PRSM example of the multi-stage rigid-body Lagrange model.
 
-Source: ``000_a07c98907360be8b.txt`` §3.1 (geometry, masses, inertias, spline radius) and §3.2
+Source: Li et al. (2021) §3.1 (geometry, masses, inertias, spline radius) and §3.2
 (friction coefficients).  Converted to SI (``units.py``): mm → m, kg·mm² → kg·m² (× 1e-6).
 
 Assumptions, each because the text does not give the number:
@@ -8,10 +8,10 @@ Assumptions, each because the text does not give the number:
 * Friction coefficients of the base case.  §3.1 gives none; §3.2 studies µ_SR ∈ {0.1, 0.2} and
   µ_SS ∈ {0.2, 0.3}.  We take the smallest pair of that study, µ_SR = 0.1 and µ_SS = 0.2, as the
   base case; with it the model reproduces the §3.1 figures (settling times about 0.14 / 0.46 ms,
-  efficiency < 0.45 → ≈ 0.80; docs/paper_comparison.md, tests/test_seed000_paper.py).
-* Thrust-bearing (nut–screw) friction is ignored in seed 000 (§2.2), so µ_NS = 0.
+  efficiency < 0.45 → ≈ 0.80; docs/paper_comparison.md, tests/test_li2021_paper.py).
+* Thrust-bearing (nut–screw) friction is ignored in Li et al. (2021) (§2.2), so µ_NS = 0.
 * The screw mass of stage 1 does not enter the dynamics (screw 1 does not translate); the value of
-  seed 002 (0.051 kg) is used so that the preset validates.
+  the multi-stage assembly article (0.051 kg) is used so that the preset validates.
 * Carrier masses are not given.  A carrier ring whose radius of gyration is the roller orbit
   radius r_S + r_R has m_P = J_P / (r_S + r_R)²; we use that estimate (0.0178 kg and 0.0248 kg).
   They enter only the axial kinetic energy 2 m_P ż_N², which is < 1 % of the nut's.
@@ -26,7 +26,7 @@ from ..params import MechanismParams, StageParams
 from .units import MM, KG_MM2
 
 
-#: the seed 000 §3.1 operating point (not part of the parameters): screw speed [rad/s], load [N]
+#: the Li et al. (2021) §3.1 operating point (not part of the parameters): screw speed [rad/s], load [N]
 SCENARIO = {"screw_speed": 100.0, "load_force": 5000.0, "t_end": 1e-3}
 
 
@@ -54,13 +54,13 @@ def _stage2() -> StageParams:
 
 
 def two_stage() -> MechanismParams:
-    """Seed 000 §3.1 two-stage PRSM with the base-case friction stated in the module docstring."""
+    """Li et al. (2021) §3.1 two-stage PRSM with the base-case friction stated in the module docstring."""
     return MechanismParams(
         stages=(_stage1(), _stage2()),
         mu_screw_roller=0.1, mu_spline=0.2, mu_nut_screw=0.0,
-        name="seed000_two_stage",
-        source="000_a07c98907360be8b.txt §3.1 (friction: §3.2)",
+        name="li2021_two_stage",
+        source="Li et al. (2021) §3.1 (friction: §3.2)",
     ).validate()
 
 
-PRESETS = {"seed000_two_stage": two_stage}
+PRESETS = {"li2021_two_stage": two_stage}

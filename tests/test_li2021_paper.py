@@ -1,4 +1,4 @@
-"""Seed 000 §3.1–3.3 (000_a07c98907360be8b.txt) at its base case: the paper's statements as tests.
+"""Li et al. (2021) §3.1–3.3 at its base case: the paper's statements as tests.
 
 Base case: µ_SR = 0.1, µ_SS = 0.2 (the smallest pair of §3.2; the preset's docstring says why),
 screw speed stepped to 100 rad/s at t = 0 with both carriers at rest, F_N2 = 5000 N.
@@ -19,7 +19,7 @@ import pytest
 
 from prsm_fmu import presets, simulate, steady_state
 
-SEED000 = presets.load("seed000_two_stage")
+LI2021 = presets.load("li2021_two_stage")
 BAND = 1e-3
 RADAU = {"stepper": "radau", "stepper_options": {"rtol": 1e-10, "atol": 1e-12}}
 
@@ -38,7 +38,7 @@ def startup(params, t_end=2e-3, h=2e-6, **kw):
 
 @pytest.fixture(scope="module")
 def base():
-    return startup(SEED000)
+    return startup(LI2021)
 
 
 def test_carriers_settle_within_the_papers_times(base):
@@ -72,7 +72,7 @@ def test_stage_one_carries_more_torque_and_contact_force_throughout(base):
 def test_section_3_2_dynamic_trends():
     """µ_SR 0.1 → 0.2: the carriers' slopes steepen (they settle sooner) and the contact forces'
     rise between t = 0 and 0.75 ms grows; µ_SS does not change F_Srz2 at any time."""
-    runs = {(mu_sr, mu_ss): startup(SEED000.with_changes(mu_screw_roller=mu_sr, mu_spline=mu_ss),
+    runs = {(mu_sr, mu_ss): startup(LI2021.with_changes(mu_screw_roller=mu_sr, mu_spline=mu_ss),
                                     t_end=1e-3, h=5e-6)
             for mu_sr, mu_ss in ((0.1, 0.2), (0.2, 0.2), (0.1, 0.3))}
     lo, hi, ss = runs[(0.1, 0.2)], runs[(0.2, 0.2)], runs[(0.1, 0.3)]
@@ -88,7 +88,7 @@ def test_section_3_2_dynamic_trends():
 
 def test_section_3_2_steady_trends():
     def ss(mu_sr, mu_ss):
-        return steady_state(SEED000.with_changes(mu_screw_roller=mu_sr, mu_spline=mu_ss), 100.0, 5000.0)
+        return steady_state(LI2021.with_changes(mu_screw_roller=mu_sr, mu_spline=mu_ss), 100.0, 5000.0)
     base = ss(0.1, 0.2)
     grid = [ss(mu_sr, mu_ss) for mu_sr in (0.1, 0.2) for mu_ss in (0.2, 0.3)]
     for k in (1, 2):   # "these friction coefficients have no effect on the rotational velocities"
@@ -108,7 +108,7 @@ def test_section_3_3_pitch_trends():
     rows = []
     for p1 in (1.0, 2.0, 3.0):
         p2 = 4.0 - p1
-        params = (SEED000.with_stage(1, screw_lead=5 * p1 * 1e-3)
+        params = (LI2021.with_stage(1, screw_lead=5 * p1 * 1e-3)
                   .with_stage(2, screw_lead=5 * p2 * 1e-3).validate())
         s = steady_state(params, 100.0, 5000.0)
         r = startup(params, t_end=1e-3, h=2e-6)
