@@ -13,7 +13,7 @@ Cases (quasi-static level, torque drive, the FMU's tolerance: rtol 1e-6, atol 1e
 * ``viscous reversal``: the friction-torque article (viscous term: no closed form anywhere), −2 N·m against 3 kN
   from 20 rad/s (1 ms steps).
 
-Error (DESIGN.md §5): max over the step ends and the states of |x − x_ref| / max|x_ref|, the
+Error (docs/accuracy.md §1): max over the step ends and the states of |x − x_ref| / max|x_ref|, the
 reference Radau at rtol 1e-12 on the same steps.  Cost: rhs calls per step and CPU per step,
 and their ratios (former / exponential), measured in this run.
 

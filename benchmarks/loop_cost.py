@@ -27,7 +27,7 @@ must equal its Python-master twin bit for bit; and, recording the scene's output
 the dynamic level (the scene's fidelity overridden: carriers as states, ROS34PW2) through the
 Python FMU, the native FMU and the native FMU in the C loop, which must agree bit for bit.  In
 the C loop the parts are timed by the C (clock_gettime around each block's calls). Each configuration's largest difference of any recorded output from the default's, relative
-to the output's largest magnitude (DESIGN.md §5), and the native FMU's from the Python FMU's at
+to the output's largest magnitude (docs/accuracy.md §1), and the native FMU's from the Python FMU's at
 the same method. The target is judged for the default and for the cheapest configuration whose
 outputs agree with the default's within ``SAME_RESULT`` (1e-5; the PRSM FMU's tolerance is
 1e-6); and apart, at the dynamic level, for its cheapest configuration, with the scene

@@ -30,7 +30,7 @@ carrier ratio without any warning).
    For each regularisation scale v_ε (``slip_velocity_scale``) and each stepper
    configuration: *diverged* on StepFailure or NaN; *bounded-but-wrong* if it chatters (total
    variation of a force output above 1.01× the reference's), stalls (no reversal), or misses
-   the reference by more than ``FRICTION_TOL`` (DESIGN.md §5 error over the FMU's outputs);
+   the reference by more than ``FRICTION_TOL`` (docs/accuracy.md §1 error over the FMU's outputs);
    else *correct*.  Reference: Radau at rtol 1e-12 on the same v_ε (checked at 1e-11).
    The regularisation's own model error, each v_ε's reference against the smallest v_ε's,
    is printed and written too (a large v_ε passes easily and is wrong in another way).
@@ -440,7 +440,7 @@ def reversal(params, stepper: str, knob: str, value: float) -> dict:
 
 
 def section5_errors(y: dict, ref: dict, outputs) -> dict[str, float]:
-    """DESIGN.md §5 per output: max_t |y − y_ref| / max_t |y_ref|."""
+    """docs/accuracy.md §1, per output: max_t |y − y_ref| / max_t |y_ref|."""
     errs = {}
     for name in outputs:
         a, b = np.asarray(y[name]), np.asarray(ref[name])
@@ -450,7 +450,7 @@ def section5_errors(y: dict, ref: dict, outputs) -> dict[str, float]:
 
 
 def section5_error(y: dict, ref: dict, outputs) -> float:
-    """DESIGN.md §5: the largest per-output error."""
+    """docs/accuracy.md §1: the largest per-output error."""
     return max(section5_errors(y, ref, outputs).values())
 
 

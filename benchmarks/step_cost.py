@@ -16,8 +16,8 @@ For each fidelity level, each stepper advances the same steps with the same held
 the same reference state (so errors do not accumulate from step to step and every step is the
 same task for every method); a stepper keeps its memory (step-size proposal) from one step to
 the next, as it does inside the FMU. The baseline is ``scipy.integrate.solve_ivp(method="Radau")``
-restarted on each step at rtol 1e-6. Error (DESIGN.md §5): max over steps and outputs of
-|y − y_ref| / max|y_ref| over the FMU's outputs (DESIGN.md §4), against Radau at rtol 1e-12 on
+restarted on each step at rtol 1e-6. Error (docs/accuracy.md §1): max over steps and outputs of
+|y − y_ref| / max|y_ref| over the FMU's outputs (docs/fmu.md, "Variables"), against Radau at rtol 1e-12 on
 the same level. Cost: CPU seconds per
 step and rhs calls per step. Ratios are measured in this run, on this machine.
 
@@ -35,7 +35,7 @@ from prsm_fmu.steppers import StepFailure, make_stepper
 
 H = 1e-3
 N_STEPS = 100
-#: the FMU's outputs (DESIGN.md §4) for two stages: the error is taken over all of them
+#: the FMU's outputs (docs/fmu.md, "Variables") for two stages: the error is taken over all of them
 OUTPUTS = ("screw_speed", "screw_angle", "rod_position", "rod_velocity", "efficiency", "friction_power") + tuple(
     f"stage[{k}].{q}" for k in (1, 2)
     for q in ("contact_force", "driven_torque", "spline_friction", "carrier_speed_ratio"))

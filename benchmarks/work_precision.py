@@ -8,7 +8,7 @@ run and compared with the scene's reference:
 * **reference**: the dynamic level with ``solve_ivp(Radau)`` at rtol 1e-12 (stepper ``radau``,
   restarted on each communication step), checked against a second reference at rtol 1e-11;
   their difference is printed (it is the floor below which an error cannot be resolved);
-* **error** (DESIGN.md §5), per output: max over the scene's fixed grid of output times (every
+* **error** (docs/accuracy.md §1), per output: max over the scene's fixed grid of output times (every
   communication step) of |y − y_ref| / max|y_ref|, over the FMU's outputs
   (``OUTPUTS`` of benchmarks/step_cost.py); a configuration's error is the largest of them.
   The reference is the *dynamic* level's, so a lower level's error includes its model error;
@@ -76,7 +76,7 @@ def _load_sibling(name: str):
     return mod
 
 
-#: the FMU's outputs (DESIGN.md §4) for two stages, as benchmarks/step_cost.py measures them
+#: the FMU's outputs (docs/fmu.md, "Variables") for two stages, as benchmarks/step_cost.py measures them
 OUTPUTS: tuple[str, ...] = tuple(_load_sibling("step_cost").OUTPUTS)
 
 #: rtol of the reference and of its check; atol = rtol · 1e-2 (per state, times state_scale)
@@ -639,7 +639,7 @@ def run_scene(scene: Scene, grid: tuple[Config, ...] | None = None, verbose: boo
     check = reference(scene, CHECK_RTOL)
     ref_diff = max(output_errors(check.outputs, ref.outputs, scene.outputs).values())
     say(f"reference: {scene.reference_fidelity} radau rtol {REFERENCE_RTOL:g}; check at rtol "
-        f"{CHECK_RTOL:g} differs by {ref_diff:.2e} (error measure of DESIGN.md §5) "
+        f"{CHECK_RTOL:g} differs by {ref_diff:.2e} (error measure of docs/accuracy.md §1) "
         f"[{time.process_time() - c0:.1f} s CPU]")
     if not ref_diff <= scene.target_error / 100:
         say(f"WARNING: the reference is not 100x more accurate than the target {scene.target_error:g}")

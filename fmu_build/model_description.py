@@ -17,7 +17,7 @@ pythonfmu writes the variables (with the unit, min and max attributes that
   themselves as ``<Enumeration declaredType=...>``;
 * ``generationTool`` names fmu_build and pythonfmu.
 
-:func:`check` then asserts the project's own rules (DESIGN.md §4): every variable has a
+:func:`check` then asserts the project's own rules (docs/fmu.md, "Variables"): every variable has a
 description, every Real a defined unit, every variable an explicit variability.
 """
 

@@ -1,6 +1,6 @@
 """prsm-fmu: dynamics of multi-stage planetary roller screw mechanisms at several fidelity levels.
 
-Entry points (DESIGN.md §3)::
+Entry points (docs/architecture.md §3)::
 
     from prsm_fmu import presets, simulate, steady_state
     p = presets.load("li2021_two_stage")

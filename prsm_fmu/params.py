@@ -1,6 +1,6 @@
 """Parameters of a multi-stage planetary roller screw mechanism (PRSM), in SI units.
 
-Conventions (stated once here, in README.md and in docs/model.md):
+Conventions (stated here, in docs/architecture.md §4 and in docs/model.md):
 
 * Stage 1 is driven by the motor; stage ``n`` carries the output (the rod).
 * Screws, rollers and nuts are right-handed (Li et al. (2021) §2.1).

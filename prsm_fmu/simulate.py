@@ -1,4 +1,4 @@
-"""Run a model over time: the ``simulate`` entry point of DESIGN.md §3.
+"""Run a model over time: the ``simulate`` entry point (docs/architecture.md §3).
 
 Inputs are held constant over each output interval (zero-order hold, like a co-simulation
 communication step); output times are t_k = k·h (no accumulated drift).
@@ -92,7 +92,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     Returns
     -------
     dict
-        ``time`` [s] and every output of DESIGN.md §4 as arrays, plus ``rhs_calls`` (total
+        ``time`` [s] and every output (docs/fmu.md, "Variables") as arrays, plus ``rhs_calls`` (total
         right-hand-side evaluations) and ``cpu_time`` [s] of the run; with ``auto`` also
         ``fidelity`` (the level run) and ``auto_choice`` (:class:`~prsm_fmu.models.AutoChoice`).
 

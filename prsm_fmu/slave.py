@@ -7,7 +7,7 @@
 
 * the inputs ``screw_torque`` [N.m] and ``load_force`` [N] onto the model inputs
   ``u = (screw_torque, load_force)`` (torque drive), held over each communication step;
-* the model's outputs (DESIGN.md §4 names) onto output variables;
+* the model's outputs (the names of docs/fmu.md, "Variables") onto output variables;
 * every physical quantity of the mechanism onto a parameter ``stage[k].<field>``
   (fields of :class:`~prsm_fmu.params.StageParams`) or a friction parameter.
 

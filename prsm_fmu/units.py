@@ -6,8 +6,8 @@ same spellings, taken from here, so a column ``driven_torque [N.m]`` means the s
 ``startup.csv``, a scene's CSV, a regression baseline and the FMU.  Scaled units of plot axes
 (``ms``, ``mm``, ``kN``) are spelled the same way (FMI prefix + unit, no spaces).
 
-:data:`OUTPUT_UNITS` gives the unit of each name of the output vocabulary (README
-"Conventions"); :func:`unit_of` looks up a full name such as ``stage[2].driven_torque``.
+:data:`OUTPUT_UNITS` gives the unit of each name of the output vocabulary
+(docs/architecture.md §4, "Conventions"); :func:`unit_of` looks up a full name such as ``stage[2].driven_torque``.
 """
 
 from __future__ import annotations

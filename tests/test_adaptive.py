@@ -24,7 +24,7 @@ OUTPUTS = ("screw_speed", "screw_acceleration", "stage[1].contact_force", "stage
 
 
 def _error(res: dict, ref: dict) -> float:
-    """DESIGN.md §5: max over outputs of max_t |y − y_ref| / max_t |y_ref| (absolute where the
+    """docs/accuracy.md §1: max over outputs of max_t |y − y_ref| / max_t |y_ref| (absolute where the
     reference is identically 0, e.g. the acceleration of a prescribed speed)."""
     errs = []
     for o in OUTPUTS:

@@ -3,7 +3,7 @@
 Expected values: the carriers' lag in steady acceleration is the linearised first-order lag
 ζ*·α·τ with τ from the linearised carrier dynamics; on each scene, the level ``auto`` picks must
 meet the scene's tolerance against a reference run of the dynamic level, and the next cheaper
-level must not (DESIGN.md §5 error measure, benchmarks/work_precision.py).
+level must not (docs/accuracy.md §1 error measure, benchmarks/work_precision.py).
 """
 
 from __future__ import annotations

@@ -117,7 +117,7 @@ def test_holding_speed_is_the_balance_root_and_energy_closes(torque, h, n):
 
 
 def _max_error(xs, ref) -> float:
-    """max over states of max|x − x_ref| / max|x_ref| (DESIGN.md §5)."""
+    """max over states of max|x − x_ref| / max|x_ref| (docs/accuracy.md §1)."""
     worst = 0.0
     for i in range(len(ref[0])):
         scale = max(abs(r[i]) for r in ref) or 1.0

@@ -224,7 +224,7 @@ def run_python(params, fidelity: str, n: int, names, stepper: str | None = None,
 
 
 def max_relative_difference(a: list[list], b: list[list]) -> float:
-    """Max over outputs of max |a - b| / max |b| (DESIGN.md §5)."""
+    """Max over outputs of max |a - b| / max |b| (docs/accuracy.md §1)."""
     worst = 0.0
     for j in range(len(b[0])):
         ref = max(abs(r[j]) for r in b) or 1.0

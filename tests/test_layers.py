@@ -1,4 +1,4 @@
-"""The import graph of prsm_fmu is acyclic and follows the layers of the design map.
+"""The import graph of prsm_fmu is acyclic and follows the layers of docs/architecture.md §2.
 
 The graph is built from the source with :mod:`ast` (no module is imported), counting every
 import statement, including those inside functions: a function-level import that closes a cycle
@@ -107,7 +107,7 @@ def _graph() -> tuple[dict[str, set[str]], dict[str, set[str]]]:
 def _layer(name: str) -> int:
     top = name.split(".")[1] if "." in name else ""
     assert top in LAYERS, (f"module {name} has no layer: add it to LAYERS in tests/test_layers.py "
-                           "(and to the layers of DESIGN.md §7)")
+                           "(and to the layers of docs/architecture.md §2)")
     return LAYERS[top]
 
 

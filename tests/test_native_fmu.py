@@ -2,7 +2,7 @@
 
 The native FMUs are built once per session in a child process (as the Python FMUs are,
 tests/test_fmu.py).  Expected values are the Python FMU's outputs on the same inputs (the C
-translation must add nothing: 1e-12 of each output's largest magnitude, DESIGN.md §5), FMI's
+translation must add nothing: 1e-12 of each output's largest magnitude, docs/accuracy.md §1), FMI's
 rules for refused calls, and the FMU's own outputs before a refused call or a saved state.
 """
 

@@ -46,7 +46,7 @@ def fmu() -> Path:
 
 
 def max_relative_difference(a, b, names) -> float:
-    """Max over outputs of max |a − b| / max |b| (DESIGN.md §5), NaN counted as a failure."""
+    """Max over outputs of max |a − b| / max |b| (docs/accuracy.md §1), NaN counted as a failure."""
     worst = 0.0
     for n in names:
         x, y = np.asarray(a[n]), np.asarray(b[n])

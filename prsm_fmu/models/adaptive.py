@@ -17,7 +17,7 @@ A run's operating point moves, so the choice is made again at every communicatio
   the largest of input, output and friction power; carrier speeds: ζ* times the largest screw
   speed so far; screw acceleration: the largest torque over the inertia on the screw; ratios: 1).
   The scales are magnitudes at the current point, so the check is conservative against the
-  error measure of DESIGN.md §5 (relative to the run's maxima).  A failed confirmation
+  error measure of docs/accuracy.md §1 (relative to the run's maxima).  A failed confirmation
   records how much more the outputs moved than the carriers (the gain err/deviation; near the
   equilibrium it is a constant of the linearised outputs) and the next confirmation waits
   until the deviation times that gain is within the limit; where that does not predict it
@@ -80,7 +80,7 @@ class AdaptiveModel(DynamicModel):
     params : MechanismParams
     drive : {"torque", "speed"}
     tolerance : float
-        Accepted model error [-] (DESIGN.md §5 measure), > 0.
+        Accepted model error [-] (docs/accuracy.md §1 measure), > 0.
     start : {"dynamic", "quasi-static"}
         Level of the first step.
     choice : AutoChoice, optional

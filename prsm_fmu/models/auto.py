@@ -2,7 +2,7 @@
 
 The levels cost, cheapest first: kinematic, quasi-static, dynamic (the dynamic level has the
 stiff carrier states; the other two step in closed form).  The estimate is the *model* error of a
-level against the dynamic level, in the error measure of DESIGN.md §5 (max over outputs of
+level against the dynamic level, in the error measure of docs/accuracy.md §1 (max over outputs of
 |y − y_ref| / max|y_ref|); the stepper's own error is controlled by the tolerance and is not part
 of it.  docs/accuracy.md §4 derives it and checks it against the work-precision data.
 
@@ -67,7 +67,7 @@ class AutoChoice:
     fidelity : str
         The chosen level.
     errors : dict
-        Estimated model error per level (DESIGN.md §5 measure).
+        Estimated model error per level (docs/accuracy.md §1 measure).
     terms : dict
         The estimate's terms: ``start_deviation``, ``speed_jump``, ``lag``, ``friction_loss``,
         ``carrier_ratio``, ``friction_outputs``.

@@ -14,7 +14,7 @@ Drive modes
 State layout (both drives): ``screw_angle`` [rad], ``screw_speed`` [rad/s], the carrier speeds
 ``carrier_k_speed`` [rad/s] (dynamic level only), then the energy accumulators
 ``input_work``, ``output_work``, ``friction_work`` [J] (integrals of motor power, load power and
-friction power).  Sign conventions: README.md "Conventions".
+friction power).  Sign conventions: docs/architecture.md §4.
 """
 
 from __future__ import annotations
@@ -177,7 +177,7 @@ class Model(ABC):
         return dx
 
     def outputs(self, t: float, x: list[float], u: tuple) -> dict[str, float]:
-        """All outputs (DESIGN.md §4 names), consistent with :meth:`rhs`.
+        """All outputs (the names of docs/fmu.md, "Variables"), consistent with :meth:`rhs`.
 
         Returns
         -------
