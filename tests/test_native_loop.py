@@ -33,7 +33,7 @@ from system_models.load import SpringDamperLoad  # noqa: E402
 from system_models.master import CoSimulationError, RetryPolicy  # noqa: E402
 from system_models.native_loop import NativeMaster  # noqa: E402
 from system_models.scenes import load_scene  # noqa: E402
-from text_numbers import number_after, same_message  # noqa: E402
+from text_numbers import number_after, same_message, same_table  # noqa: E402
 
 
 def native_fmu():
@@ -236,5 +236,5 @@ def test_cli_run_with_the_native_loop_writes_the_same_csv_as_the_python_loop(cap
         code = cli.main(["run", "--scene", "position_step", "--prsm", "native", "--fmu",
                          str(native_fmu()), "--loop", loop, "--no-plots", "--out", str(out)])
         assert code == 0, capsys.readouterr().err
-        csv[loop] = (out / "position_step.csv").read_bytes()
-    assert csv["python"] == csv["native"]
+        csv[loop] = (out / "position_step.csv").read_text(encoding="utf-8")
+    assert same_table(csv["python"], csv["native"])      # every number equal as a double

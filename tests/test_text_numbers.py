@@ -10,7 +10,7 @@ import math
 
 import pytest
 
-from text_numbers import number_after, same_message, split_numbers
+from text_numbers import number_after, same_message, same_table, split_numbers
 
 C_SPELLING = "fmi2DoStep: step size 8.7531688739772769e-15 s below h_min"
 PY_SPELLING = "fmi2DoStep: step size 8.753168873977277e-15 s below h_min"
@@ -46,3 +46,11 @@ def test_same_message_tells_other_numbers_and_other_words_apart():
     assert not same_message("t = 0.012 s", "t = 0.012 ms")
     assert same_message("value nan", "value nan")          # equal NaNs count as equal
     assert not same_message("a 1", "a 1 2")
+
+
+def test_same_table_compares_cells_as_numbers():
+    a = "time [s],x [m],status\n0,1e-3,ok\n0.1,nan,error\n"
+    assert same_table(a, "time [s],x [m],status\n0.0,0.001,ok\n1e-1,nan,error\n")
+    assert not same_table(a, "time [s],x [m],status\n0,1.0000000000000002e-3,ok\n0.1,nan,error\n")
+    assert not same_table(a, "time [s],x [m],status\n0,1e-3,ok\n")               # a row fewer
+    assert not same_table(a, "time [s],x [m],status\n0,1e-3,ok\n0.1,nan,failed\n")

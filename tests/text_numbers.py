@@ -9,6 +9,8 @@ test derives (e.g. half a unit in the last printed digit).
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 import re
 
@@ -83,3 +85,36 @@ def same_message(a: str, b: str) -> bool:
     (ta, na), (tb, nb) = split_numbers(a), split_numbers(b)
     return ta == tb and len(na) == len(nb) and all(
         x == y or (math.isnan(x) and math.isnan(y)) for x, y in zip(na, nb))
+
+
+def _cell(text: str) -> float | str:
+    """A CSV cell as a float when it is a number, else as its text."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _same_value(a: float | str, b: float | str) -> bool:
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or (math.isnan(a) and math.isnan(b))
+    return a == b
+
+
+def same_table(a: str, b: str) -> bool:
+    """Whether two CSV texts hold the same table: the same rows and columns, every numeric cell
+    equal as a float (NaN equal to NaN), every other cell equal as text.
+
+    Parameters
+    ----------
+    a, b : str
+        CSV texts.
+
+    Returns
+    -------
+    bool
+    """
+    ra, rb = list(csv.reader(io.StringIO(a))), list(csv.reader(io.StringIO(b)))
+    return len(ra) == len(rb) and all(
+        len(x) == len(y) and all(_same_value(_cell(u), _cell(v)) for u, v in zip(x, y))
+        for x, y in zip(ra, rb))
