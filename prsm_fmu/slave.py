@@ -63,6 +63,7 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
                         active_level, configure, fidelity_name)
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
+from .engine import fallback_reason, library_name, platform_folder
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
 
@@ -402,6 +403,46 @@ def type_definitions() -> dict[str, list[tuple[str, int, str]]]:
 # -------------------------------------------------------------------------------------------
 
 
+#: the FMU's parameter start values, read by every instance from its own resources: two builds
+#: of one modelIdentifier (e.g. ``--start fidelity=dynamic``) share the slave module in a
+#: process (pythonfmu imports it once), never their start values
+START_VALUES_FILE = "prsm_start_values.json"
+#: what the FMU's build says about its engine library: ``{"geometry": {name: value}}``, the
+#: parameters the library's built-in contact geometry was computed from
+ENGINE_FILE = "prsm_engine.json"
+
+
+def read_resource_json(resources: str | None, name: str) -> Any:
+    """The JSON file ``name`` of an FMU's resources (None when absent or no resources)."""
+    import json
+    import os
+
+    if not resources:
+        return None
+    path = os.path.join(resources, name)
+    if not os.path.isfile(path):
+        return None
+    with open(path, encoding="utf-8") as f:
+        return json.load(f)
+
+
+def packed_engine(resources: str | None) -> tuple[str | None, dict[str, Any], str | None]:
+    """The engine library an FMU packs for this platform: (its path, the geometry it was built
+    with, None), or (None, {}, why it has none).  A slave outside an FMU (no ``resources``)
+    gets (None, {}, None): the engine compiled for its parameters (:mod:`prsm_fmu.engine`)."""
+    import os
+
+    if not resources:
+        return None, {}, None
+    info = read_resource_json(resources, ENGINE_FILE)
+    if info is None:
+        return None, {}, "this FMU was built without the engine library"
+    path = os.path.join(resources, "binaries", platform_folder(), library_name())
+    if not os.path.isfile(path):
+        return None, {}, f"this FMU has no engine library for platform {platform_folder()}"
+    return path, dict(info["geometry"]), None
+
+
 def _guarded(call: str, failed: Any = None):
     """Decorate an FMI entry point so that no Python exception leaves it.
 
@@ -438,11 +479,15 @@ class PRSMSlave(Fmi2Slave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
-        defaults = self.defaults
+        defaults = read_resource_json(self.resources, START_VALUES_FILE) or self.defaults
         if defaults is None:
             from . import presets
 
             defaults = parameter_defaults(presets.load(self.preset))
+        #: the engine library packed in this FMU for this platform, the geometry it was built
+        #: with, and why it cannot run here (None: it can)
+        self._engine_path, self._engine_geometry, self._engine_missing = packed_engine(
+            self.resources)
         n = sum(1 for name in defaults if name.endswith(".screw_radius"))
         self.n_stages = n
         self._table = variable_table(n)
@@ -685,7 +730,8 @@ class PRSMSlave(Fmi2Slave):
                        for k in range(1, self.n_stages + 1))
         params = MechanismParams(stages=stages, name=f"{type(self).__name__} ({self.preset})",
                                  **{f: par[f] for f in MECHANISM_FIELDS}).validate()
-        built = configure(params, par, tuple(self._u))
+        built = configure(params, par, tuple(self._u), library_path=self._engine_path,
+                          engine_refusal=self._engine_refusal())
         model, _stepper, x0, _level, _name = built
         u0 = (self._u[0], self._u[1])
         # non-finite inputs are refused by doStep, and so is a start where the rigid contact has
@@ -699,6 +745,17 @@ class PRSMSlave(Fmi2Slave):
                                  f"{bad[0]!r}): a mass, inertia or radius is out of any "
                                  "physical proportion to the others")
         return built
+
+    def _engine_refusal(self) -> str | None:
+        """Why the packed engine cannot run the current parameters (None: it can)."""
+        if self._engine_missing:
+            return self._engine_missing
+        for name, value in self._engine_geometry.items():
+            if self._par.get(name) != value:
+                return (f"{name} = {self._par.get(name)!r} differs from the value the engine "
+                        f"library was built with ({value!r}): the engine bakes the contact "
+                        "geometry in")
+        return None
 
     def _config_key(self) -> tuple:
         return tuple(self._par[n] for n in self._par_names)
@@ -774,6 +831,10 @@ class PRSMSlave(Fmi2Slave):
             along = ("; it switches between the dynamic and the quasi-static level along the run"
                      if model.fidelity == "auto" else "")
             self.log(f"fidelity = 'auto' starts with {model.auto_choice.describe()}{along}",
+                     Fmi2Status.ok)
+        why = fallback_reason(stepper)
+        if why is not None:
+            self.log(f"the Python reference model runs, not the compiled engine: {why}",
                      Fmi2Status.ok)
         self._model, self._stepper, self._x = model, stepper, x0
         self._u_held = (self._u[0], self._u[1])

@@ -1,0 +1,159 @@
+"""Which engine steps a model: the compiled core or the Python reference.
+
+The compiled core is the C of the native FMU (``fmu_build/native``: the model and its
+steppers), run in-process through ctypes (:class:`fmu_build.native_stepper.NativeStepper`).
+It is the default engine of every door: the pythonfmu FMU (which loads the library packed in
+its ``resources/binaries/<platform>/``), :func:`prsm_fmu.configure.configure` and so the
+actuator loop's Python PRSM block, and :func:`prsm_fmu.simulate.simulate` (which compile it
+with gcc on first use, cached).  The Python model and steppers stay the readable reference:
+``engine="python"`` selects them, and they run wherever the engine cannot:
+
+* no engine library loads (no gcc, another platform, a build without it);
+* the engine refuses the configuration on construction (a level, drive or friction term the C
+  does not model: its own message says which);
+* the stepper asked for is not the engine's method at that level (:data:`ENGINE_METHOD`);
+* in an FMU, a geometry parameter differs from the value the packed library was built with
+  (the engine bakes the contact geometry in).
+
+Each fallback carries its reason (:func:`fallback_reason`), which the FMU logs.  As the engine
+learns more (levels, friction terms), the doors widen by themselves: they try the engine first
+whenever the stepper asked for is the engine's.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+__all__ = ["ENGINES", "DEFAULT_ENGINE", "ENGINE_METHOD", "check_engine", "engine_stepper",
+           "fallback_reason", "is_engine", "library_name", "platform_folder"]
+
+#: the engine choices: the compiled core, or the Python reference
+ENGINES = ("native", "python")
+#: the engine every door uses unless told otherwise
+DEFAULT_ENGINE = "native"
+#: per level, the Python stepper the engine translates operation for operation (equal states
+#: bit for bit, tests/test_engine.py); ``default`` means this stepper when the engine runs.  A
+#: level not listed (``auto``) is offered to the engine with ``default`` and it decides.
+ENGINE_METHOD = {"kinematic": "closed_form_explicit", "quasi-static": "closed_form_explicit",
+                 "dynamic": "rosenbrock"}
+#: the library's file name in an FMU's ``resources/binaries/<platform>/``
+LIBRARY_STEM = "prsm_engine"
+
+#: reason why no library could be made for a parameter set (by repr): tried once per process
+_unavailable: dict[str, str] = {}
+
+
+def check_engine(engine: Any) -> str:
+    """``engine`` if it is one of :data:`ENGINES`.
+
+    Raises
+    ------
+    ValueError
+        Naming the value and the allowed ones.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine = {engine!r} is not allowed: must be one of "
+                         f"{', '.join(map(repr, ENGINES))}")
+    return engine
+
+
+def platform_folder() -> str:
+    """The FMI 2.0 platform folder of this process (``linux64``, ``darwin64``, ``win64``)."""
+    import platform
+    import sys
+
+    bits = "64" if sys.maxsize > 2 ** 32 else "32"
+    system = {"Linux": "linux", "Darwin": "darwin", "Windows": "win"}.get(platform.system(),
+                                                                           platform.system())
+    return system + bits
+
+
+def library_name() -> str:
+    """The engine library's file name on this platform (``prsm_engine.so`` on Linux)."""
+    import sys
+
+    ext = ".dll" if sys.platform.startswith("win") else ".dylib" if sys.platform == "darwin" \
+        else ".so"
+    return LIBRARY_STEM + ext
+
+
+def is_engine(stepper: Any) -> bool:
+    """Whether ``stepper`` is the compiled engine."""
+    return getattr(stepper, "name", "") == "native"
+
+
+def fallback_reason(stepper: Any) -> str | None:
+    """Why ``stepper`` is the Python reference although the engine was asked for (None: the
+    engine runs, or the reference was asked for)."""
+    return getattr(stepper, "engine_fallback", None)
+
+
+def _library(params, library_path: str | None):
+    """The loaded engine library, or the reason why none loads (str)."""
+    try:
+        from fmu_build import native_stepper
+    except Exception as exc:  # noqa: BLE001 - any failure means: no engine here
+        return f"the engine's interface cannot be imported ({type(exc).__name__}: {exc})"
+    if library_path is not None:
+        try:
+            return native_stepper.load_library(library_path)
+        except OSError as exc:
+            return f"the engine library {library_path} does not load ({exc})"
+    key = repr(params)
+    if key in _unavailable:
+        return _unavailable[key]
+    try:
+        return native_stepper.native_library(params)
+    except Exception as exc:  # noqa: BLE001 - BuildError (no gcc), OSError
+        why = f"no engine library for these parameters ({type(exc).__name__}: {exc})"
+        _unavailable[key] = why
+        return why
+
+
+def engine_stepper(model: Any, level: str, stepper: str, rtol: float, atol: float,
+                   max_substeps: int = 100000, fixed_substeps: int | None = None,
+                   library_path: str | None = None, refusal: str | None = None):
+    """The engine's stepper for ``model``, or the reason why it cannot run it.
+
+    Parameters
+    ----------
+    model : prsm_fmu.models.base.Model
+        The model (its parameters, level and drive).
+    level : str
+        The configured level (``kinematic``, ``quasi-static``, ``dynamic`` or ``auto``).
+    stepper : str
+        The stepper asked for, or ``"default"``.
+    rtol, atol : float
+        Relative [-] and absolute [state units] tolerances (the Python steppers' meaning).
+    max_substeps, fixed_substeps : int
+        Internal steps allowed per advance; equal internal steps (None or 0: adaptive).
+    library_path : str, optional
+        A prebuilt library to load (an FMU's); default: compiled for ``model``'s parameters.
+    refusal : str, optional
+        A reason known beforehand why the engine cannot run (then it is not tried).
+
+    Returns
+    -------
+    tuple
+        ``(stepper, None)`` with the engine's stepper, or ``(None, reason)``.
+    """
+    method = ENGINE_METHOD.get(level)
+    if stepper not in ("default", method):
+        return None, (f"stepper = {stepper!r} is not the engine's (it runs "
+                      f"{method or 'no fixed method'} at fidelity = {level!r})")
+    if refusal:
+        return None, refusal
+    if not (math.isfinite(rtol) and math.isfinite(atol)):
+        return None, "non-finite tolerances"
+    lib = _library(model.params, library_path)
+    if isinstance(lib, str):
+        return None, lib
+    from fmu_build.native_stepper import NativeStepper
+
+    try:
+        st = NativeStepper(model, rtol=rtol, atol=atol, max_substeps=max_substeps,
+                           fixed_substeps=fixed_substeps or None, library=lib)
+    except ValueError as exc:
+        return None, f"the engine refuses this configuration: {exc}"
+    return st, None
