@@ -149,11 +149,58 @@ def engine_stepper(model: Any, level: str, stepper: str, rtol: float, atol: floa
     lib = _library(model.params, library_path)
     if isinstance(lib, str):
         return None, lib
-    from fmu_build.native_stepper import NativeStepper
-
     try:
-        st = NativeStepper(model, rtol=rtol, atol=atol, max_substeps=max_substeps,
-                           fixed_substeps=fixed_substeps or None, library=lib)
+        st = _engine_class()(model, rtol=rtol, atol=atol, max_substeps=max_substeps,
+                             fixed_substeps=fixed_substeps or None, library=lib)
     except ValueError as exc:
         return None, f"the engine refuses this configuration: {exc}"
     return st, None
+
+
+_ENGINE_CLASS: list[type] = []
+
+
+def _engine_class() -> type:
+    """:class:`fmu_build.native_stepper.NativeStepper` with a lean :meth:`advance` for the
+    doors' hot path (an FMU's doStep): one ctypes call into preallocated arrays, no numpy, no
+    list of rows.  Its results are the same call's (``prsm_api_advance_many`` with one step)."""
+    if _ENGINE_CLASS:
+        return _ENGINE_CLASS[0]
+    import ctypes
+
+    from fmu_build.native_stepper import NativeStepper
+
+    from .steppers.base import StepFailure, StepStats
+
+    class EngineStepper(NativeStepper):
+        #: the C updates its memory only when an advance succeeds (prsm_model.h): a refused
+        #: step leaves it as it was, so the caller need not save and restore it
+        keeps_memory_on_failure = True
+
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self._row = (ctypes.c_double * self.n_states)()
+            # the same C function without declared argument types: ctypes then converts
+            # nothing (the arrays pass as pointers, the doubles are wrapped here), a third of
+            # the declared call's cost (benchmarks/fmu_step_cost.py)
+            lib = self._lib
+            self._call = type(lib.prsm_api_advance_many)(("prsm_api_advance_many", lib))
+            self._call.restype = ctypes.c_int
+            self._double = ctypes.c_double
+            self._msg_len = len(self._msg)
+
+        def advance(self, t: float, x: list[float], u: tuple, h: float):
+            if not (0.0 < h < math.inf):
+                raise ValueError(f"h = {h!r} is out of range: must be a finite number > 0 [s]")
+            xi, ui, counts, double = self._x, self._u, self._stats, self._double
+            xi[:] = x
+            ui[0] = u[0]
+            ui[1] = u[1]
+            if self._call(self._handle, double(t), xi, ui, double(h), 1, self._row, counts,
+                          self._msg, self._msg_len):
+                raise StepFailure(self._msg.value.decode())
+            stats = StepStats(rhs_calls=counts[0], substeps=counts[1], rejected=counts[2])
+            return self._row[:], stats
+
+    _ENGINE_CLASS.append(EngineStepper)
+    return EngineStepper

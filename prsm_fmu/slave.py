@@ -443,6 +443,12 @@ def packed_engine(resources: str | None) -> tuple[str | None, dict[str, Any], st
     return path, dict(info["geometry"]), None
 
 
+def _fixed_level(model) -> int | None:
+    """The model's level code if it never changes along a run (None: ``auto``'s switching
+    model, whose :func:`active_level` is read after every step)."""
+    return None if hasattr(model, "mode") else active_level(model)
+
+
 def _guarded(call: str, failed: Any = None):
     """Decorate an FMI entry point so that no Python exception leaves it.
 
@@ -513,6 +519,8 @@ class PRSMSlave(Fmi2Slave):
         self._stats = (0, 0, 0)
         self._model = None
         self._stepper = None
+        self._memory_kept = False
+        self._level: int | None = None          # the model's level code, if it never changes
         self._config: tuple = ()
         self._init_error: str | None = None
         self._y: list[float] | None = None
@@ -837,6 +845,8 @@ class PRSMSlave(Fmi2Slave):
             self.log(f"the Python reference model runs, not the compiled engine: {why}",
                      Fmi2Status.ok)
         self._model, self._stepper, self._x = model, stepper, x0
+        self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
+        self._level = _fixed_level(model)
         self._u_held = (self._u[0], self._u[1])
         self._config = self._config_key()
         self._stats = (0, 0, active_level(model))
@@ -871,25 +881,29 @@ class PRSMSlave(Fmi2Slave):
             return self._refuse(f"inputs screw_torque = {u[0]!r} N.m, load_force = {u[1]!r} N: "
                                 "every input must be finite")
         stepper = self._stepper
-        memory = stepper.get_memory()
+        memory = None if self._memory_kept else stepper.get_memory()
         try:
             x, stats = stepper.advance(current_time, self._x, u, h)
         except Exception as exc:  # noqa: BLE001 - StepFailure; anything else would be fmi2Fatal
-            stepper.set_memory(memory)
+            if memory is not None:
+                stepper.set_memory(memory)
             cause = self._model.contact_diagnosis(self._x, u)
             if cause is not None:         # contact_status reads 1 here
                 return self._refuse(cause)
             what = str(exc) if isinstance(exc, StepFailure) else f"{type(exc).__name__}: {exc}"
             return self._refuse(f"integration failed: {what}")
-        if not all(math.isfinite(v) for v in x):
-            stepper.set_memory(memory)
+        if not all(map(math.isfinite, x)):     # (the engine checks its states itself)
+            if memory is not None:
+                stepper.set_memory(memory)
             cause = self._model.contact_diagnosis(self._x, u)
             return self._refuse(cause or "integration failed: the stepper returned a non-finite "
                                 "state")
         self._x = x
         self._t = current_time + h
         self._u_held = u
-        self._stats = (stats.rhs_calls, stats.substeps, active_level(self._model))
+        level = self._level
+        self._stats = (stats.rhs_calls, stats.substeps,
+                       active_level(self._model) if level is None else level)
         self._y = None
         return True
 
@@ -946,6 +960,8 @@ class PRSMSlave(Fmi2Slave):
                 return str(exc)
         self._par.update(zip(self._par_names, config))
         self._model, self._stepper = model, stepper
+        self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
+        self._level = None if model is None else _fixed_level(model)
         self._config = config if stepper is not None else ()
         self._u[0], self._u[1] = f["inputs"]
         self._phase = f["phase"]
