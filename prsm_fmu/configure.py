@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-from .engine import DEFAULT_ENGINE, ENGINE_METHOD, check_engine, engine_stepper
+from .engine import ENGINE_METHOD, check_engine, default_engine, engine_stepper
 from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
@@ -136,7 +136,7 @@ def _is_int(value: Any) -> bool:
 
 
 def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[float, float],
-              engine: str = DEFAULT_ENGINE, library_path: str | None = None,
+              engine: str | None = None, library_path: str | None = None,
               engine_refusal: str | None = None):
     """Model, stepper and initial state of a torque-driven PRSM from its solver parameters.
 
@@ -150,8 +150,9 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         [rad], ``initial_carrier_equilibrium`` (bool): the FMU's parameters of the same names.
     inputs : tuple
         Motor torque [N·m] and load force [N] at the start.
-    engine : {"native", "python"}
-        ``native``: the compiled engine steps the model wherever it can (:mod:`prsm_fmu.engine`;
+    engine : {"native", "python"}, optional
+        Default: :func:`prsm_fmu.engine.default_engine` (``native`` unless the environment
+        variable ``PRSM_FMU_ENGINE`` says otherwise).  ``native``: the compiled engine steps the model wherever it can (:mod:`prsm_fmu.engine`;
         with ``stepper = default`` it runs its own method of the level, e.g.
         ``closed_form_explicit`` at the quasi-static level); elsewhere, and with ``python``,
         the Python stepper (``stepper.engine_fallback`` says why, for ``native``).
@@ -172,7 +173,7 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         Naming the parameter, its value and the allowed range.
     """
     fidelity = fidelity_name(solver["fidelity"])
-    check_engine(engine)
+    engine = default_engine() if engine is None else check_engine(engine)
     tol = solver["tolerance"]
     lo, hi = TOLERANCE_RANGE
     if not (isinstance(tol, (int, float)) and lo <= tol <= hi):

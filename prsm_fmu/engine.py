@@ -17,7 +17,9 @@ with gcc on first use, cached).  The Python model and steppers stay the readable
 
 Each fallback carries its reason (:func:`fallback_reason`), which the FMU logs.  As the engine
 learns more (levels, friction terms), the doors widen by themselves: they try the engine first
-whenever the stepper asked for is the engine's.
+whenever the stepper asked for is the engine's.  The environment variable
+``PRSM_FMU_ENGINE=python`` (:data:`ENGINE_ENV`; the command lines' ``--engine python``) selects
+the reference in every door of a process that is given no ``engine`` argument, FMUs included.
 """
 
 from __future__ import annotations
@@ -25,13 +27,18 @@ from __future__ import annotations
 import math
 from typing import Any
 
-__all__ = ["ENGINES", "DEFAULT_ENGINE", "ENGINE_METHOD", "check_engine", "engine_stepper",
-           "fallback_reason", "is_engine", "library_name", "platform_folder"]
+__all__ = ["ENGINES", "DEFAULT_ENGINE", "ENGINE_ENV", "ENGINE_METHOD", "check_engine",
+           "default_engine", "engine_stepper", "fallback_reason", "is_engine", "library_name",
+           "platform_folder"]
 
 #: the engine choices: the compiled core, or the Python reference
 ENGINES = ("native", "python")
 #: the engine every door uses unless told otherwise
 DEFAULT_ENGINE = "native"
+#: environment variable that selects the engine of every door of a process and its children
+#: (Dask workers, FMUs loaded in it) where no ``engine`` argument is given; the command lines'
+#: ``--engine`` sets it
+ENGINE_ENV = "PRSM_FMU_ENGINE"
 #: per level, the Python stepper the engine translates operation for operation (equal states
 #: bit for bit, tests/test_engine.py); ``default`` means this stepper when the engine runs.  A
 #: level not listed (``auto``) is offered to the engine with ``default`` and it decides.
@@ -56,6 +63,26 @@ def check_engine(engine: Any) -> str:
         raise ValueError(f"engine = {engine!r} is not allowed: must be one of "
                          f"{', '.join(map(repr, ENGINES))}")
     return engine
+
+
+def default_engine() -> str:
+    """The engine of the doors that are given none: :data:`ENGINE_ENV` if set, else
+    :data:`DEFAULT_ENGINE`.
+
+    Raises
+    ------
+    ValueError
+        Naming the variable, its value and the allowed ones.
+    """
+    import os
+
+    value = os.environ.get(ENGINE_ENV)
+    if value is None or value == "":
+        return DEFAULT_ENGINE
+    if value not in ENGINES:
+        raise ValueError(f"{ENGINE_ENV} = {value!r} is not allowed: must be one of "
+                         f"{', '.join(map(repr, ENGINES))}")
+    return value
 
 
 def platform_folder() -> str:

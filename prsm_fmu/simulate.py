@@ -12,7 +12,7 @@ from typing import Callable, Union
 
 import numpy as np
 
-from .engine import DEFAULT_ENGINE, check_engine, engine_stepper, is_engine
+from .engine import check_engine, default_engine, engine_stepper, is_engine
 from .models import make_model
 from .models.base import is_finite_state
 from .params import MechanismParams
@@ -47,7 +47,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
              rtol: float = 1e-8, atol: float = 1e-10, initial_screw_speed: float = 0.0,
              initial_carrier_ratio: float | None = 0.0, model_options: dict | None = None,
              stepper_options: dict | None = None,
-             engine: str = DEFAULT_ENGINE) -> dict[str, np.ndarray]:
+             engine: str | None = None) -> dict[str, np.ndarray]:
     """Simulate the mechanism and return its outputs on a regular time grid.
 
     Parameters
@@ -90,11 +90,13 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         them at equilibrium.  Default 0 (carriers at rest, seed 000's start).
     model_options, stepper_options : dict, optional
         Passed to the model (e.g. ``efficiency``) and the stepper (e.g. ``substeps``).
-    engine : {"native", "python"}
-        ``native`` (default): the compiled engine steps the model where it can
-        (:mod:`prsm_fmu.engine`: the level's engine method, e.g. ``closed_form_explicit`` at
-        the quasi-static level when ``stepper`` is None; only ``max_substeps`` and
-        ``fixed_substeps`` among ``stepper_options``), else the Python stepper;
+    engine : {"native", "python"}, optional
+        Default: :func:`prsm_fmu.engine.default_engine` (``native`` unless the environment
+        variable ``PRSM_FMU_ENGINE`` says otherwise).  ``native``: the compiled engine steps
+        the model where it can (:mod:`prsm_fmu.engine`: the level's engine method, e.g.
+        ``closed_form_explicit`` at the quasi-static level when ``stepper`` is None; only
+        ``max_substeps`` and ``fixed_substeps`` among ``stepper_options``), else the Python
+        stepper;
         ``python``: the Python reference.  The result's ``engine`` says which ran and
         ``engine_fallback`` why not the engine.
 
@@ -136,7 +138,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
                      carrier_ratio=initial_carrier_ratio)
     model = make_model(params, fidelity, drive, **mopts)
     fidelity = model.fidelity
-    check_engine(engine)
+    engine = default_engine() if engine is None else check_engine(engine)
     name = stepper or DEFAULT_STEPPER[fidelity]
     opts = tuned_stepper_options(name, rtol, atol)
     opts.update(stepper_options or {})

@@ -63,7 +63,7 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
                         active_level, configure, fidelity_name)
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
-from .engine import fallback_reason, library_name, platform_folder
+from .engine import ENGINE_ENV, fallback_reason, is_engine, library_name, platform_folder
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
 
@@ -840,8 +840,8 @@ class PRSMSlave(Fmi2Slave):
                      if model.fidelity == "auto" else "")
             self.log(f"fidelity = 'auto' starts with {model.auto_choice.describe()}{along}",
                      Fmi2Status.ok)
-        why = fallback_reason(stepper)
-        if why is not None:
+        if not is_engine(stepper):
+            why = fallback_reason(stepper) or f"{ENGINE_ENV} = 'python' selects it"
             self.log(f"the Python reference model runs, not the compiled engine: {why}",
                      Fmi2Status.ok)
         self._model, self._stepper, self._x = model, stepper, x0
