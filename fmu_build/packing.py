@@ -3,8 +3,9 @@
 * ``prsm_fmu/``: the modules the slave imports, directly or on demand (followed
   from :mod:`prsm_fmu.slave` and :mod:`prsm_fmu.engine`, imports made on demand included), and the presets;
   not the tools (command line, sweeps, regression runner, reports, plotting);
-* ``fmu_build/native_stepper.py`` (with an empty ``fmu_build/__init__.py``): the engine's
-  ctypes interface; not the FMU builders;
+* ``prsm_engine_interface.py``: the engine's ctypes interface (:mod:`fmu_build.native_stepper`
+  under a name of its own, which never shadows the ``fmu_build`` of a process that has one);
+  not the FMU builders;
 * ``binaries/<platform>/prsm_engine.so``: the compiled engine (the native FMU's C model and
   steppers with the flat interface ``prsm_api.c``) for the build's platform and geometry,
   compiled here with gcc, so that no compiler is needed where the FMU runs, and
@@ -21,7 +22,7 @@ import shutil
 from pathlib import Path
 
 import prsm_fmu
-from prsm_fmu.engine import library_name, platform_folder
+from prsm_fmu.engine import PACKED_INTERFACE, library_name, platform_folder
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.slave import ENGINE_FILE, START_VALUES_FILE
 
@@ -31,8 +32,6 @@ __all__ = ["runtime_modules", "stage_runtime", "stage_engine", "stage_start_valu
 ROOTS = ("prsm_fmu.slave", "prsm_fmu.engine")
 #: packages loaded by name at run time (modulefinder cannot see them): packed whole
 WHOLE_PACKAGES = ("prsm_fmu.presets",)
-#: the engine's interface: the one module of fmu_build inside the FMU
-ENGINE_INTERFACE = "fmu_build/native_stepper.py"
 
 
 def _imports(path: Path, module: str, is_package: bool) -> set[str]:
@@ -95,13 +94,9 @@ def stage_runtime(dest: Path) -> list[Path]:
     for rel in runtime_modules():
         (dest / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(root / rel, dest / rel)
-    interface = Path(__file__).resolve().parent / Path(ENGINE_INTERFACE).name
-    (dest / "fmu_build").mkdir(exist_ok=True)
-    shutil.copy2(interface, dest / ENGINE_INTERFACE)
-    (dest / "fmu_build" / "__init__.py").write_text(
-        '"""The engine\'s ctypes interface only (the FMU builders are not packed)."""\n',
-        encoding="utf-8")
-    return [dest / "prsm_fmu", dest / "fmu_build"]
+    interface = dest / f"{PACKED_INTERFACE}.py"
+    shutil.copy2(Path(__file__).resolve().parent / "native_stepper.py", interface)
+    return [dest / "prsm_fmu", interface]
 
 
 def stage_engine(dest: Path, params: MechanismParams) -> list[Path]:

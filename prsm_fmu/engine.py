@@ -116,10 +116,26 @@ def fallback_reason(stepper: Any) -> str | None:
     return getattr(stepper, "engine_fallback", None)
 
 
+#: the engine's ctypes interface as an FMU packs it (a module of its own name, so that it never
+#: shadows the fmu_build package of a process that has one)
+PACKED_INTERFACE = "prsm_engine_interface"
+
+
+def _interface():
+    """The module :mod:`fmu_build.native_stepper`: the installed one, else the FMU's copy."""
+    try:
+        from fmu_build import native_stepper
+    except ImportError:
+        import importlib
+
+        return importlib.import_module(PACKED_INTERFACE)
+    return native_stepper
+
+
 def _library(params, library_path: str | None):
     """The loaded engine library, or the reason why none loads (str)."""
     try:
-        from fmu_build import native_stepper
+        native_stepper = _interface()
     except Exception as exc:  # noqa: BLE001 - any failure means: no engine here
         return f"the engine's interface cannot be imported ({type(exc).__name__}: {exc})"
     if library_path is not None:
@@ -195,7 +211,7 @@ def _engine_class() -> type:
         return _ENGINE_CLASS[0]
     import ctypes
 
-    from fmu_build.native_stepper import NativeStepper
+    NativeStepper = _interface().NativeStepper
 
     from .steppers.base import StepFailure, StepStats
 
