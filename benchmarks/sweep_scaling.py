@@ -68,7 +68,7 @@ def _study(path: str, n_points: int) -> None:
 GOAL_POINTS = 4
 
 
-def engine_goal(study_path: str, fmu_dir: str, tmp: str, repeat: int) -> None:
+def engine_goal(fmu_dir: str, tmp: str, repeat: int) -> None:
     """Print the time per point of the engine's doors against the Python path (docstring)."""
     import subprocess
     import sys
@@ -80,14 +80,9 @@ def engine_goal(study_path: str, fmu_dir: str, tmp: str, repeat: int) -> None:
                     ref_dir], check=True, capture_output=True)
     paths = {"fmu": {"engine": fmu_dir, "python": ref_dir}}
     per_point: dict[tuple[str, str], float] = {}
+    sub = os.path.join(tmp, "goal.toml")
+    _study(sub, GOAL_POINTS)                    # the first points of the same grid
     for backend in ("fmu", "model"):
-        study = load_study(study_path, backend=backend)
-        points = study.points()[:GOAL_POINTS]
-        sub = os.path.join(tmp, f"goal_{backend}.toml")
-        with open(sub, "w", encoding="utf-8") as fh:      # the first points only
-            text = open(study_path, encoding="utf-8").read()
-            grid = "\n".join(f"{k} = {sorted({p[k] for p in points})}" for k in points[0])
-            fh.write(text[:text.index("[grid]")] + "[grid]\n" + grid + "\n")
         study = load_study(sub, backend=backend)
         for engine in ("engine", "python"):
             best = float("inf")
@@ -140,7 +135,7 @@ def main() -> None:
     n = len(study.points())
     print(f"study: seed 000 start-up on PRSM2.fmu (dynamic, 1 ms at 1 µs steps), {n} points "
           f"(µ_SR × µ_SS), {os.cpu_count()} cores")
-    engine_goal(study_path, fmu_dir, tmp, args.repeat)
+    engine_goal(fmu_dir, tmp, args.repeat)
     if args.goal_only:
         return
 

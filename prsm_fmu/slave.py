@@ -943,7 +943,10 @@ class PRSMSlave(Fmi2Slave):
     def _get_fmu_state(self) -> tuple:
         memory = None if self._stepper is None else self._stepper.get_memory()
         x = None if self._x is None else tuple(self._x)
-        state = (fmu_state.TAG, type(self).__name__, self.n_stages, self._config_key(),
+        # while stepping the parameters are fixed: the key made at initialization holds
+        config = self._config if self._config and self._phase == "stepping" else \
+            self._config_key()
+        state = (fmu_state.TAG, type(self).__name__, self.n_stages, config,
                  (self._u[0], self._u[1]), self._phase, self._t, x, self._u_held, memory,
                  self._stats, self._init_error)
         self._own_states.append(state)
@@ -985,10 +988,11 @@ class PRSMSlave(Fmi2Slave):
                     stepper.set_memory(old_memory)
                 return str(exc)
         self._par.update(zip(self._par_names, config))
+        if model is not self._model:
+            self._level = None if model is None else _fixed_level(model)
+            self._state_outputs = {} if model is None else self._states_read_as_outputs(model)
         self._model, self._stepper = model, stepper
         self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
-        self._level = None if model is None else _fixed_level(model)
-        self._state_outputs = {} if model is None else self._states_read_as_outputs(model)
         self._config = config if stepper is not None else ()
         self._u[0], self._u[1] = f["inputs"]
         self._phase = f["phase"]
