@@ -318,3 +318,31 @@ def test_outputs_read_alone_from_the_state_equal_the_outputs_read_together(build
         assert alone == [together[h.outputs.index(n)] for n in pair], k
     assert h.get_real(["screw_speed"])[0] < 0.0          # the reversal went through zero
     h.free()
+
+
+def test_the_environment_selects_the_reference_for_every_door_given_no_engine(monkeypatch):
+    params = presets.load("seed000_two_stage")
+    monkeypatch.setenv("PRSM_FMU_ENGINE", "python")
+    _m, st, *_ = configure(params, SOLVER, (0.0, 0.0))
+    assert st.name == "closed_form" and fallback_reason(st) is None
+    _m, st, *_ = configure(params, SOLVER, (0.0, 0.0), engine="native")   # the argument wins
+    assert is_engine(st)
+    res = simulate(params, fidelity="quasi-static", screw_torque=20.0, t_end=1e-3,
+                   output_interval=1e-4)
+    assert res["engine"] == "python"
+    monkeypatch.setenv("PRSM_FMU_ENGINE", "C")
+    with pytest.raises(ValueError, match=r"PRSM_FMU_ENGINE = 'C' is not allowed: must be one "
+                                         r"of 'native', 'python'"):
+        configure(params, SOLVER, (0.0, 0.0))
+
+
+def test_the_command_lines_take_engine(monkeypatch, capsys):
+    from prsm_fmu.cli import main
+
+    monkeypatch.delenv("PRSM_FMU_ENGINE", raising=False)
+    assert main(["--engine", "cuda", "presets"]) == 2
+    assert "argument --engine: invalid choice: 'cuda'" in capsys.readouterr().err
+    assert main(["--engine", "python", "presets"]) == 0
+    import os
+
+    assert os.environ["PRSM_FMU_ENGINE"] == "python"
