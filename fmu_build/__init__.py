@@ -5,7 +5,8 @@
 builds an FMU from any preset of :mod:`prsm_fmu.presets`.  See docs/fmu.md.
 
 Modules: :mod:`.mechanisms` (which parameters each FMU starts from), :mod:`.builder`
-(generate the slave module, run pythonfmu, complete and validate) and
+(generate the slave module, run pythonfmu, complete and validate), :mod:`.packing` (what the
+FMU carries: the runtime modules, the compiled engine, the start values) and
 :mod:`.model_description` (what pythonfmu leaves out of modelDescription.xml).
 """
 

@@ -1,9 +1,11 @@
 """The PRSM co-simulation slave: the FMU's variable table mapped onto one model, nothing else.
 
 :class:`PRSMSlave` is a pythonfmu ``Fmi2Slave``.  It owns no physics: it builds a
-:class:`~prsm_fmu.params.MechanismParams` from its parameters, a model with
-:func:`~prsm_fmu.models.make_model` and a stepper with
-:func:`~prsm_fmu.steppers.make_stepper`, and maps
+:class:`~prsm_fmu.params.MechanismParams` from its parameters, and a model and a stepper with
+:func:`~prsm_fmu.configure.configure`: the compiled engine packed in the FMU
+(:mod:`prsm_fmu.engine`; its start values and engine library are read from the instance's own
+resources) where it runs the configuration, else a Python stepper (logged, with the reason), and
+maps
 
 * the inputs ``screw_torque`` [N.m] and ``load_force`` [N] onto the model inputs
   ``u = (screw_torque, load_force)`` (torque drive), held over each communication step;
