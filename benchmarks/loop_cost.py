@@ -43,6 +43,12 @@ single step from the reference loop's states and inputs (local error, motor stat
 
 The issue's target for the loop is ≤ 0.35 CPU s per simulated second (floor ≤ 0.7).
 
+The one-engine goal (printed last; alone with ``--goal-only``): the default loop (README's first
+command: the pythonfmu FMU, which now runs the compiled engine, under the Python master, every
+output recorded) with the position step held to 1.5 s costs ≥ 4× less CPU than the 7.14 CPU s
+of 2026-11-23 (floor 2×); main before the engine (707572e, checked out in a temporary git
+worktree, its FMU built by its own code) is run in the same run for comparison.
+
 Run: ``python benchmarks/loop_cost.py [--scene position_step] [--rounds 3]`` (builds the FMUs in
 child processes first; about a minute).
 """
@@ -222,11 +228,84 @@ def max_difference(a, b, names=None) -> tuple[float, str]:
     return worst, where
 
 
+#: the revision the default loop's goal is measured against (main before the engine was the
+#: default: 707572e), and its CPU seconds on 2026-11-23 (the issue's baseline)
+AGAINST = "707572e"
+CPU_2026_11_23 = 7.14
+#: the simulated time of the goal's run [s]: the position step held to 1.5 s
+GOAL_T_END = 1.5
+GOAL_CHILD = """
+import json, sys, time
+from dataclasses import replace
+import prsm_fmu
+from system_models.ema import build_system
+from system_models.scenes import load_scene
+scene = replace(load_scene("position_step"), t_end={t_end!r})
+system = build_system(scene, prsm="fmu", fmu_path={fmu!r})
+c0 = time.process_time()
+system.run()
+print(json.dumps([time.process_time() - c0, prsm_fmu.__file__]))
+"""
+
+
+def _child_env(tree: Path) -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(tree)] + [p for p in [env.get("PYTHONPATH")] if p])
+    return env
+
+
+def goal_against(rev: str = AGAINST, rounds: int = 3) -> None:
+    """The default loop (README's first command: position_step, the pythonfmu PRSM2 driven by
+    fmpy under the Python master, every output recorded) held to GOAL_T_END, in child
+    processes of this tree and of ``rev`` (a temporary ``git worktree``), each with the FMU
+    built by its own tree; CPU seconds of ``System.run``, the smallest of ``rounds`` runs
+    each, interleaved; printed with their ratio and the goal against 2026-11-23."""
+    import json
+
+    with tempfile.TemporaryDirectory(prefix="loop_goal_") as tmp:
+        old = Path(tmp) / "old"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old), rev],
+                       check=True, capture_output=True)
+        try:
+            trees = {rev: old, "this tree": ROOT}
+            fmus = {}
+            for label, tree in trees.items():
+                dest = Path(tmp) / label.replace(" ", "_")
+                subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest)],
+                               env=_child_env(tree), check=True, capture_output=True)
+                fmus[label] = dest / "PRSM2.fmu"
+            cpu: dict[str, list[float]] = {label: [] for label in trees}
+            for _ in range(rounds):
+                for label, tree in trees.items():
+                    code = GOAL_CHILD.format(t_end=GOAL_T_END, fmu=str(fmus[label]))
+                    proc = subprocess.run([sys.executable, "-c", code], env=_child_env(tree),
+                                          check=True, capture_output=True, text=True, cwd=tmp)
+                    seconds, where = json.loads(proc.stdout.strip().splitlines()[-1])
+                    assert Path(where).resolve().is_relative_to(tree.resolve()), where
+                    cpu[label].append(seconds)
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)],
+                           capture_output=True)
+    then, now = min(cpu[rev]), min(cpu["this tree"])
+    print(f"default position_step loop held to {GOAL_T_END:g} s (pythonfmu PRSM2 through fmpy, "
+          f"Python master; CPU s of the loop, best of {rounds}, measured in this run): "
+          f"{rev} {then:.2f} s, this tree {now:.2f} s ({then / now:.2f}x less)")
+    ratio = CPU_2026_11_23 / now
+    print(f"  against 2026-11-23 ({CPU_2026_11_23} CPU s then): {ratio:.2f}x less (goal >= 4x, "
+          f"floor >= 2x: {'goal met' if ratio >= 4 else 'floor met' if ratio >= 2 else 'NOT met'})"
+          f"; {rev} in this run was {CPU_2026_11_23 / then:.2f}x less than then")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="position_step")
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--goal-only", action="store_true",
+                    help="only the default loop's goal against " + AGAINST)
     args = ap.parse_args()
+    if args.goal_only:
+        goal_against(rounds=args.rounds)
+        return
     scene = load_scene(args.scene)
     with tempfile.TemporaryDirectory(prefix="loop_cost_") as tmp:
         fmus = {"python": build_fmu(Path(tmp))}
@@ -305,6 +384,8 @@ def main() -> None:
         print(f"  one motor step, {label:<12} largest error / max|x|: i_d {err[0]:.1e}, "
               f"i_q {err[1]:.1e}, energies {max(err[2:]):.1e}")
 
+    print()
+    goal_against(rounds=args.rounds)
 
 if __name__ == "__main__":
     main()

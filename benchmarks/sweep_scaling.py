@@ -20,7 +20,16 @@ starting a cluster (≈ 1 s) is paid once per study, not per point.  Each config
 * overhead per point = (t(dask 1) − t(loop)) / points, and as a fraction of the loop's time
   per point                                              (target ≤ 10 %).
 
-Run: ``python benchmarks/sweep_scaling.py [--points 24] [--repeat 2]`` (about a minute).
+The one-engine goal (printed first; alone with ``--goal-only``): a point of the same study on
+the default door, the compiled engine, against the Python path in the same run: each of the
+first ``GOAL_POINTS`` points in this process (``executor="loop"``), the best of ``--repeat``
+runs, on the ``fmu`` backend (PRSM2.fmu, which runs the engine, against the same FMU built with
+``--engine python``) and on the ``model`` backend (:func:`prsm_fmu.simulate` with
+``engine="native"`` against ``engine="python"``).  Goal: ≥ 50× faster than the Python path
+(floor 20×).
+
+Run: ``python benchmarks/sweep_scaling.py [--points 24] [--repeat 2] [--goal-only]`` (about a
+minute).
 """
 
 from __future__ import annotations
@@ -55,10 +64,61 @@ def _study(path: str, n_points: int) -> None:
             """))
 
 
+#: points of the study timed for the one-engine goal
+GOAL_POINTS = 4
+
+
+def engine_goal(fmu_dir: str, tmp: str, repeat: int) -> None:
+    """Print the time per point of the engine's doors against the Python path (docstring)."""
+    import subprocess
+    import sys
+
+    from prsm_fmu.sweep import load_study, run_study
+
+    ref_dir = os.path.join(tmp, "fmu_python")
+    subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--engine", "python", "--dest",
+                    ref_dir], check=True, capture_output=True)
+    paths = {"fmu": {"engine": fmu_dir, "python": ref_dir}}
+    per_point: dict[tuple[str, str], float] = {}
+    sub = os.path.join(tmp, "goal.toml")
+    _study(sub, GOAL_POINTS)                    # the first points of the same grid
+    for backend in ("fmu", "model"):
+        study = load_study(sub, backend=backend)
+        for engine in ("engine", "python"):
+            best = float("inf")
+            for r in range(repeat):
+                out = os.path.join(tmp, f"goal_{backend}_{engine}_{r}")
+                kw = ({"fmu_dir": paths["fmu"][engine]} if backend == "fmu" else {})
+                if backend == "model":
+                    os.environ["PRSM_FMU_ENGINE"] = "native" if engine == "engine" else "python"
+                t0 = time.perf_counter()
+                res = run_study(study, out, progress=None, figures=False, resume=False,
+                                executor="loop", **kw)
+                dt = (time.perf_counter() - t0) / len(res.rows)
+                assert all(row["status"] == "ok" for row in res.rows), res.failed
+                best = min(best, dt)
+            per_point[backend, engine] = best
+    os.environ.pop("PRSM_FMU_ENGINE", None)
+    python_path = per_point["fmu", "python"]
+    print(f"one engine: s per point of the start-up study (first {GOAL_POINTS} points, best of "
+          f"{repeat}, in this process):")
+    for (backend, engine), t in per_point.items():
+        print(f"  {backend:5s} backend, {engine:6s}: {t:8.4f} s   "
+              f"({python_path / t:6.1f}x faster than the Python path: fmu backend, python)")
+    best = min(per_point["fmu", "engine"], per_point["model", "engine"])
+    ratio = python_path / best
+    print(f"  fastest engine door / Python path = {ratio:.1f}x (goal >= 50x, floor >= 20x: "
+          f"{'goal met' if ratio >= 50 else 'floor met' if ratio >= 20 else 'NOT met'}); "
+          f"model backend engine / python = "
+          f"{per_point['model', 'python'] / per_point['model', 'engine']:.1f}x")
+    print()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=24, help="about this many points (× 4)")
     ap.add_argument("--repeat", type=int, default=2, help="runs per configuration (best counts)")
+    ap.add_argument("--goal-only", action="store_true", help="only the one-engine goal")
     args = ap.parse_args()
 
     from dask.distributed import Client
@@ -75,6 +135,9 @@ def main() -> None:
     n = len(study.points())
     print(f"study: Li et al. (2021) start-up on PRSM2.fmu (dynamic, 1 ms at 1 µs steps), {n} points "
           f"(µ_SR × µ_SS), {os.cpu_count()} cores")
+    engine_goal(fmu_dir, tmp, args.repeat)
+    if args.goal_only:
+        return
 
     def timed(label: str, **kw) -> float:
         best = float("inf")

@@ -5,7 +5,8 @@
 builds an FMU from any preset of :mod:`prsm_fmu.presets`.  See docs/fmu.md.
 
 Modules: :mod:`.mechanisms` (which parameters each FMU starts from), :mod:`.builder`
-(generate the slave module, run pythonfmu, complete and validate) and
+(generate the slave module, run pythonfmu, complete and validate), :mod:`.packing` (what the
+FMU carries: the runtime modules, the compiled engine, the start values) and
 :mod:`.model_description` (what pythonfmu leaves out of modelDescription.xml).
 """
 
@@ -20,13 +21,14 @@ __all__ = ["build_fmu", "build_native", "build_named", "validate", "BuildError",
 
 
 def build_named(name: str, dest="dist", check: bool = True, start: dict | None = None,
-                native: bool = False):
+                native: bool = False, engine: bool = True):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
     (``start``: parameter start values other than the preset's, see ``builder.start_values``;
     for the native FMU not the structural ones).
 
     ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
-    levels, :mod:`fmu_build.native`) instead of the Python one.
+    levels, :mod:`fmu_build.native`) instead of the Python one.  ``engine``: the Python FMU
+    packs the compiled engine (:mod:`fmu_build.packing`); False: the Python model only.
 
     Returns
     -------
@@ -40,4 +42,4 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
                          "(or use --preset)") from None
     if native:
         return build_native(name, make(), source, dest, check, start)
-    return build_fmu(name, make(), source, dest, check, start)
+    return build_fmu(name, make(), source, dest, check, start, engine=engine)

@@ -2,8 +2,9 @@
 
 ::
 
-    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native] [--dest DIR] [--no-validate]
-    prsm-fmu-build --preset NAME --name ID [--native] [--dest DIR]
+    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native] [--engine native|python] [--dest DIR]
+                   [--no-validate]
+    prsm-fmu-build --preset NAME --name ID [--native] [--engine native|python] [--dest DIR]
 
 ``--native`` builds ``<name>-native.fmu`` instead: the kinematic, quasi-static and dynamic
 levels in C, no Python needed to run it (:mod:`fmu_build.native`; needs gcc).
@@ -47,6 +48,11 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--native", action="store_true",
                     help="build the native C FMU <name>-native.fmu (kinematic, quasi-static and "
                          "dynamic levels; needs gcc) instead of the Python one")
+    ap.add_argument("--engine", choices=("native", "python"), default="native",
+                    help="what computes the physics of the Python FMU: native (default) packs "
+                         "the compiled engine for this platform (needs gcc to build; the "
+                         "Python model runs where it cannot, logged), python the Python "
+                         "reference model only")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
     return ap
@@ -97,14 +103,16 @@ def main(argv: list[str] | None = None) -> int:
             if args.native:
                 targets = [build_native(args.name, params, args.preset, args.dest, check, start)]
             else:
-                targets = [build_fmu(args.name, params, args.preset, args.dest, check, start)]
+                targets = [build_fmu(args.name, params, args.preset, args.dest, check, start,
+                                     engine=args.engine == "native")]
         else:
             unknown = [n for n in args.names if n not in FMUS]
             if unknown:
                 ap.error(f"argument FMU: invalid choice(s) {', '.join(map(repr, unknown))}: "
                          f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
-            targets = [build_named(n, args.dest, check, start, native=args.native) for n in names]
+            targets = [build_named(n, args.dest, check, start, native=args.native,
+                                   engine=args.engine == "native") for n in names]
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2
     except (BuildError, ValueError, OSError) as exc:

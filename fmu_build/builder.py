@@ -5,9 +5,10 @@ The FMU ``PRSM<n>`` (or any name) is built from a :class:`~prsm_fmu.params.Mecha
 1. a slave module ``<name lower>_slave.py`` is generated: ``class <name>(PRSMSlave)`` with the
    parameters' values as start values (:func:`prsm_fmu.slave.parameter_defaults`), the
    preset's name in the description and the default experiment;
-2. pythonfmu's ``FmuBuilder`` packs it with the whole ``prsm_fmu`` package (the physics runs
-   from ``resources/prsm_fmu``) and the pythonfmu binaries, declaring that the FMU can get,
-   set and serialize its state;
+2. pythonfmu's ``FmuBuilder`` packs it with what runs inside the FMU (:mod:`.packing`: the
+   physics and slave modules of ``prsm_fmu``, the compiled engine for this platform with its
+   ctypes interface, the start values) and the pythonfmu binaries, declaring that the FMU can
+   get, set and serialize its state;
 3. :func:`fmu_build.model_description.complete` adds what pythonfmu leaves out, and the zip is
    rewritten with the completed ``modelDescription.xml``;
 4. :func:`fmu_build.extra.add_baselines` packs the regression baselines into ``extra/``
@@ -22,6 +23,7 @@ module to describe it, and a process that later loads the FMU would run that sta
 from __future__ import annotations
 
 import shutil
+import sys
 import tempfile
 import zipfile
 from pathlib import Path
@@ -31,7 +33,7 @@ from prsm_fmu.params import MechanismParams
 from prsm_fmu.configure import ENUMERATIONS
 from prsm_fmu.slave import ENUM_PARAMETERS, parameter_defaults, type_definitions
 
-from . import extra, model_description
+from . import extra, model_description, packing
 
 #: the default experiment of every FMU: start [s], stop [s], communication step [s]
 DEFAULT_EXPERIMENT = (0.0, 0.1, 1e-3)
@@ -134,7 +136,7 @@ def validate(fmu: Path) -> list[str]:
 
 
 def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",
-              check: bool = True, start: dict | None = None) -> Path:
+              check: bool = True, start: dict | None = None, engine: bool = True) -> Path:
     """Build ``<dest>/<name>.fmu`` from ``params``.
 
     Parameters
@@ -152,6 +154,9 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
         :class:`BuildError` on any problem.
     start : dict, optional
         Parameter start values other than the preset's (:func:`start_values`).
+    engine : bool
+        Pack the compiled engine for this platform (:mod:`fmu_build.packing`; without gcc the
+        FMU is built without it, said on stderr); False: the FMU runs the Python model.
 
     Returns
     -------
@@ -164,15 +169,22 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
     params = params.validate()
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
-    package = Path(prsm_fmu.__file__).resolve().parent
     with tempfile.TemporaryDirectory(prefix="prsm_fmu_build_") as tmp:
         tmp = Path(tmp)
         script = tmp / "src" / f"{name.lower()}_slave.py"
         script.parent.mkdir()
         script.write_text(slave_source(name, params, preset, start), encoding="utf-8")
-        staged = tmp / "pkg" / "prsm_fmu"
-        shutil.copytree(package, staged, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[staged],
+        staged = tmp / "pkg"
+        staged.mkdir()
+        project = packing.stage_runtime(staged)
+        project.append(packing.stage_start_values(staged, start_values(params, start)))
+        if engine:
+            try:
+                project += packing.stage_engine(staged, params)
+            except BuildError as exc:       # no gcc: the FMU runs the Python model, and says so
+                print(f"fmu_build: {name}.fmu without the compiled engine (it runs the Python "
+                      f"model): {exc}", file=sys.stderr)
+        built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=project,
                                      canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         built = Path(built)
         with zipfile.ZipFile(built) as z:

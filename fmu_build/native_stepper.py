@@ -20,14 +20,12 @@ from __future__ import annotations
 
 import ctypes
 import math
+from pathlib import Path
 from typing import Any
 
 from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
 
-from . import native
-from .builder import BuildError
-
-__all__ = ["NativeStepper", "native_library"]
+__all__ = ["NativeStepper", "native_library", "load_library", "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
 LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_api.c")
@@ -51,15 +49,40 @@ def native_library(params) -> ctypes.CDLL:
     key = repr(params)
     if key in _by_params:
         return _by_params[key]
+    lib = library_file(params)
+    _by_params[key] = dll = load_library(str(lib))
+    return dll
+
+
+def library_file(params) -> Path:
+    """The shared library of ``params``' geometry, compiled with gcc on first use and cached
+    (fmu_build.native.cached_library).
+
+    Raises
+    ------
+    BuildError
+        When gcc is missing or fails.
+    """
+    from . import native     # the build tools: not needed where a library is only loaded
+
     constants = native.constants_header(params)
     files = {f: (native.SOURCE_DIR / f).read_bytes() for f in LIB_SOURCES + native.HEADERS}
     files["prsm_constants.h"] = constants.encode()
-    lib = native.cached_library("prsm", files, LIB_SOURCES)
-    digest = lib.stem
-    if digest in _loaded:
-        _by_params[key] = _loaded[digest]
-        return _loaded[digest]
-    dll = ctypes.CDLL(str(lib))
+    return native.cached_library("prsm", files, LIB_SOURCES)
+
+
+def load_library(path: str) -> ctypes.CDLL:
+    """The library at ``path`` (from :func:`library_file`, or packed in an FMU) loaded, with
+    its functions' argument types declared; loaded once per path and process.
+
+    Raises
+    ------
+    OSError
+        When the file cannot be loaded (missing, other platform).
+    """
+    if path in _loaded:
+        return _loaded[path]
+    dll = ctypes.CDLL(path)
     dbl, i32, vp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
     dll.prsm_api_new.restype = vp
     dll.prsm_api_new.argtypes = [dbl, i32, ctypes.c_char_p, ctypes.c_int]
@@ -71,7 +94,7 @@ def native_library(params) -> ctypes.CDLL:
     dll.prsm_api_get_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_set_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_free.argtypes = [vp]
-    _loaded[digest] = _by_params[key] = dll
+    _loaded[path] = dll
     return dll
 
 
@@ -92,6 +115,9 @@ class NativeStepper(Stepper):
     fixed_substeps : int or None
         Equal internal steps per advance (ROS34PW2 without error control) instead of adaptive
         ones.
+    library : ctypes.CDLL, optional
+        The loaded library (:func:`load_library`) to run, e.g. the one packed in an FMU, built
+        for ``model``'s geometry; default: :func:`native_library` of the model's parameters.
 
     Raises
     ------
@@ -102,7 +128,8 @@ class NativeStepper(Stepper):
     name = "native"
 
     def __init__(self, model: Any, rtol: float = 1e-6, atol: float = 1e-8,
-                 max_substeps: int = 100000, fixed_substeps: int | None = None) -> None:
+                 max_substeps: int = 100000, fixed_substeps: int | None = None,
+                 library: ctypes.CDLL | None = None) -> None:
         super().__init__(model)
         params = model.params
         level = getattr(model, "fidelity", "")
@@ -123,7 +150,7 @@ class NativeStepper(Stepper):
         ints = [int(v) for st in params.stages for v in (st.n_rollers, st.carriers)]
         ints += [_LEVELS[level], 1 if model.drive == "speed" else 0, fixed_substeps or 0,
                  max_substeps]
-        self._lib = lib = native_library(params)
+        self._lib = lib = library if library is not None else native_library(params)
         if (len(reals), len(ints)) != (lib.prsm_api_n_reals(), lib.prsm_api_n_ints()):
             raise ValueError(f"the C model reads {lib.prsm_api_n_reals()} doubles and "
                              f"{lib.prsm_api_n_ints()} ints, not {len(reals)} and {len(ints)}")

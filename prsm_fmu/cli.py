@@ -47,6 +47,7 @@ import numpy as np
 from . import presets as _presets
 from .arguments import (ArgumentParser, existing_dir, existing_file, finite_float, float_in,
                         int_in, nonzero_float, one_line, positive_float, writable_dir)
+from .engine import ENGINE_ENV, ENGINES
 from .fmu_variables import Variable, fmu_variables
 from .models import FIDELITIES
 from .params import MECHANISM_FIELD_NAMES, MechanismParams
@@ -507,6 +508,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(
         prog="prsm-fmu",
         description="Planetary roller screw mechanism (PRSM) dynamics. SI units throughout.")
+    parser.add_argument("--engine", choices=ENGINES, default=None, help="what computes the PRSM physics in every door of this run (simulate, the Python block, the FMUs loaded, sweep workers): native (default) the compiled "
+                        "engine where it loads, python the Python reference model (sets PRSM_FMU_ENGINE)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser(
@@ -816,6 +819,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        if args.engine is not None:
+            os.environ[ENGINE_ENV] = args.engine
         return int(args.func(args, args.parser))
     except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
         code = exc.code

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
+from .engine import ENGINE_METHOD, check_engine, default_engine, engine_stepper
 from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
@@ -134,7 +135,9 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[float, float]):
+def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[float, float],
+              engine: str | None = None, library_path: str | None = None,
+              engine_refusal: str | None = None):
     """Model, stepper and initial state of a torque-driven PRSM from its solver parameters.
 
     Parameters
@@ -147,11 +150,22 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         [rad], ``initial_carrier_equilibrium`` (bool): the FMU's parameters of the same names.
     inputs : tuple
         Motor torque [N·m] and load force [N] at the start.
+    engine : {"native", "python"}, optional
+        Default: :func:`prsm_fmu.engine.default_engine` (``native`` unless the environment
+        variable ``PRSM_FMU_ENGINE`` says otherwise).  ``native``: the compiled engine steps the model wherever it can (:mod:`prsm_fmu.engine`;
+        with ``stepper = default`` it runs its own method of the level, e.g.
+        ``closed_form_explicit`` at the quasi-static level); elsewhere, and with ``python``,
+        the Python stepper (``stepper.engine_fallback`` says why, for ``native``).
+    library_path : str, optional
+        The engine library to load (an FMU's packed one); default: compiled for ``params``.
+    engine_refusal : str, optional
+        A reason known beforehand why the engine cannot run (the FMU's geometry check).
 
     Returns
     -------
     tuple
-        (model, stepper, x0, level, stepper name).
+        (model, stepper, x0, level, stepper name); the name is the Python stepper's, or the
+        engine's method when the engine runs (``stepper.name`` is then ``native``).
 
     Raises
     ------
@@ -159,6 +173,7 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         Naming the parameter, its value and the allowed range.
     """
     fidelity = fidelity_name(solver["fidelity"])
+    engine = default_engine() if engine is None else check_engine(engine)
     tol = solver["tolerance"]
     lo, hi = TOLERANCE_RANGE
     if not (isinstance(tol, (int, float)) and lo <= tol <= hi):
@@ -192,8 +207,8 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     # auto: the kinematic level, or the model that switches between dynamic and quasi-static
     level = fidelity if choice is None else ("kinematic" if choice.fidelity == "kinematic"
                                              else "auto")
-    name = stepper_name(solver["stepper"])
-    name = DEFAULT_STEPPER[level] if name == "default" else name
+    asked = stepper_name(solver["stepper"])
+    name = DEFAULT_STEPPER[level] if asked == "default" else asked
     if name in ("closed_form", "closed_form_explicit") and level == "dynamic":
         raise ValueError(f"stepper = {name!r} is not allowed with fidelity = 'dynamic': "
                          "the closed form exists only for kinematic and quasi-static")
@@ -218,7 +233,16 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     model_opts = {"efficiency": eff} if level == "kinematic" else {}
     model = (make_model(params, level, "torque", **model_opts) if choice is None
              else auto_model(params, "torque", choice, **model_opts))
-    stepper = make_stepper(name, model, **opts)
+    stepper = why = None
+    if engine == "native":
+        stepper, why = engine_stepper(model, level, asked, tol, ATOL_FACTOR * tol, max_substeps,
+                                      substeps, library_path, engine_refusal)
+    if stepper is None:
+        stepper = make_stepper(name, model, **opts)
+        if why is not None:
+            stepper.engine_fallback = why
+    else:
+        name = ENGINE_METHOD.get(level, name)
     x0 = model.initial_state(tuple(inputs), screw_speed=solver["initial_screw_speed"],
                              screw_angle=solver["initial_screw_angle"],
                              carrier_ratio=None if solver["initial_carrier_equilibrium"] else 0.0)

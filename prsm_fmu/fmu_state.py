@@ -82,8 +82,9 @@ def _finite_floats(v: Any, n: int | None = None) -> bool:
 
 
 def _plain(v: Any, depth: int = 0) -> str | None:
-    """Why ``v`` is not a plain, finite memory value (None if it is one)."""
-    if v is None or isinstance(v, (bool, str)) or _is_int(v):
+    """Why ``v`` is not a plain, finite memory value (None if it is one; bytes: the compiled
+    engine's memory, whose length its ``set_memory`` checks)."""
+    if v is None or isinstance(v, (bool, str, bytes)) or _is_int(v):
         return None
     if _is_float(v):
         return None if math.isfinite(v) else f"non-finite number {v!r}"

@@ -12,6 +12,7 @@ from typing import Callable, Union
 
 import numpy as np
 
+from .engine import check_engine, default_engine, engine_stepper, is_engine
 from .models import make_model
 from .models.base import is_finite_state
 from .params import MechanismParams
@@ -45,7 +46,8 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
              t_end: float, output_interval: float, stepper: str | None = None,
              rtol: float = 1e-8, atol: float = 1e-10, initial_screw_speed: float = 0.0,
              initial_carrier_ratio: float | None = 0.0, model_options: dict | None = None,
-             stepper_options: dict | None = None) -> dict[str, np.ndarray]:
+             stepper_options: dict | None = None,
+             engine: str | None = None) -> dict[str, np.ndarray]:
     """Simulate the mechanism and return its outputs on a regular time grid.
 
     Parameters
@@ -88,12 +90,22 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         them at equilibrium.  Default 0 (carriers at rest, Li et al.'s (2021) start).
     model_options, stepper_options : dict, optional
         Passed to the model (e.g. ``efficiency``) and the stepper (e.g. ``substeps``).
+    engine : {"native", "python"}, optional
+        Default: :func:`prsm_fmu.engine.default_engine` (``native`` unless the environment
+        variable ``PRSM_FMU_ENGINE`` says otherwise).  ``native``: the compiled engine steps
+        the model where it can (:mod:`prsm_fmu.engine`: the level's engine method, e.g.
+        ``closed_form_explicit`` at the quasi-static level when ``stepper`` is None; only
+        ``max_substeps`` and ``fixed_substeps`` among ``stepper_options``), else the Python
+        stepper;
+        ``python``: the Python reference.  The result's ``engine`` says which ran and
+        ``engine_fallback`` why not the engine.
 
     Returns
     -------
     dict
-        ``time`` [s] and every output (docs/fmu.md, "Variables") as arrays, plus ``rhs_calls`` (total
-        right-hand-side evaluations) and ``cpu_time`` [s] of the run; with ``auto`` also
+        ``time`` [s] and every output of the model as arrays, plus ``rhs_calls`` (total
+        right-hand-side evaluations), ``cpu_time`` [s] of the run, ``engine`` and
+        ``engine_fallback`` (above); with ``auto`` also
         ``fidelity`` (the level run) and ``auto_choice`` (:class:`~prsm_fmu.models.AutoChoice`).
 
     Raises
@@ -126,13 +138,25 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
                      carrier_ratio=initial_carrier_ratio)
     model = make_model(params, fidelity, drive, **mopts)
     fidelity = model.fidelity
+    engine = default_engine() if engine is None else check_engine(engine)
     name = stepper or DEFAULT_STEPPER[fidelity]
     opts = tuned_stepper_options(name, rtol, atol)
     opts.update(stepper_options or {})
     if "fixed_substeps" in opts:
         for key in TUNED_OPTIONS.get(name, {}):
             opts.pop(key, None)
-    st = make_stepper(name, model, **opts)
+    st = why = None
+    if engine == "native":
+        extra = sorted(set(stepper_options or {}) - {"max_substeps", "fixed_substeps"})
+        extra += sorted(set(model_options or {}) - {"efficiency"})
+        if extra:
+            why = f"the engine takes no option {', '.join(map(repr, extra))}"
+        else:
+            so = stepper_options or {}
+            st, why = engine_stepper(model, fidelity, stepper or "default", rtol, atol,
+                                     so.get("max_substeps", 100000), so.get("fixed_substeps"))
+    if st is None:
+        st = make_stepper(name, model, **opts)
 
     x = model.initial_state(u0, screw_speed=speed0, carrier_ratio=initial_carrier_ratio)
     names = model.output_names
@@ -166,6 +190,8 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     res.update({k: out[:, j] for j, k in enumerate(names)})
     res["rhs_calls"] = rhs_calls
     res["cpu_time"] = cpu
+    res["engine"] = "native" if is_engine(st) else "python"
+    res["engine_fallback"] = why
     if hasattr(model, "auto_choice"):
         res["fidelity"] = fidelity
         res["auto_choice"] = model.auto_choice

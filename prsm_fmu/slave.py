@@ -1,9 +1,11 @@
 """The PRSM co-simulation slave: the FMU's variable table mapped onto one model, nothing else.
 
 :class:`PRSMSlave` is a pythonfmu ``Fmi2Slave``.  It owns no physics: it builds a
-:class:`~prsm_fmu.params.MechanismParams` from its parameters, a model with
-:func:`~prsm_fmu.models.make_model` and a stepper with
-:func:`~prsm_fmu.steppers.make_stepper`, and maps
+:class:`~prsm_fmu.params.MechanismParams` from its parameters, and a model and a stepper with
+:func:`~prsm_fmu.configure.configure`: the compiled engine packed in the FMU
+(:mod:`prsm_fmu.engine`; its start values and engine library are read from the instance's own
+resources) where it runs the configuration, else a Python stepper (logged, with the reason), and
+maps
 
 * the inputs ``screw_torque`` [N.m] and ``load_force`` [N] onto the model inputs
   ``u = (screw_torque, load_force)`` (torque drive), held over each communication step;
@@ -49,6 +51,7 @@ Behaviour a host sees (docs/fmu.md, "Errors", gives the table):
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from operator import itemgetter
 from typing import Any, Callable
@@ -63,6 +66,7 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
                         active_level, configure, fidelity_name)
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
+from .engine import ENGINE_ENV, fallback_reason, is_engine, library_name, platform_folder
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
 
@@ -402,6 +406,52 @@ def type_definitions() -> dict[str, list[tuple[str, int, str]]]:
 # -------------------------------------------------------------------------------------------
 
 
+#: the FMU's parameter start values, read by every instance from its own resources: two builds
+#: of one modelIdentifier (e.g. ``--start fidelity=dynamic``) share the slave module in a
+#: process (pythonfmu imports it once), never their start values
+START_VALUES_FILE = "prsm_start_values.json"
+#: what the FMU's build says about its engine library: ``{"geometry": {name: value}}``, the
+#: parameters the library's built-in contact geometry was computed from
+ENGINE_FILE = "prsm_engine.json"
+
+
+def read_resource_json(resources: str | None, name: str) -> Any:
+    """The JSON file ``name`` of an FMU's resources (None when absent or no resources)."""
+    import json
+    import os
+
+    if not resources:
+        return None
+    path = os.path.join(resources, name)
+    if not os.path.isfile(path):
+        return None
+    with open(path, encoding="utf-8") as f:
+        return json.load(f)
+
+
+def packed_engine(resources: str | None) -> tuple[str | None, dict[str, Any], str | None]:
+    """The engine library an FMU packs for this platform: (its path, the geometry it was built
+    with, None), or (None, {}, why it has none).  A slave outside an FMU (no ``resources``)
+    gets (None, {}, None): the engine compiled for its parameters (:mod:`prsm_fmu.engine`)."""
+    import os
+
+    if not resources:
+        return None, {}, None
+    info = read_resource_json(resources, ENGINE_FILE)
+    if info is None:
+        return None, {}, "this FMU was built without the engine library"
+    path = os.path.join(resources, "binaries", platform_folder(), library_name())
+    if not os.path.isfile(path):
+        return None, {}, f"this FMU has no engine library for platform {platform_folder()}"
+    return path, dict(info["geometry"]), None
+
+
+def _fixed_level(model) -> int | None:
+    """The model's level code if it never changes along a run (None: ``auto``'s switching
+    model, whose :func:`active_level` is read after every step)."""
+    return None if hasattr(model, "mode") else active_level(model)
+
+
 def _guarded(call: str, failed: Any = None):
     """Decorate an FMI entry point so that no Python exception leaves it.
 
@@ -438,11 +488,15 @@ class PRSMSlave(Fmi2Slave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
-        defaults = self.defaults
+        defaults = read_resource_json(self.resources, START_VALUES_FILE) or self.defaults
         if defaults is None:
             from . import presets
 
             defaults = parameter_defaults(presets.load(self.preset))
+        #: the engine library packed in this FMU for this platform, the geometry it was built
+        #: with, and why it cannot run here (None: it can)
+        self._engine_path, self._engine_geometry, self._engine_missing = packed_engine(
+            self.resources)
         n = sum(1 for name in defaults if name.endswith(".screw_radius"))
         self.n_stages = n
         self._table = variable_table(n)
@@ -468,11 +522,18 @@ class PRSMSlave(Fmi2Slave):
         self._stats = (0, 0, 0)
         self._model = None
         self._stepper = None
+        self._memory_kept = False
+        self._level: int | None = None          # the model's level code, if it never changes
+        #: value reference of an output that is a state -> its index in the state vector
+        #: (``screw_speed``, ``screw_angle``: fmi2GetReal of those alone reads the state)
+        self._state_outputs: dict[int, int] = {}
         self._config: tuple = ()
         self._init_error: str | None = None
         self._y: list[float] | None = None
         self._preview: tuple = (None, None)
         self._refused: list[str] = []           # refused calls not yet reported by a doStep
+        #: the last FMU states this instance made (the objects themselves, immutable tuples)
+        self._own_states: deque = deque(maxlen=OWN_STATES)
         self._register(defaults)
         fmu_exit.guard_library(self.resources, type(self).__name__)
 
@@ -594,6 +655,13 @@ class PRSMSlave(Fmi2Slave):
                 return self._get_typed(vrs, "Real")
         y = self._y
         if y is None:
+            x = self._x
+            states = self._state_outputs
+            if x is not None and states:        # outputs that are states: no Model.outputs
+                try:
+                    return [x[states[vr]] for vr in vrs]
+                except KeyError:
+                    pass
             y = self._compute_outputs()
         return [y[k] for k in positions]
 
@@ -685,7 +753,8 @@ class PRSMSlave(Fmi2Slave):
                        for k in range(1, self.n_stages + 1))
         params = MechanismParams(stages=stages, name=f"{type(self).__name__} ({self.preset})",
                                  **{f: par[f] for f in MECHANISM_FIELDS}).validate()
-        built = configure(params, par, tuple(self._u))
+        built = configure(params, par, tuple(self._u), library_path=self._engine_path,
+                          engine_refusal=self._engine_refusal())
         model, _stepper, x0, _level, _name = built
         u0 = (self._u[0], self._u[1])
         # non-finite inputs are refused by doStep, and so is a start where the rigid contact has
@@ -699,6 +768,24 @@ class PRSMSlave(Fmi2Slave):
                                  f"{bad[0]!r}): a mass, inertia or radius is out of any "
                                  "physical proportion to the others")
         return built
+
+    def _engine_refusal(self) -> str | None:
+        """Why the packed engine cannot run the current parameters (None: it can)."""
+        if self._engine_missing:
+            return self._engine_missing
+        for name, value in self._engine_geometry.items():
+            if self._par.get(name) != value:
+                return (f"{name} = {self._par.get(name)!r} differs from the value the engine "
+                        f"library was built with ({value!r}): the engine bakes the contact "
+                        "geometry in")
+        return None
+
+    def _states_read_as_outputs(self, model) -> dict[int, int]:
+        """Value reference -> state index of the Real outputs that are states of ``model``
+        (their output equals the state: Model.outputs; tests/test_engine.py)."""
+        names = getattr(model, "state_names", ())
+        return {vr: names.index(self._out_names[i]) for vr, i in self._out_index.items()
+                if self._out_names[i] in names}
 
     def _config_key(self) -> tuple:
         return tuple(self._par[n] for n in self._par_names)
@@ -775,7 +862,14 @@ class PRSMSlave(Fmi2Slave):
                      if model.fidelity == "auto" else "")
             self.log(f"fidelity = 'auto' starts with {model.auto_choice.describe()}{along}",
                      Fmi2Status.ok)
+        if not is_engine(stepper):
+            why = fallback_reason(stepper) or f"{ENGINE_ENV} = 'python' selects it"
+            self.log(f"the Python reference model runs, not the compiled engine: {why}",
+                     Fmi2Status.ok)
         self._model, self._stepper, self._x = model, stepper, x0
+        self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
+        self._level = _fixed_level(model)
+        self._state_outputs = self._states_read_as_outputs(model)
         self._u_held = (self._u[0], self._u[1])
         self._config = self._config_key()
         self._stats = (0, 0, active_level(model))
@@ -810,25 +904,29 @@ class PRSMSlave(Fmi2Slave):
             return self._refuse(f"inputs screw_torque = {u[0]!r} N.m, load_force = {u[1]!r} N: "
                                 "every input must be finite")
         stepper = self._stepper
-        memory = stepper.get_memory()
+        memory = None if self._memory_kept else stepper.get_memory()
         try:
             x, stats = stepper.advance(current_time, self._x, u, h)
         except Exception as exc:  # noqa: BLE001 - StepFailure; anything else would be fmi2Fatal
-            stepper.set_memory(memory)
+            if memory is not None:
+                stepper.set_memory(memory)
             cause = self._model.contact_diagnosis(self._x, u)
             if cause is not None:         # contact_status reads 1 here
                 return self._refuse(cause)
             what = str(exc) if isinstance(exc, StepFailure) else f"{type(exc).__name__}: {exc}"
             return self._refuse(f"integration failed: {what}")
-        if not all(math.isfinite(v) for v in x):
-            stepper.set_memory(memory)
+        if not all(map(math.isfinite, x)):     # (the engine checks its states itself)
+            if memory is not None:
+                stepper.set_memory(memory)
             cause = self._model.contact_diagnosis(self._x, u)
             return self._refuse(cause or "integration failed: the stepper returned a non-finite "
                                 "state")
         self._x = x
         self._t = current_time + h
         self._u_held = u
-        self._stats = (stats.rhs_calls, stats.substeps, active_level(self._model))
+        level = self._level
+        self._stats = (stats.rhs_calls, stats.substeps,
+                       active_level(self._model) if level is None else level)
         self._y = None
         return True
 
@@ -847,14 +945,22 @@ class PRSMSlave(Fmi2Slave):
     def _get_fmu_state(self) -> tuple:
         memory = None if self._stepper is None else self._stepper.get_memory()
         x = None if self._x is None else tuple(self._x)
-        return (fmu_state.TAG, type(self).__name__, self.n_stages, self._config_key(),
-                (self._u[0], self._u[1]), self._phase, self._t, x, self._u_held, memory,
-                self._stats, self._init_error)
+        # while stepping the parameters are fixed: the key made at initialization holds
+        config = self._config if self._config and self._phase == "stepping" else \
+            self._config_key()
+        state = (fmu_state.TAG, type(self).__name__, self.n_stages, config,
+                 (self._u[0], self._u[1]), self._phase, self._t, x, self._u_held, memory,
+                 self._stats, self._init_error)
+        self._own_states.append(state)
+        return state
 
     @_guarded("fmi2SetFMUstate")
     def _set_fmu_state(self, state: tuple) -> None:
-        why = fmu_state.check(state, type(self).__name__, self.n_stages,
-                              tuple(self._par_types))
+        # a state this instance made (the same immutable object: a master that saves and
+        # restores around trial steps) was valid when made: its check is skipped
+        own = any(state is s for s in self._own_states)
+        why = None if own else fmu_state.check(state, type(self).__name__, self.n_stages,
+                                                tuple(self._par_types))
         if why is None:
             why = self._restore(dict(zip(fmu_state.FIELDS, state)))
         if why is not None:
@@ -884,7 +990,11 @@ class PRSMSlave(Fmi2Slave):
                     stepper.set_memory(old_memory)
                 return str(exc)
         self._par.update(zip(self._par_names, config))
+        if model is not self._model:
+            self._level = None if model is None else _fixed_level(model)
+            self._state_outputs = {} if model is None else self._states_read_as_outputs(model)
         self._model, self._stepper = model, stepper
+        self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
         self._config = config if stepper is not None else ()
         self._u[0], self._u[1] = f["inputs"]
         self._phase = f["phase"]
@@ -905,6 +1015,9 @@ class PRSMSlave(Fmi2Slave):
     def _fmu_state_from_bytes(data: bytes):
         return fmu_state.from_bytes(data)
 
+
+#: how many of its latest FMU states an instance recognises as its own (restored unchecked)
+OWN_STATES = 8
 
 #: how far a doStep's currentCommunicationPoint may lie from the FMU's time, relative to
 #: max(1 s, |time|): hosts that count time in integers (libcosim: ns) or as differences of

@@ -23,10 +23,12 @@ stderr naming the argument and its allowed values, before anything runs).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from prsm_fmu.arguments import ArgumentParser, existing_file, float_in, int_in, writable_dir
+from prsm_fmu.engine import ENGINE_ENV, ENGINES
 
 __all__ = ["main", "build_parser"]
 
@@ -36,6 +38,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .master import MAX_HALVINGS
 
     ap = ArgumentParser(prog="prsm-ema", description=__doc__.splitlines()[0])
+    ap.add_argument("--engine", choices=ENGINES, default=None,
+                    help="what computes the PRSM physics (the FMU's and the Python block's): "
+                         "native (default) the compiled engine where it loads, python the "
+                         "Python reference model (sets PRSM_FMU_ENGINE)")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
     sub.add_parser("list", help="list the scenes (./scenes first, then the built-in ones)",
                    description="List the scenes, one per line with its description: those in "
@@ -223,6 +229,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     try:
         args = ap.parse_args(argv)
+        if args.engine is not None:
+            os.environ[ENGINE_ENV] = args.engine
         if args.command == "list":
             return _cmd_list()
         return _cmd_run(args, ap)

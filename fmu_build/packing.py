@@ -1,0 +1,129 @@
+"""What the pythonfmu FMU carries in ``resources/``: what runs inside it, nothing else.
+
+* ``prsm_fmu/``: the modules the slave imports, directly or on demand (followed
+  from :mod:`prsm_fmu.slave` and :mod:`prsm_fmu.engine`, imports made on demand included), and the presets;
+  not the tools (command line, sweeps, regression runner, reports, plotting);
+* ``prsm_engine_interface.py``: the engine's ctypes interface (:mod:`fmu_build.native_stepper`
+  under a name of its own, which never shadows the ``fmu_build`` of a process that has one);
+  not the FMU builders;
+* ``binaries/<platform>/prsm_engine.so``: the compiled engine (the native FMU's C model and
+  steppers with the flat interface ``prsm_api.c``) for the build's platform and geometry,
+  compiled here with gcc, so that no compiler is needed where the FMU runs, and
+  ``prsm_engine.json``: the geometry parameters it was built with (an instance whose geometry
+  differs runs the Python model, logged);
+* ``prsm_start_values.json``: the parameters' start values, read by every instance.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import shutil
+from pathlib import Path
+
+import prsm_fmu
+from prsm_fmu.engine import PACKED_INTERFACE, library_name, platform_folder
+from prsm_fmu.params import MechanismParams
+from prsm_fmu.slave import ENGINE_FILE, START_VALUES_FILE
+
+__all__ = ["runtime_modules", "stage_runtime", "stage_engine", "stage_start_values"]
+
+#: the modules the slave needs, besides what they import
+ROOTS = ("prsm_fmu.slave", "prsm_fmu.engine")
+#: packages loaded by name at run time (modulefinder cannot see them): packed whole
+WHOLE_PACKAGES = ("prsm_fmu.presets",)
+
+
+def _imports(path: Path, module: str, is_package: bool) -> set[str]:
+    """The absolute names of every module ``path`` imports, at any depth of its code (the
+    imports inside functions too: those made on demand)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    package = module if is_package else module.rpartition(".")[0]
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package
+            for _ in range(node.level - 1):
+                base = base.rpartition(".")[0]
+            stem = node.module or ""
+            head = f"{base}.{stem}".strip(".") if node.level else stem
+            names.add(head)
+            names.update(f"{head}.{a.name}" for a in node.names)
+    return names
+
+
+def runtime_modules() -> list[Path]:
+    """The files of :mod:`prsm_fmu` the FMU runs (the slave's and the engine door's imports,
+    followed through the package), relative to the package's parent folder."""
+    root = Path(prsm_fmu.__file__).resolve().parent.parent
+
+    def file_of(name: str) -> tuple[Path, bool] | None:
+        base = root.joinpath(*name.split("."))
+        if (base / "__init__.py").is_file():
+            return base / "__init__.py", True
+        if base.with_suffix(".py").is_file():
+            return base.with_suffix(".py"), False
+        return None
+
+    todo = list(ROOTS) + [f"{p}.{f.stem}" for p in WHOLE_PACKAGES
+                          for f in root.joinpath(*p.split(".")).glob("*.py")
+                          if f.stem != "__init__"]
+    seen: dict[str, Path] = {}
+    while todo:
+        name = todo.pop()
+        parts = name.split(".")
+        # a module's packages are imported with it
+        for i in range(1, len(parts) + 1):
+            sub = ".".join(parts[:i])
+            if sub in seen or parts[0] != "prsm_fmu":
+                continue
+            found = file_of(sub)
+            if found is None:
+                continue
+            seen[sub] = found[0]
+            todo.extend(_imports(found[0], sub, found[1]))
+    return sorted(f.relative_to(root) for f in seen.values())
+
+
+def stage_runtime(dest: Path) -> list[Path]:
+    """Copy the runtime modules and the engine interface into ``dest``; the folders created
+    (pythonfmu's project files)."""
+    root = Path(prsm_fmu.__file__).resolve().parent.parent
+    for rel in runtime_modules():
+        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(root / rel, dest / rel)
+    interface = dest / f"{PACKED_INTERFACE}.py"
+    shutil.copy2(Path(__file__).resolve().parent / "native_stepper.py", interface)
+    return [dest / "prsm_fmu", interface]
+
+
+def stage_engine(dest: Path, params: MechanismParams) -> list[Path]:
+    """Compile the engine for ``params``' geometry into ``dest/binaries/<platform>/`` and
+    describe it in ``dest/prsm_engine.json``; the project files created.
+
+    Raises
+    ------
+    fmu_build.builder.BuildError
+        When gcc is missing or fails.
+    """
+    from .native import STRUCTURAL
+    from .native_stepper import library_file
+
+    lib = library_file(params)
+    folder = dest / "binaries" / platform_folder()
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(lib, folder / library_name())
+    geometry = {f"stage[{k}].{f}": getattr(st, f)
+                for k, st in enumerate(params.stages, start=1) for f in STRUCTURAL}
+    (dest / ENGINE_FILE).write_text(json.dumps({"geometry": geometry}, indent=1),
+                                    encoding="utf-8")
+    return [dest / "binaries", dest / ENGINE_FILE]
+
+
+def stage_start_values(dest: Path, values: dict) -> Path:
+    """Write the start values (parameter name -> value) as ``dest/prsm_start_values.json``."""
+    path = dest / START_VALUES_FILE
+    path.write_text(json.dumps(values, indent=1), encoding="utf-8")
+    return path

@@ -1,0 +1,249 @@
+"""Which engine steps a model: the compiled core or the Python reference.
+
+The compiled core is the C of the native FMU (``fmu_build/native``: the model and its
+steppers), run in-process through ctypes (:class:`fmu_build.native_stepper.NativeStepper`).
+It is the default engine of every door: the pythonfmu FMU (which loads the library packed in
+its ``resources/binaries/<platform>/``), :func:`prsm_fmu.configure.configure` and so the
+actuator loop's Python PRSM block, and :func:`prsm_fmu.simulate.simulate` (which compile it
+with gcc on first use, cached).  The Python model and steppers stay the readable reference:
+``engine="python"`` selects them, and they run wherever the engine cannot:
+
+* no engine library loads (no gcc, another platform, a build without it);
+* the engine refuses the configuration on construction (a level, drive or friction term the C
+  does not model: its own message says which);
+* the stepper asked for is not the engine's method at that level (:data:`ENGINE_METHOD`);
+* in an FMU, a geometry parameter differs from the value the packed library was built with
+  (the engine bakes the contact geometry in).
+
+Each fallback carries its reason (:func:`fallback_reason`), which the FMU logs.  As the engine
+learns more (levels, friction terms), the doors widen by themselves: they try the engine first
+whenever the stepper asked for is the engine's.  The environment variable
+``PRSM_FMU_ENGINE=python`` (:data:`ENGINE_ENV`; the command lines' ``--engine python``) selects
+the reference in every door of a process that is given no ``engine`` argument, FMUs included.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+__all__ = ["ENGINES", "DEFAULT_ENGINE", "ENGINE_ENV", "ENGINE_METHOD", "check_engine",
+           "default_engine", "engine_stepper", "fallback_reason", "is_engine", "library_name",
+           "platform_folder"]
+
+#: the engine choices: the compiled core, or the Python reference
+ENGINES = ("native", "python")
+#: the engine every door uses unless told otherwise
+DEFAULT_ENGINE = "native"
+#: environment variable that selects the engine of every door of a process and its children
+#: (Dask workers, FMUs loaded in it) where no ``engine`` argument is given; the command lines'
+#: ``--engine`` sets it
+ENGINE_ENV = "PRSM_FMU_ENGINE"
+#: per level, the Python stepper the engine translates operation for operation (equal states
+#: bit for bit, tests/test_engine.py); ``default`` means this stepper when the engine runs.  A
+#: level not listed (``auto``) is offered to the engine with ``default`` and it decides.
+ENGINE_METHOD = {"kinematic": "closed_form_explicit", "quasi-static": "closed_form_explicit",
+                 "dynamic": "rosenbrock"}
+#: the library's file name in an FMU's ``resources/binaries/<platform>/``
+LIBRARY_STEM = "prsm_engine"
+
+#: reason why no library could be made for a parameter set (by repr): tried once per process
+_unavailable: dict[str, str] = {}
+
+
+def check_engine(engine: Any) -> str:
+    """``engine`` if it is one of :data:`ENGINES`.
+
+    Raises
+    ------
+    ValueError
+        Naming the value and the allowed ones.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine = {engine!r} is not allowed: must be one of "
+                         f"{', '.join(map(repr, ENGINES))}")
+    return engine
+
+
+def default_engine() -> str:
+    """The engine of the doors that are given none: :data:`ENGINE_ENV` if set, else
+    :data:`DEFAULT_ENGINE`.
+
+    Raises
+    ------
+    ValueError
+        Naming the variable, its value and the allowed ones.
+    """
+    import os
+
+    value = os.environ.get(ENGINE_ENV)
+    if value is None or value == "":
+        return DEFAULT_ENGINE
+    if value not in ENGINES:
+        raise ValueError(f"{ENGINE_ENV} = {value!r} is not allowed: must be one of "
+                         f"{', '.join(map(repr, ENGINES))}")
+    return value
+
+
+def platform_folder() -> str:
+    """The FMI 2.0 platform folder of this process (``linux64``, ``darwin64``, ``win64``)."""
+    import platform
+    import sys
+
+    bits = "64" if sys.maxsize > 2 ** 32 else "32"
+    system = {"Linux": "linux", "Darwin": "darwin", "Windows": "win"}.get(platform.system(),
+                                                                           platform.system())
+    return system + bits
+
+
+def library_name() -> str:
+    """The engine library's file name on this platform (``prsm_engine.so`` on Linux)."""
+    import sys
+
+    ext = ".dll" if sys.platform.startswith("win") else ".dylib" if sys.platform == "darwin" \
+        else ".so"
+    return LIBRARY_STEM + ext
+
+
+def is_engine(stepper: Any) -> bool:
+    """Whether ``stepper`` is the compiled engine."""
+    return getattr(stepper, "name", "") == "native"
+
+
+def fallback_reason(stepper: Any) -> str | None:
+    """Why ``stepper`` is the Python reference although the engine was asked for (None: the
+    engine runs, or the reference was asked for)."""
+    return getattr(stepper, "engine_fallback", None)
+
+
+#: the engine's ctypes interface as an FMU packs it (a module of its own name, so that it never
+#: shadows the fmu_build package of a process that has one)
+PACKED_INTERFACE = "prsm_engine_interface"
+
+
+def _interface():
+    """The module :mod:`fmu_build.native_stepper`: the installed one, else the FMU's copy."""
+    try:
+        from fmu_build import native_stepper
+    except ImportError:
+        import importlib
+
+        return importlib.import_module(PACKED_INTERFACE)
+    return native_stepper
+
+
+def _library(params, library_path: str | None):
+    """The loaded engine library, or the reason why none loads (str)."""
+    try:
+        native_stepper = _interface()
+    except Exception as exc:  # noqa: BLE001 - any failure means: no engine here
+        return f"the engine's interface cannot be imported ({type(exc).__name__}: {exc})"
+    if library_path is not None:
+        try:
+            return native_stepper.load_library(library_path)
+        except OSError as exc:
+            return f"the engine library {library_path} does not load ({exc})"
+    key = repr(params)
+    if key in _unavailable:
+        return _unavailable[key]
+    try:
+        return native_stepper.native_library(params)
+    except Exception as exc:  # noqa: BLE001 - BuildError (no gcc), OSError
+        why = f"no engine library for these parameters ({type(exc).__name__}: {exc})"
+        _unavailable[key] = why
+        return why
+
+
+def engine_stepper(model: Any, level: str, stepper: str, rtol: float, atol: float,
+                   max_substeps: int = 100000, fixed_substeps: int | None = None,
+                   library_path: str | None = None, refusal: str | None = None):
+    """The engine's stepper for ``model``, or the reason why it cannot run it.
+
+    Parameters
+    ----------
+    model : prsm_fmu.models.base.Model
+        The model (its parameters, level and drive).
+    level : str
+        The configured level (``kinematic``, ``quasi-static``, ``dynamic`` or ``auto``).
+    stepper : str
+        The stepper asked for, or ``"default"``.
+    rtol, atol : float
+        Relative [-] and absolute [state units] tolerances (the Python steppers' meaning).
+    max_substeps, fixed_substeps : int
+        Internal steps allowed per advance; equal internal steps (None or 0: adaptive).
+    library_path : str, optional
+        A prebuilt library to load (an FMU's); default: compiled for ``model``'s parameters.
+    refusal : str, optional
+        A reason known beforehand why the engine cannot run (then it is not tried).
+
+    Returns
+    -------
+    tuple
+        ``(stepper, None)`` with the engine's stepper, or ``(None, reason)``.
+    """
+    method = ENGINE_METHOD.get(level)
+    if stepper not in ("default", method):
+        return None, (f"stepper = {stepper!r} is not the engine's (it runs "
+                      f"{method or 'no fixed method'} at fidelity = {level!r})")
+    if refusal:
+        return None, refusal
+    if not (math.isfinite(rtol) and math.isfinite(atol)):
+        return None, "non-finite tolerances"
+    lib = _library(model.params, library_path)
+    if isinstance(lib, str):
+        return None, lib
+    try:
+        st = _engine_class()(model, rtol=rtol, atol=atol, max_substeps=max_substeps,
+                             fixed_substeps=fixed_substeps or None, library=lib)
+    except ValueError as exc:
+        return None, f"the engine refuses this configuration: {exc}"
+    return st, None
+
+
+_ENGINE_CLASS: list[type] = []
+
+
+def _engine_class() -> type:
+    """:class:`fmu_build.native_stepper.NativeStepper` with a lean :meth:`advance` for the
+    doors' hot path (an FMU's doStep): one ctypes call into preallocated arrays, no numpy, no
+    list of rows.  Its results are the same call's (``prsm_api_advance_many`` with one step)."""
+    if _ENGINE_CLASS:
+        return _ENGINE_CLASS[0]
+    import ctypes
+
+    NativeStepper = _interface().NativeStepper
+
+    from .steppers.base import StepFailure, StepStats
+
+    class EngineStepper(NativeStepper):
+        #: the C updates its memory only when an advance succeeds (prsm_model.h): a refused
+        #: step leaves it as it was, so the caller need not save and restore it
+        keeps_memory_on_failure = True
+
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self._row = (ctypes.c_double * self.n_states)()
+            # the same C function without declared argument types: ctypes then converts
+            # nothing (the arrays pass as pointers, the doubles are wrapped here), a third of
+            # the declared call's cost (benchmarks/fmu_step_cost.py)
+            lib = self._lib
+            self._call = type(lib.prsm_api_advance_many)(("prsm_api_advance_many", lib))
+            self._call.restype = ctypes.c_int
+            self._double = ctypes.c_double
+            self._msg_len = len(self._msg)
+
+        def advance(self, t: float, x: list[float], u: tuple, h: float):
+            if not (0.0 < h < math.inf):
+                raise ValueError(f"h = {h!r} is out of range: must be a finite number > 0 [s]")
+            xi, ui, counts, double = self._x, self._u, self._stats, self._double
+            xi[:] = x
+            ui[0] = u[0]
+            ui[1] = u[1]
+            if self._call(self._handle, double(t), xi, ui, double(h), 1, self._row, counts,
+                          self._msg, self._msg_len):
+                raise StepFailure(self._msg.value.decode())
+            stats = StepStats(rhs_calls=counts[0], substeps=counts[1], rejected=counts[2])
+            return self._row[:], stats
+
+    _ENGINE_CLASS.append(EngineStepper)
+    return EngineStepper
