@@ -12,7 +12,8 @@ at ``fmi2ExitInitializationMode`` and when a state is restored, and writes the m
 
 from __future__ import annotations
 
-from prsm_fmu.param_ranges import INPUT_BOUNDS, SMALLEST, STATE_BOUNDS, fmu_rules
+from prsm_fmu.param_ranges import (INPUT_BOUNDS, MAX_QUOTIENT, SMALLEST, STATE_BOUNDS,
+                                    fmu_rules)
 from prsm_fmu.params import MechanismParams
 
 __all__ = ["ranges_header"]
@@ -73,5 +74,6 @@ def ranges_header(params: MechanismParams) -> str:
         f"#define PRSM_MAX_SPEED {_num(STATE_BOUNDS['speed'][0])}",
         f"#define PRSM_MAX_WORK {_num(STATE_BOUNDS['work'][0])}",
         f"#define PRSM_SMALLEST {_num(SMALLEST)}",
+        f"#define PRSM_MAX_QUOTIENT {_num(MAX_QUOTIENT)}",
         "#endif",
         ""])

@@ -23,7 +23,7 @@ from typing import Any, Callable
 
 __all__ = ["Range", "fmt", "STAGE_RANGES", "MECHANISM_RANGES", "SOLVER_RANGES", "FmuRule",
            "fmu_rules", "max_rollers", "spline_rule", "bearing_rule", "INPUT_BOUNDS",
-           "STATE_BOUNDS", "SMALLEST", "input_violation", "state_violation", "SPLINE_RADIUS_MIN_FRACTION"]
+           "STATE_BOUNDS", "SMALLEST", "MAX_QUOTIENT", "input_violation", "state_violation", "SPLINE_RADIUS_MIN_FRACTION"]
 
 #: the smallest spline radius relative to the screw's pitch radius (Li et al. (2021), eq. 12:
 #: the spline friction µ_SS |M| / r_SS grows without bound as r_SS -> 0; below r_S/100 the bore
@@ -250,36 +250,42 @@ INPUT_BOUNDS: dict[str, tuple[float, str]] = {"screw_torque": (1e6, "N.m"),
 #: speed [rad/s] (10 times the largest initial speed), every work integral [J]
 STATE_BOUNDS: dict[str, tuple[float, str]] = {"angle": (1e15, "rad"), "speed": (1e5, "rad/s"),
                                               "work": (1e150, "J")}
-#: a nonzero input, speed or work smaller than this in magnitude is refused: the outputs
-#: divide by them (carrier_speed_ratio by the screw speed, efficiency by the input power,
-#: overall_efficiency by the input work), and with every magnitude in [1e-150, bound] each
-#: quotient stays below 1e300
+#: a nonzero input smaller than this in magnitude is refused: ``efficiency`` divides the load's
+#: power by the motor's, about F c / T, which stays below 1e300 for |T| >= 1e-150 N.m
 SMALLEST = 1e-150
-
-
-def _in_bounds(v: float, bound: float) -> bool:
-    return v == 0.0 or SMALLEST <= abs(v) <= bound
+#: largest quotient an output may take: carrier_speed_ratio = carrier speed / screw speed and
+#: overall_efficiency = output work / input work; a state that would make either larger (a
+#: subnormal screw speed under spinning carriers, a subnormal input work) is refused
+MAX_QUOTIENT = 1e300
 
 
 def input_violation(u: tuple[float, float]) -> str | None:
     """Why the inputs (screw_torque [N.m], load_force [N]) are refused, or None."""
     for (name, (bound, unit)), v in zip(INPUT_BOUNDS.items(), u):
-        if not _in_bounds(v, bound):
+        if not (v == 0.0 or SMALLEST <= abs(v) <= bound):
             return (f"input {name} = {fmt(v)} {unit} is out of range: must be 0 or of magnitude "
                     f"in [{fmt(SMALLEST)}, {fmt(bound)}] {unit}")
     return None
 
 
 def state_violation(x) -> str | None:
-    """Why the model state x = (angle, speed, [carrier speeds], three work integrals) is out of
-    :data:`STATE_BOUNDS`, or None."""
+    """Why the model state x = (angle, speed, [carrier speeds], input, output and friction
+    work) is out of :data:`STATE_BOUNDS` or would make a quotient among the outputs exceed
+    :data:`MAX_QUOTIENT`, or None."""
     n = len(x)
     for i, v in enumerate(x):
         kind = "angle" if i == 0 else "work" if i >= n - 3 else "speed"
         bound, unit = STATE_BOUNDS[kind]
-        ok = abs(v) <= bound if kind == "angle" else _in_bounds(v, bound)
-        if not ok:
-            return (f"state x[{i}] ({kind}) = {fmt(v)} {unit} is out of range: must be "
-                    + (f"in [-{fmt(bound)}, {fmt(bound)}] {unit}" if kind == "angle" else
-                       f"0 or of magnitude in [{fmt(SMALLEST)}, {fmt(bound)}] {unit}"))
+        if not abs(v) <= bound:
+            return (f"state x[{i}] ({kind}) = {fmt(v)} {unit} is out of range: must be in "
+                    f"[-{fmt(bound)}, {fmt(bound)}] {unit}")
+    omega, w_in, w_out = x[1], x[n - 3], x[n - 2]
+    for i in range(2, n - 3):
+        if omega != 0.0 and abs(x[i]) > MAX_QUOTIENT * abs(omega):
+            return (f"state x[{i}] (carrier speed) = {fmt(x[i])} rad/s is out of range for the "
+                    f"screw speed {fmt(omega)} rad/s: carrier_speed_ratio must stay within "
+                    f"{fmt(MAX_QUOTIENT)}")
+    if w_in > 0.0 and abs(w_out) > MAX_QUOTIENT * w_in:
+        return (f"state x[{n - 2}] (output work) = {fmt(w_out)} J is out of range for the input "
+                f"work {fmt(w_in)} J: overall_efficiency must stay within {fmt(MAX_QUOTIENT)}")
     return None

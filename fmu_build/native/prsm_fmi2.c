@@ -224,22 +224,33 @@ static int input_violation(const double u[2], char *msg, int len) {
 }
 
 static int state_violation(const double *x, int n, char *msg, int len) {
+    char v[40], w[40], q[40];
     for (int i = 0; i < n; i++) {
         int angle = i == 0, work = i >= n - 3;
         double bound = angle ? PRSM_MAX_ANGLE : work ? PRSM_MAX_WORK : PRSM_MAX_SPEED;
-        const char *kind = angle ? "angle" : work ? "work" : "speed";
-        const char *unit = angle ? "rad" : work ? "J" : "rad/s";
-        if (angle ? fabs(x[i]) <= bound : in_bounds(x[i], bound)) continue;
-        char v[40], lo[40], hi[40];
+        if (fabs(x[i]) <= bound) continue;
         prsm_fmt_num(v, sizeof v, x[i]);
-        prsm_fmt_num(lo, sizeof lo, PRSM_SMALLEST);
-        prsm_fmt_num(hi, sizeof hi, bound);
-        if (angle)
-            snprintf(msg, (size_t)len, "state x[%d] (%s) = %s %s is out of range: must be in [-%s, %s] %s",
-                     i, kind, v, unit, hi, hi, unit);
-        else
-            snprintf(msg, (size_t)len, "state x[%d] (%s) = %s %s is out of range: must be 0 or of "
-                     "magnitude in [%s, %s] %s", i, kind, v, unit, lo, hi, unit);
+        prsm_fmt_num(w, sizeof w, bound);
+        const char *unit = angle ? "rad" : work ? "J" : "rad/s";
+        snprintf(msg, (size_t)len, "state x[%d] (%s) = %s %s is out of range: must be in [-%s, %s] %s",
+                 i, angle ? "angle" : work ? "work" : "speed", v, unit, w, w, unit);
+        return -1;
+    }
+    double omega = x[1], w_in = x[n - 3], w_out = x[n - 2];
+    prsm_fmt_num(q, sizeof q, PRSM_MAX_QUOTIENT);
+    for (int i = 2; i < n - 3; i++)
+        if (omega != 0.0 && fabs(x[i]) > PRSM_MAX_QUOTIENT * fabs(omega)) {
+            prsm_fmt_num(v, sizeof v, x[i]);
+            prsm_fmt_num(w, sizeof w, omega);
+            snprintf(msg, (size_t)len, "state x[%d] (carrier speed) = %s rad/s is out of range for the "
+                     "screw speed %s rad/s: carrier_speed_ratio must stay within %s", i, v, w, q);
+            return -1;
+        }
+    if (w_in > 0.0 && fabs(w_out) > PRSM_MAX_QUOTIENT * w_in) {
+        prsm_fmt_num(v, sizeof v, w_out);
+        prsm_fmt_num(w, sizeof w, w_in);
+        snprintf(msg, (size_t)len, "state x[%d] (output work) = %s J is out of range for the input "
+                 "work %s J: overall_efficiency must stay within %s", n - 2, v, w, q);
         return -1;
     }
     return 0;
