@@ -4,7 +4,9 @@ Each case is one the bad-input sweep found accepted or answered wrongly; the exp
 are FMI 2.0's rules and docs/fmu.md's error table, not the FMU's own output:
 
 * after a refused ``doStep`` a retry may succeed, so ``fmi2GetBooleanStatus(fmi2Terminated)``
-  answers fmi2OK and false; after ``fmi2Terminate`` it answers true;
+  answers fmi2OK and false; after the same call refused twice in a row (a deterministic FMU
+  cannot take it) and after ``fmi2Terminate`` it answers true, so that fmpy's
+  ``simulate_fmu``, which retries a refused step unchanged, stops instead of looping;
 * a ``currentCommunicationPoint`` farther than 1e-12·max(1 s, |t|) from the FMU's time is
   refused whatever the step size (1e6 s away at t = 0.01 s with h = 1e16 s was accepted: the
   window scaled with h), and so is a step too small to change the time (h = 1e-20 s at
@@ -41,7 +43,9 @@ def test_a_refused_step_does_not_read_as_terminated(native):
     try:
         assert host.step(0.0, -1.0) == DISCARD
         verdicts.append(("after a refused step", _terminated(host), (OK, 0)))
-        assert host.step(0.0, H) == OK                 # the retry succeeds
+        assert host.step(0.0, -1.0) == DISCARD         # the same call again cannot succeed
+        verdicts.append(("after the same call refused twice", _terminated(host), (OK, 1)))
+        assert host.step(0.0, H) == OK                 # a retry with another step succeeds
         verdicts.append(("after a good step", _terminated(host), (OK, 0)))
         host.fmu.terminate()
         verdicts.append(("after fmi2Terminate", _terminated(host), (OK, 1)))
@@ -111,3 +115,19 @@ def test_a_state_of_another_fmu_or_instance_is_refused_before_it_is_used(native)
     finally:
         for h in (a, b, c):
             h.fmu.freeInstance()
+
+
+def test_fmpy_simulate_fmu_stops_at_a_step_it_cannot_take(native):
+    """fmpy's simulate_fmu retries a refused step unchanged while fmi2Terminated is false; the
+    second identical refusal reads true, so the run ends at the last good time (0 s here: the
+    start torque 1e7 N.m is beyond its bound) instead of looping until the timeout."""
+    import time
+
+    from fmpy import simulate_fmu
+
+    t0 = time.monotonic()
+    res = simulate_fmu(str(native["PRSM2"]), start_values={"screw_torque": 1e7}, stop_time=0.01,
+                       output_interval=1e-3, timeout=60.0)
+    took = time.monotonic() - t0
+    print(f"  simulate_fmu ended at t = {res['time'][-1]} s after {took:.2f} s")
+    assert res["time"][-1] == 0.0 and took < 30.0

@@ -95,6 +95,10 @@ typedef struct {
     fmi2CallbackFunctions cb;
     char name[256];
     int logging_on;
+    /* the last refused doStep (t, h, inputs) and whether it was refused twice in a row exactly
+       as called: the FMU is deterministic, so that call cannot succeed (fmi2Terminated) */
+    double refused_call[4];
+    int has_refused, stuck;
 } component;
 
 /* ---- logging ----------------------------------------------------------------------------------- */
@@ -704,6 +708,7 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     COMPONENT_OR_ERROR(comp);
     set_starts(&c->s);
     c->y_valid = 0;
+    c->has_refused = c->stuck = 0;
     return fmi2OK;
 }
 
@@ -711,6 +716,16 @@ fmi2Status fmi2Reset(fmi2Component comp) {
 static fmi2Status refuse(component *c, const char *reason) {
     log_msg(c, fmi2Discard, "doStep refused, state unchanged: %s", reason);
     return fmi2Discard;
+}
+
+/* a refused doStep(t, h) with the inputs set: remembered, and a second identical one in a row
+ * marks the instance stuck (fmi2Terminated true) until a call differs */
+static fmi2Status refuse_call(component *c, double t, double h, const char *reason) {
+    double call[4] = {t, h, c->s.u[0], c->s.u[1]};
+    c->stuck = c->has_refused && !memcmp(call, c->refused_call, sizeof call);
+    memcpy(c->refused_call, call, sizeof call);
+    c->has_refused = 1;
+    return refuse(c, reason);
 }
 
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
@@ -724,15 +739,15 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
     if (!(0.0 < h && h < INFINITY) || !(t + h > t)) {
         snprintf(reason, sizeof reason, "communication step size = %.17g s is out of range: must be "
                  "a finite number > 0 that advances the time", h);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
     if (!(isfinite(u[0]) && isfinite(u[1]))) {
         snprintf(reason, sizeof reason, "inputs screw_torque = %.17g N.m, load_force = %.17g N: every input must be finite", u[0], u[1]);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
     if (!isfinite(t)) {
         snprintf(reason, sizeof reason, "currentCommunicationPoint = %.17g s must be finite", t);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
     /* hosts compute communication times their own way: a point within PRSM_TIME_MATCH
        (prsm_fmu.slave.TIME_MATCH) of max(1 s, |time|) from the FMU's own time is the same point;
@@ -743,20 +758,21 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
                 t, c->s.t);
         return fmi2Error;
     }
-    if (input_violation(u, reason, sizeof reason)) return refuse(c, reason);
+    if (input_violation(u, reason, sizeof reason)) return refuse_call(c, t, h, reason);
     double x_new[PRSM_NX_MAX] = {0.0};
     prsm_stats stats;
     char msg[700];
     prsm_memory mem_before = c->s.mem;
     if (prsm_advance(&c->model, &c->s.mem, t, c->s.x, u, h, x_new, &stats, msg, sizeof msg)) {
         snprintf(reason, sizeof reason, "integration failed: %s", msg);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
     if (state_violation(x_new, c->model.nx, msg, sizeof msg)) {   /* outputs could overflow */
         c->s.mem = mem_before;
         snprintf(reason, sizeof reason, "the step would end out of the state's bounds: %s", msg);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
+    c->has_refused = c->stuck = 0;
     memcpy(c->s.x, x_new, sizeof x_new);
     c->s.t = t + h;
     c->s.u_held[0] = u[0];
@@ -793,16 +809,19 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component comp, const fmi2StatusKind s, fmi2
     return fmi2Discard;
 }
 
-/* fmi2Terminated: fmi2OK and false while the instance can go on (every refused doStep may be
- * retried from the unchanged state), true once fmi2Terminate has been called (docs/fmu.md,
- * Errors) */
+/* fmi2Terminated: fmi2OK and false while the instance can go on (a refused doStep may be
+ * retried from the unchanged state with other inputs, another step size or another state);
+ * true once fmi2Terminate has been called, or after the same doStep (t, h, inputs) was refused
+ * twice in a row: the FMU is deterministic, so repeating it cannot succeed, and a host that
+ * retries without changing anything (fmpy's simulate_fmu, fmusim) stops instead of looping
+ * (docs/fmu.md, Errors) */
 fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
     COMPONENT_OR_ERROR(comp);
     if (s != fmi2Terminated || !value) {
         log_msg(c, fmi2Discard, "fmi2GetBooleanStatus: only fmi2Terminated is answered");
         return fmi2Discard;
     }
-    *value = c->s.phase == PH_TERMINATED ? fmi2True : fmi2False;
+    *value = c->s.phase == PH_TERMINATED || c->stuck ? fmi2True : fmi2False;
     return fmi2OK;
 }
 
@@ -961,6 +980,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
         return fmi2Error;
     }
     memcpy(&c->s, s, sizeof c->s);
+    c->has_refused = c->stuck = 0;
     if (c->s.phase >= PH_STEPPING) c->model = *m;
     free(m);
     c->y_valid = 0;
