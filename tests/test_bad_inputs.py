@@ -194,3 +194,44 @@ def test_native_sources_under_sanitizers_survive_random_calls(native, tmp_path):
         run.stderr[-3000:]
     assert run.returncode == 0, (run.stdout[-2000:], run.stderr[-2000:])
     assert "nonfinite 0" in run.stdout
+
+
+def test_crafted_native_states_are_refused_whole(native):
+    """The native FMU's serialized state is its C struct: the state vector is found by the bytes
+    of the screw speed it reports, and the same crafted values as above are written there; each
+    state is refused by fmi2DeSerializeFMUstate (fmi2Error), nothing restored."""
+    import struct
+
+    from fmpy.fmi1 import FMICallException
+
+    host = native_host("PRSM2", start={"fidelity": "dynamic"})
+    verdicts = []
+    try:
+        run_fmu(host, 20, ["screw_speed"])
+        good = host.state_bytes()
+        speed = host.get_real(["screw_speed"])[0]
+        at = good.find(struct.pack("<d", speed))
+        assert at > 0 and good.count(struct.pack("<d", speed)) >= 1
+        x = list(struct.unpack_from("<9d", good, at - 8))     # angle, speed, 2 carriers, 3 works, ...
+        cases = {"screw speed 1e308": {1: 1e308}, "screw speed -1e308": {1: -1e308},
+                 "subnormal screw speed, carriers spinning": {1: 5e-324, 2: 50.0, 3: 50.0},
+                 "input work subnormal, output work 1e10": {4: 5e-324, 5: 1e10},
+                 "work 1e300": {4: 1e300, 5: 1e300}}
+        for what, change in cases.items():
+            data = bytearray(good)
+            for i, v in change.items():
+                struct.pack_into("<d", data, at - 8 + 8 * i, v)
+            before = host.state_bytes()
+            try:
+                state = host.fmu.deSerializeFMUstate(bytes(data))
+                host.fmu.setFMUstate(state)
+                got = "accepted"
+            except FMICallException:
+                got = "refused"
+            verdicts.append((what, got, host.state_bytes() == before, host.messages[-1][1]))
+        assert x[1] == speed
+    finally:
+        host.free()
+    for what, got, same, msg in verdicts:
+        print(f"  {got}{'' if same else ' (CHANGED)'}: {what}: {msg.split(': ', 2)[-1]}")
+    assert all(got == "refused" and same for _, got, same, _ in verdicts)
