@@ -10,13 +10,18 @@
  *  - parameters (causality parameter) can be set before exitInitializationMode; structural
  *    parameters (geometry: causality local, variability constant) cannot be set at all;
  *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
- *    in initialization mode) a value out of range, fidelity auto, a stepper the level does not
+ *    in initialization mode) a value out of range (the rows of prsm_params_gen.h, generated from
+ *    prsm_fmu/param_ranges.py: the Python FMU's rules and messages), fidelity auto, a stepper the level does not
  *    run here (kinematic, quasi-static: default, closed_form_explicit, explicit_adaptive;
  *    dynamic: default, rosenbrock), or a value of a parameter this code does not model (it must
  *    stay at its start value, 0);
  *  - doStep refuses with fmi2Discard (logged, state unchanged) a non-finite or non-positive
- *    step, non-finite inputs or a failed integration; with fmi2Error a communication point that
- *    is not the FMU's time;
+ *    step or one too small to advance the time, non-finite inputs or inputs out of their
+ *    bounds, a failed integration, a step that would end out of the state's bounds; with
+ *    fmi2Error a communication point that is not the FMU's time (within PRSM_TIME_MATCH);
+ *  - fmi2Terminated reads true after fmi2Terminate or after the same doStep refused twice;
+ *  - every fmi2FMUstate handed in is checked (tag, owning instance) before it is read or
+ *    written;
  *  - the FMU state holds everything that decides the next step (parameters, inputs, time,
  *    state vector, inputs held, counters, stepper memory) and is checked whole when restored.
  */
