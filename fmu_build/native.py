@@ -45,6 +45,7 @@ from pathlib import Path
 from xml.dom.minidom import parseString
 
 import prsm_fmu
+from prsm_fmu.slave import TIME_MATCH
 from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
@@ -52,6 +53,7 @@ from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _RO
 
 from . import model_description
 from .builder import BuildError, build_fmu, validate
+from .native_ranges import ranges_header
 
 __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
            "SOURCES", "COMPILE_FLAGS"]
@@ -319,6 +321,7 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
              f"{identifier.removesuffix('_native')}. Do not edit. */",
              f"#define PRSM_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define PRSM_GUID {_c_string(guid)}",
+             f"#define PRSM_TIME_MATCH {_hex(TIME_MATCH)}",
              f"#define PRSM_N_VARS {len(rows)}",
              f"#define PRSM_MAX_VR {max(v.vr for v, _, _ in rows)}",
              "static const prsm_var PRSM_VARS[PRSM_N_VARS] = {"]
@@ -494,8 +497,9 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
             shutil.copy(SOURCE_DIR / f, src / f)
         for f in FMI_HEADERS:
             shutil.copy(_fmi_headers() / f, src / f)
-        constants = constants_header(params)
-        (src / "prsm_constants.h").write_text(constants, encoding="utf-8")
+        constants = constants_header(params) + ranges_header(params)
+        (src / "prsm_constants.h").write_text(constants_header(params), encoding="utf-8")
+        (src / "prsm_params_gen.h").write_text(ranges_header(params), encoding="utf-8")
         stable = re.sub(rb'(guid|generationDateAndTime|generationTool)="[^"]*"', b"", md)
         digest = hashlib.sha256(stable + constants.encode()
                                 + b"".join((SOURCE_DIR / f).read_bytes() for f in SOURCES + HEADERS))
@@ -531,6 +535,7 @@ Compile for another platform, e.g.
 
 and put the library under binaries/<platform>/ (linux64, darwin64, win64).  Keep fused
 multiply-add off (-ffp-contract=off; MSVC /fp:precise) and no fast-math: the results then equal
-the Python FMU's to round-off.  prsm_constants.h (geometry) and prsm_variables.h (variables)
+the Python FMU's to round-off.  prsm_constants.h (geometry), prsm_params_gen.h (parameter
+ranges) and prsm_variables.h (variables)
 were generated from the preset by prsm-fmu's fmu_build.native: rebuild the FMU to change them.
 """

@@ -14,6 +14,7 @@ from .engine import ENGINE_METHOD, check_engine, default_engine, engine_stepper
 from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
+from .param_ranges import SOLVER_RANGES
 from .params import MechanismParams
 from .simulate import DEFAULT_STEPPER, tuned_stepper_options
 from .steppers import STEPPER_NAMES, make_stepper
@@ -69,17 +70,17 @@ ENUMERATIONS: dict[str, dict[str, tuple[int, str]]] = {"Fidelity": FIDELITY_ITEM
 #: ``tolerance`` in [1e-12, 0.1]: below 1e-12 the error estimates of the embedded pairs are
 #: rounding noise for states of order 1..1e3 in double precision (eps = 2.2e-16), so a step
 #: can fail for every step size; above 0.1 the ``auto`` level may carry a 10 % model error.
-TOLERANCE_RANGE = (1e-12, 0.1)
+TOLERANCE_RANGE = (SOLVER_RANGES["tolerance"].lo, SOLVER_RANGES["tolerance"].hi)
 #: ``max_substeps`` in [10, 100000]: it bounds the work of one doStep (docs/fmu.md, "Work of
 #: one doStep"); fewer than 10 internal steps cannot take the adaptive steppers through their
 #: starting step and one rejection; ``substeps`` (fixed steps) must not exceed it either
-MAX_SUBSTEPS_RANGE = (10, 100_000)
+MAX_SUBSTEPS_RANGE = (SOLVER_RANGES["max_substeps"].lo, SOLVER_RANGES["max_substeps"].hi)
 #: |initial_screw_speed| [rad/s] at most: 10^4 rad/s (95,000 rpm) is 20x beyond any PRSM
 #: (critical speeds of the papers' screws are a few thousand rpm)
-MAX_INITIAL_SPEED = 1e4
+MAX_INITIAL_SPEED = SOLVER_RANGES["initial_screw_speed"].hi
 #: |initial_screw_angle| [rad] at most: beyond 10^6 rad a step's angle increment of 1 µrad
 #: loses its last digits to the magnitude of the angle (10^6 * 2.2e-16 = 2e-10 rad)
-MAX_INITIAL_ANGLE = 1e6
+MAX_INITIAL_ANGLE = SOLVER_RANGES["initial_screw_angle"].hi
 
 
 def _choice(kind: str, items: dict[str, tuple[int, str]], value: Any) -> str:
@@ -175,26 +176,11 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     fidelity = fidelity_name(solver["fidelity"])
     engine = default_engine() if engine is None else check_engine(engine)
     tol = solver["tolerance"]
-    lo, hi = TOLERANCE_RANGE
-    if not (isinstance(tol, (int, float)) and lo <= tol <= hi):
-        raise ValueError(f"tolerance = {tol!r} is out of range: must be in [{lo:g}, {hi:g}]")
-    lo, hi = MAX_SUBSTEPS_RANGE
-    max_substeps = solver["max_substeps"]
-    if not (_is_int(max_substeps) and lo <= max_substeps <= hi):
-        raise ValueError(f"max_substeps = {max_substeps!r} is out of range: must be an integer "
-                         f"in [{lo}, {hi}]")
-    substeps = solver["substeps"]
-    if not (_is_int(substeps) and 0 <= substeps <= max_substeps):
-        raise ValueError(f"substeps = {substeps!r} is out of range: must be an integer in "
-                         f"[0, max_substeps = {max_substeps}] (0: adaptive)")
+    for name, rule in SOLVER_RANGES.items():    # the one table of ranges (param_ranges)
+        rule.check(name, solver[name],
+                   hi=solver["max_substeps"] if name == "substeps" else None)
+    max_substeps, substeps = solver["max_substeps"], solver["substeps"]
     eff = solver["kinematic_efficiency"]
-    if not (math.isfinite(eff) and 0.0 < eff <= 1.0):
-        raise ValueError(f"kinematic_efficiency = {eff!r} is out of range: must be in (0, 1]")
-    for name, bound, unit in (("initial_screw_speed", MAX_INITIAL_SPEED, "rad/s"),
-                              ("initial_screw_angle", MAX_INITIAL_ANGLE, "rad")):
-        if not abs(solver[name]) <= bound:
-            raise ValueError(f"{name} = {solver[name]!r} {unit} is out of range: must be in "
-                             f"[-{bound:g}, {bound:g}] {unit}")
     for k, stage in enumerate(params.stages, start=1):   # contact exists: errors name the stage
         contact_geometry(stage, f"stage[{k}]")
     choice = None

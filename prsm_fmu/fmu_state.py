@@ -17,6 +17,8 @@ import math
 import pickle
 from typing import Any, NamedTuple
 
+from .param_ranges import input_violation, state_violation
+
 __all__ = ["TAG", "MAGIC", "FIELDS", "PHASES", "Invalid", "to_bytes", "from_bytes", "check"]
 
 #: format tag of the state tuple (its first field)
@@ -30,6 +32,8 @@ FIELDS = ("tag", "model", "n_stages", "parameters", "inputs", "phase", "time", "
 PHASES = ("instantiated", "initialization", "stepping", "failed", "terminated")
 #: the phases with a model (and a state vector)
 RUNNING = ("stepping", "terminated")
+#: the largest FMI 2.0 Integer (a C int): a counter above it cannot be read by fmi2GetInteger
+INT32_MAX = 2**31 - 1
 #: deepest nesting of the stepper's memory (tuples in tuples) a state may hold
 _MAX_DEPTH = 8
 
@@ -152,12 +156,17 @@ def check(state: Any, model: str, n_stages: int, parameter_types: tuple[type, ..
         return f"x = {f['x']!r}: must be None in phase {f['phase']!r}"
     if not _finite_floats(f["inputs_held"], 2):
         return f"inputs_held = {f['inputs_held']!r}: need 2 finite floats"
+    why = input_violation(f["inputs_held"]) or (state_violation(f["x"]) if running else None)
+    if why is not None:             # the outputs of such a state could overflow (docs/fmu.md)
+        return why
     why = _plain(f["memory"])
     if why:
         return f"memory: {why}"
-    if not (isinstance(f["counters"], tuple) and len(f["counters"]) == 3
-            and all(_is_int(v) and v >= 0 for v in f["counters"])):
-        return f"counters = {f['counters']!r}: need 3 integers >= 0"
+    c = f["counters"]
+    if not (isinstance(c, tuple) and len(c) == 3 and all(_is_int(v) for v in c)
+            and 0 <= c[0] <= INT32_MAX and 0 <= c[1] <= INT32_MAX and c[2] in (0, 1, 2)):
+        return (f"counters = {c!r}: need step_rhs_calls and step_substeps in [0, {INT32_MAX}] "
+                "(an FMI Integer) and step_fidelity 0, 1 or 2")
     if not (f["init_error"] is None or isinstance(f["init_error"], str)):
         return f"init_error = {f['init_error']!r}: must be None or a str"
     return None

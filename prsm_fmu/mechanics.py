@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from .friction import regularised_factor, regularised_sign, viscous_coefficient
 from .geometry import contact_geometry
 from .kinematics import ideal_carrier_speed_ratio
+from .param_ranges import fmt
 from .params import MechanismParams
 
 TWO_PI = 2.0 * math.pi
@@ -206,7 +207,7 @@ class Mechanism:
         limit = min(s.min_normal_z for s in self.stages)
         if self.mu >= limit:
             raise ValueError(
-                f"mu_screw_roller = {self.mu!r} is out of range for this geometry: must be < "
+                f"mu_screw_roller = {fmt(self.mu)} is out of range for this geometry: must be < "
                 f"{limit:.4f} (the axial part of the contact normal); above it the thread self-locks "
                 "and the rigid model has no solution")
         self.v_eps = params.slip_velocity_scale

@@ -19,73 +19,23 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
+from .param_ranges import (MECHANISM_RANGES, STAGE_RANGES, bearing_rule, max_rollers,
+                           spline_rule)
+
 #: relative tolerance of the geometric consistency checks (radii, leads)
 GEOMETRY_RTOL = 1e-6
 
-#: largest differential-sliding coefficient µ_3 [m]: a moment arm of rolling resistance is at most
-#: a contact half-width, well below a millimetre for thread contacts (the friction-torque article: ~1e-6 m)
-MAX_MU_DIFFERENTIAL = 1e-3
-
-#: largest viscous coefficient µ_1 per engaged thread [N·s/m]: 1e5 N·s/m puts 1e4 N on one thread
-#: at 0.1 m/s of slip, the order of the largest normal force a thread carries; a lubricant film
-#: that resists more than that is no film (the friction-torque article: 0.001 N·s/m; its own load table needs ~580)
-MAX_MU_VISCOUS = 1e5
-
-#: most engaged thread turns per roller [-]: a roller 1 m long (the length bound) at 1 mm pitch
-MAX_THREADS_PER_ROLLER = 1000
+#: largest differential-sliding coefficient µ_3 [m], largest viscous coefficient µ_1 per engaged
+#: thread [N·s/m], most engaged thread turns per roller: their reasons are in the table
+#: (prsm_fmu.param_ranges), the one definition of every range
+MAX_MU_DIFFERENTIAL = MECHANISM_RANGES["mu_differential"].hi
+MAX_MU_VISCOUS = MECHANISM_RANGES["mu_viscous"].hi
+MAX_THREADS_PER_ROLLER = STAGE_RANGES["threads_per_roller"].hi
 
 
 def _check_positive(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
         raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
-
-
-#: upper bounds of a stage's sizes: no PRSM has a radius or a lead of a metre, a part of ten
-#: tonnes or a moment of inertia of 1000 kg.m2 (the papers' largest: 27.5 mm, 18 kg,
-#: 1.7e-4 kg.m2); beyond them the model's numbers lose their meaning before they overflow
-MAX_SIZE = {"m": 1.0, "kg": 1e4, "kg.m2": 1e3}
-#: unit of each bounded StageParams field
-FIELD_UNITS = {"screw_radius": "m", "roller_radius": "m", "nut_radius": "m", "screw_lead": "m",
-               "spline_radius": "m", "bearing_radius": "m", "screw_mass": "kg", "nut_mass": "kg",
-               "roller_mass": "kg", "carrier_mass": "kg", "screw_inertia": "kg.m2",
-               "roller_inertia": "kg.m2", "carrier_inertia": "kg.m2"}
-
-
-def _check_at_most(name: str, value: float, unit: str) -> None:
-    if value > MAX_SIZE[unit]:
-        raise ValueError(f"{name} = {value!r} {unit} is out of range: must be at most "
-                         f"{MAX_SIZE[unit]:g} {unit}")
-
-
-def _check_non_negative(name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
-        raise ValueError(f"{name} = {value!r} is out of range: must be a finite number >= 0")
-
-
-def _check_friction(name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and 0.0 <= value < 1.0):
-        raise ValueError(f"{name} = {value!r} is out of range: friction coefficient must be in [0, 1)")
-
-
-#: the smallest spline radius relative to the screw's pitch radius (see _check_spline_radius)
-SPLINE_RADIUS_MIN_FRACTION = 0.01
-
-
-def _check_spline_radius(k: int, stage: "StageParams") -> None:
-    """Bounds of the spline radius r_SSk of stage k > 1 (Li et al. (2021), eq. 12).
-
-    The internal spline teeth are cut in the bore of screw #k, so r_SSk lies inside its pitch
-    radius r_Sk.  The spline friction f_Sk = µ_SS |M_Sk| / r_SSk grows without bound as
-    r_SSk -> 0 (at 1e-30 m no step can succeed); below 1/100 of r_Sk the bore would leave a
-    wall of 99 % of the screw's radius, which no design has.
-    """
-    r, r_s = stage.spline_radius, stage.screw_radius
-    lo = SPLINE_RADIUS_MIN_FRACTION * r_s
-    if not (isinstance(r, (int, float)) and lo <= r <= r_s):
-        raise ValueError(
-            f"stage[{k}].spline_radius = {r!r} m is out of range: must be in [{lo!r}, {r_s!r}] m "
-            f"while mu_spline > 0 (from {SPLINE_RADIUS_MIN_FRACTION:g} x to 1 x "
-            f"stage[{k}].screw_radius: the internal spline teeth lie in the bore of the screw)")
 
 
 def _check_int_at_least(name: str, value: Any, minimum: int) -> None:
@@ -189,25 +139,10 @@ class StageParams:
         ValueError
             Naming the field, its value and the allowed range.
         """
-        for f in ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_mass",
-                  "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
-                  "roller_inertia", "carrier_inertia"):
-            _check_positive(f"{name}.{f}", getattr(self, f))
-        for f in ("spline_radius", "bearing_radius"):
-            _check_non_negative(f"{name}.{f}", getattr(self, f))
-        for f, unit in FIELD_UNITS.items():
-            _check_at_most(f"{name}.{f}", getattr(self, f), unit)
-        _check_int_at_least(f"{name}.screw_starts", self.screw_starts, 1)
-        _check_int_at_least(f"{name}.n_rollers", self.n_rollers, 1)
-        _check_int_at_least(f"{name}.carriers", self.carriers, 1)
-        _check_int_at_least(f"{name}.threads_per_roller", self.threads_per_roller, 1)
-        if self.threads_per_roller > MAX_THREADS_PER_ROLLER:
-            raise ValueError(f"{name}.threads_per_roller = {self.threads_per_roller!r} is out of "
-                             f"range: must be in [1, {MAX_THREADS_PER_ROLLER}] (a roller at most "
-                             "1 m long at 1 mm pitch)")
-        if self.carriers > 2:
-            raise ValueError(f"{name}.carriers = {self.carriers!r} is out of range: must be 1 or 2 "
-                             "(a carrier at one or at both ends of the rollers)")
+        for f, rule in STAGE_RANGES.items():
+            hi = (max_rollers(self.screw_radius, self.roller_radius)
+                  if f == "n_rollers" and geometry else None)
+            rule.check(f"{name}.{f}", getattr(self, f), hi=hi)
         beta = self.flank_angle
         if not (isinstance(beta, (int, float)) and math.isfinite(beta) and 0.0 < beta < math.pi / 2):
             raise ValueError(
@@ -221,15 +156,6 @@ class StageParams:
                 f"{name}.nut_radius = {self.nut_radius!r} m is inconsistent with "
                 f"screw_radius + 2*roller_radius = {fit!r} m: must equal it "
                 f"(relative tolerance {GEOMETRY_RTOL:g})")
-        # the rollers' axes lie on a circle of radius r_S + r_R; N_R rollers of radius r_R fit
-        # around it without overlapping while N_R * 2 asin(r_R / (r_S + r_R)) <= 2 pi
-        most = int(math.pi / math.asin(self.roller_radius / (self.screw_radius + self.roller_radius))
-                   + 1e-9)
-        if self.n_rollers > most:
-            raise ValueError(
-                f"{name}.n_rollers = {self.n_rollers!r} is out of range: must be in [1, {most}] "
-                f"(rollers of radius {self.roller_radius!r} m fit around the screw without "
-                "overlapping only up to that number)")
         engaged = self.screw_starts * self.roller_radius
         if abs(self.nut_radius - engaged) > GEOMETRY_RTOL * engaged:
             raise ValueError(
@@ -314,42 +240,18 @@ class MechanismParams:
             raise ValueError(
                 f"stages = {self.stages!r} is out of range: need a tuple of at least 1 StageParams")
         # the coefficients first: the radii's checks below depend on them
-        _check_friction("mu_screw_roller", self.mu_screw_roller)
-        _check_friction("mu_spline", self.mu_spline)
-        _check_friction("mu_nut_screw", self.mu_nut_screw)
-        _check_positive("slip_velocity_scale", self.slip_velocity_scale)
-        # the coefficients first: the radii's checks below depend on them
-        _check_friction("mu_screw_roller", self.mu_screw_roller)
-        _check_friction("mu_spline", self.mu_spline)
-        _check_friction("mu_nut_screw", self.mu_nut_screw)
-        _check_positive("slip_velocity_scale", self.slip_velocity_scale)
-        mv = self.mu_viscous
-        if not (isinstance(mv, (int, float)) and math.isfinite(mv) and 0.0 <= mv <= MAX_MU_VISCOUS):
-            raise ValueError(
-                f"mu_viscous = {mv!r} N·s/m is out of range: must be in [0, {MAX_MU_VISCOUS:g}] "
-                "N·s/m (per engaged thread; beyond it a lubricant film would carry more than a "
-                "thread's normal force)")
-        m3 = self.mu_differential
-        if not (isinstance(m3, (int, float)) and math.isfinite(m3)
-                and 0.0 <= m3 <= MAX_MU_DIFFERENTIAL):
-            raise ValueError(
-                f"mu_differential = {m3!r} m is out of range: must be in [0, "
-                f"{MAX_MU_DIFFERENTIAL:g}] m (a moment arm, ~1e-6 m in the friction-torque article; at most a contact "
-                "half-width)")
+        for f, rule in MECHANISM_RANGES.items():
+            rule.check(f, getattr(self, f))
         for k, st in enumerate(self.stages, start=1):
             if not isinstance(st, StageParams):
                 raise ValueError(f"stage[{k}] = {st!r} is not a StageParams")
             st.validate(f"stage[{k}]", geometry)
-            if k > 1 and self.mu_spline > 0.0:
-                if geometry:
-                    _check_spline_radius(k, st)
-                else:        # its bound relative to the screw radius is geometry (a design check)
-                    _check_positive(f"stage[{k}].spline_radius", st.spline_radius)
-            if k < len(self.stages) and self.mu_nut_screw > 0.0 and not st.bearing_radius > 0.0:
-                raise ValueError(
-                    f"stage[{k}].bearing_radius = {st.bearing_radius!r} is out of range: must be "
-                    f"a finite number > 0 while mu_nut_screw = {self.mu_nut_screw!r} > 0 (the "
-                    "thrust bearing's friction acts at that radius)")
+            conditional = ([spline_rule(k, st.screw_radius if geometry else None)] if k > 1
+                           else []) + ([bearing_rule(k)] if k < len(self.stages) else [])
+            for rule in conditional:
+                if getattr(self, rule.when) > 0.0:
+                    rule.range.check(rule.name, getattr(st, rule.name.split(".", 1)[1]),
+                                     lo=rule.lo, hi=rule.hi)
         return self
 
     def with_changes(self, **changes: Any) -> "MechanismParams":

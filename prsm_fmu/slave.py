@@ -64,6 +64,7 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
                         FIDELITY_ITEMS, LEVEL_CODES, MAX_INITIAL_ANGLE, MAX_INITIAL_SPEED,
                         MAX_SUBSTEPS_RANGE, STEPPER_CHOICES, STEPPER_ITEMS, TOLERANCE_RANGE,
                         active_level, configure, fidelity_name)
+from .param_ranges import input_violation, state_violation
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
 from .engine import ENGINE_ENV, fallback_reason, is_engine, library_name, platform_folder
@@ -903,6 +904,9 @@ class PRSMSlave(Fmi2Slave):
         if not (math.isfinite(u[0]) and math.isfinite(u[1])):
             return self._refuse(f"inputs screw_torque = {u[0]!r} N.m, load_force = {u[1]!r} N: "
                                 "every input must be finite")
+        why = input_violation(u)
+        if why is not None:
+            return self._refuse(why)
         stepper = self._stepper
         memory = None if self._memory_kept else stepper.get_memory()
         try:
@@ -921,6 +925,10 @@ class PRSMSlave(Fmi2Slave):
             cause = self._model.contact_diagnosis(self._x, u)
             return self._refuse(cause or "integration failed: the stepper returned a non-finite "
                                 "state")
+        why = state_violation(x)
+        if why is not None:          # the outputs of that state could overflow: docs/fmu.md
+            stepper.set_memory(memory)
+            return self._refuse(f"the step would end out of the state's bounds: {why}")
         self._x = x
         self._t = current_time + h
         self._u_held = u

@@ -146,7 +146,7 @@ def _cmd_run(args, ap) -> int:
                             loop=args.loop)
         mech = scene.prsm.get("mechanism", "PRSM1" if scene.topology == "geared" else "PRSM2")
         if args.prsm != "python" and args.fmu:
-            check_fmu_stages(args.fmu, facts["n_stages"], mech)
+            check_fmu_stages(args.fmu, facts["n_stages"], mech, native=args.prsm == "native")
         check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
         return _refuse(str(exc))

@@ -20,6 +20,7 @@ from typing import Any
 
 from prsm_fmu import presets
 from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, active_level, configure
+from prsm_fmu.param_ranges import input_violation, state_violation
 from prsm_fmu.params import MECHANISM_FIELD_NAMES, MechanismParams, stage_field_names
 from prsm_fmu.simulate import DEFAULT_STEPPER
 from prsm_fmu.steppers import StepFailure
@@ -157,12 +158,20 @@ class PythonPRSM(PythonBlock):
         if not (math.isfinite(u[0]) and math.isfinite(u[1])):
             raise StepRefused(self.name, t, h, f"inputs screw_torque = {u[0]!r} N.m, load_force = "
                               f"{u[1]!r} N: every input must be finite")
+        why = input_violation(u)                 # the FMU's bounds (docs/fmu.md, Variables)
+        if why is not None:
+            raise StepRefused(self.name, t, h, why)
         self.stepper.set_memory(self.memory)
         try:
             x, st = self.stepper.advance(t, self.x, u, h)
         except StepFailure as exc:
             self.stepper.set_memory(self.memory)
             raise StepRefused(self.name, t, h, f"integration failed: {exc}") from None
+        why = state_violation(x)
+        if why is not None:
+            self.stepper.set_memory(self.memory)
+            raise StepRefused(self.name, t, h, f"the step would end out of the state's bounds: "
+                              f"{why}")
         self.x, self.t, self.u_held = x, t + h, u
         self.stats = (st.rhs_calls, st.substeps, active_level(self.model))
         self.memory = self.stepper.get_memory()

@@ -170,14 +170,22 @@ def check_output_dir(path: str | os.PathLike) -> None:
         raise ValueError(f"--out {str(p)!r}: cannot write there ({exc.strerror or exc})") from None
 
 
-def check_fmu_stages(fmu_path: str | os.PathLike, n_stages: int, mechanism: str) -> None:
-    """ValueError naming ``--fmu`` if the FMU's stage count is not the scene's."""
+def check_fmu_stages(fmu_path: str | os.PathLike, n_stages: int, mechanism: str,
+                     native: bool = False) -> None:
+    """ValueError naming ``--fmu`` if the FMU's stage count is not the scene's, or (``native``:
+    the run asked for ``--prsm native``) if it is not a native FMU (modelIdentifier
+    ``<name>_native``, docs/fmu.md *The native FMU*)."""
     from fmpy import read_model_description
 
     try:
         md = read_model_description(str(fmu_path))
     except Exception as exc:  # noqa: BLE001 - any unreadable file is the same mistake
         raise ValueError(f"--fmu {str(fmu_path)!r} cannot be read as an FMU: {exc}") from None
+    ident = md.coSimulation.modelIdentifier if md.coSimulation else ""
+    if native and not ident.endswith("_native"):
+        raise ValueError(f"--fmu {str(fmu_path)!r} is not a native FMU (modelIdentifier "
+                         f"{ident!r}) but --prsm native asks for one: give --fmu "
+                         f"dist/{mechanism}-native.fmu, or --prsm fmu to run this one")
     names = {v.name for v in md.modelVariables}
     k = 0
     while f"stage[{k + 1}].contact_force" in names:

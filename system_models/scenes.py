@@ -105,6 +105,9 @@ def parse_scene(data: dict[str, Any], name: str, path: Path | None = None) -> Sc
     for key in ("controller", "motor", "load", "prsm", "initial", "retry", "gear"):
         if key in data and not isinstance(data[key], dict):
             raise ValueError(f"{where}: {key} must be a table")
+    from .scene_types import check_fields
+
+    check_fields(data, where)
     checks = data.get("check", [])
     if not isinstance(checks, list) or not all(isinstance(c, dict) and "kind" in c for c in checks):
         raise ValueError(f"{where}: every [[check]] must be a table with a 'kind'")
@@ -127,9 +130,9 @@ def parse_scene(data: dict[str, Any], name: str, path: Path | None = None) -> Sc
         raise ValueError(f"{where}: outputs must be a list of 'block.port' names")
     return Scene(name=name, description=str(data.get("description", "")),
                  t_end=_positive(data, "t_end", where), step=_positive(data, "step", where),
-                 order=str(data.get("order", "gauss-seidel")),
-                 extrapolation=int(data.get("extrapolation", 1)),
-                 fidelity=str(data.get("fidelity", "quasi-static")),
+                 order=data.get("order", "gauss-seidel"),
+                 extrapolation=data.get("extrapolation", 1),
+                 fidelity=data.get("fidelity", "quasi-static"),
                  t0=float(data.get("t0", 0.0)), outputs=list(outputs),
                  controller=dict(data["controller"]), motor=dict(data.get("motor", {})),
                  load=dict(data.get("load", {})), prsm=dict(data.get("prsm", {})),

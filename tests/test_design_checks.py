@@ -229,10 +229,10 @@ def test_cli_check_default_run_does_what_its_help_says(capsys):
 
 
 @pytest.mark.parametrize("value, name, allowed", [
-    ("stage[1].screw_radius=-1", "stage[1].screw_radius", "> 0"),
-    ("stage[2].nut_mass=0", "stage[2].nut_mass", "> 0"),
+    ("stage[1].screw_radius=-1", "stage[1].screw_radius", "in (0, "),
+    ("stage[2].nut_mass=0", "stage[2].nut_mass", "in (0, "),
     ("stage[1].flank_angle=1.6", "stage[1].flank_angle", "(0, pi/2)"),
-    ("stage[1].screw_starts=0", "stage[1].screw_starts", ">= 1"),
+    ("stage[1].screw_starts=0", "stage[1].screw_starts", "an integer in [1, "),
     ("mu_spline=2", "mu_spline", "[0, 1)"),
 ])
 def test_cli_check_set_values_are_validated_like_the_parameters(value, name, allowed, capsys):

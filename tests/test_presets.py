@@ -80,13 +80,17 @@ POSITIVE_STAGE_FIELDS = ("screw_radius", "roller_radius", "nut_radius", "screw_l
                          "screw_inertia", "roller_inertia", "carrier_inertia")
 
 CASES = [
-    *[pytest.param(_bad_stage(1, **{f: v}), f"stage[1].{f}", "> 0", id=f"{f}={v}")
+    # "(0, ": the open lower end, > 0 (param_ranges' interval notation)
+    *[pytest.param(_bad_stage(1, **{f: v}), f"stage[1].{f}", "in (0, ", id=f"{f}={v}")
       for f in POSITIVE_STAGE_FIELDS for v in (0.0, -1e-3)],
-    pytest.param(_bad_stage(2, nut_mass=float("nan")), "stage[2].nut_mass", "> 0",
+    pytest.param(_bad_stage(2, nut_mass=float("nan")), "stage[2].nut_mass", "in (0, ",
                  id="nut_mass=nan"),
-    pytest.param(_bad_stage(1, screw_starts=0), "stage[1].screw_starts", ">= 1", id="starts=0"),
-    pytest.param(_bad_stage(1, n_rollers=0), "stage[1].n_rollers", ">= 1", id="rollers=0"),
-    pytest.param(_bad_stage(1, carriers=0), "stage[1].carriers", ">= 1", id="carriers=0"),
+    pytest.param(_bad_stage(1, screw_starts=0), "stage[1].screw_starts", "an integer in [1, ",
+                 id="starts=0"),
+    pytest.param(_bad_stage(1, n_rollers=0), "stage[1].n_rollers", "an integer in [1, ",
+                 id="rollers=0"),
+    pytest.param(_bad_stage(1, carriers=0), "stage[1].carriers", "an integer in [1, 2]",
+                 id="carriers=0"),
     *[pytest.param(_bad_stage(2, flank_angle=v), "stage[2].flank_angle", "(0, pi/2)",
                    id=f"flank={v:.3f}") for v in (0.0, -0.1, math.pi / 2, 2.0)],
     *[pytest.param(_bad_mechanism(**{f: v}), f, "[0, 1)", id=f"{f}={v}")
@@ -103,7 +107,7 @@ CASES = [
     # a friction coefficient is reported as itself, not as the radius its check depends on
     pytest.param(_bad_mechanism(mu_nut_screw=math.inf), "mu_nut_screw", "[0, 1)",
                  id="mu_nut_screw=inf"),
-    pytest.param(_bad_stage(1, bearing_radius=0.0), "stage[1].bearing_radius", "> 0",
+    pytest.param(_bad_stage(1, bearing_radius=0.0), "stage[1].bearing_radius", "in (0, ",
                  id="bearing_radius_missing"),
     pytest.param(_bad_mechanism(stages=()), "stages", "at least 1", id="zero_stages"),
 ]

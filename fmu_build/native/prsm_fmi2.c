@@ -10,13 +10,18 @@
  *  - parameters (causality parameter) can be set before exitInitializationMode; structural
  *    parameters (geometry: causality local, variability constant) cannot be set at all;
  *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
- *    in initialization mode) a value out of range, fidelity auto, a stepper the level does not
+ *    in initialization mode) a value out of range (the rows of prsm_params_gen.h, generated from
+ *    prsm_fmu/param_ranges.py: the Python FMU's rules and messages), fidelity auto, a stepper the level does not
  *    run here (kinematic, quasi-static: default, closed_form_explicit, explicit_adaptive;
  *    dynamic: default, rosenbrock), or a value of a parameter this code does not model (it must
  *    stay at its start value, 0);
  *  - doStep refuses with fmi2Discard (logged, state unchanged) a non-finite or non-positive
- *    step, non-finite inputs or a failed integration; with fmi2Error a communication point that
- *    is not the FMU's time;
+ *    step or one too small to advance the time, non-finite inputs or inputs out of their
+ *    bounds, a failed integration, a step that would end out of the state's bounds; with
+ *    fmi2Error a communication point that is not the FMU's time (within PRSM_TIME_MATCH);
+ *  - fmi2Terminated reads true after fmi2Terminate or after the same doStep refused twice;
+ *  - every fmi2FMUstate handed in is checked (tag, owning instance) before it is read or
+ *    written;
  *  - the FMU state holds everything that decides the next step (parameters, inputs, time,
  *    state vector, inputs held, counters, stepper memory) and is checked whole when restored.
  */
@@ -61,6 +66,7 @@ typedef struct {
 #define PRSM_STR_LEN 64
 
 #include "prsm_variables.h"
+#include "prsm_params_gen.h"
 
 enum { PH_INSTANTIATED, PH_INITIALIZATION, PH_STEPPING, PH_TERMINATED };
 static const char *const PHASE_NAMES[] = {"instantiated", "initialization mode", "stepping",
@@ -94,6 +100,10 @@ typedef struct {
     fmi2CallbackFunctions cb;
     char name[256];
     int logging_on;
+    /* the last refused doStep (t, h, inputs) and whether it was refused twice in a row exactly
+       as called: the FMU is deterministic, so that call cannot succeed (fmi2Terminated) */
+    double refused_call[4];
+    int has_refused, stuck;
 } component;
 
 /* ---- logging ----------------------------------------------------------------------------------- */
@@ -123,21 +133,142 @@ static const char *choice(const snapshot *s, int type, int index, const prsm_enu
     if (type == T_STRING) return s->par_str[index];
     for (int i = 0; i < n_items; i++)
         if (items[i].value == s->par_int[index]) return items[i].name;
-    return "";
+    return NULL;
+}
+
+/* the message of an Enumeration value that is no item (configure._choice's words) */
+static void no_item(char *msg, int len, const char *kind, int value, const prsm_enum_item *items,
+                    int n_items) {
+    int j = snprintf(msg, (size_t)len, "%s = %d is not allowed: must be one of ", kind, value);
+    for (int i = 0; i < n_items && j > 0 && j < len; i++)
+        j += snprintf(msg + j, (size_t)(len - j), "%s%d (%s)", i ? ", " : "", items[i].value,
+                      items[i].name);
 }
 
 /* step_fidelity (configure.LEVEL_CODES): kinematic 0, quasi-static 1, dynamic 2 */
 static int model_level(const prsm_model *m) { return m->kinematic ? 0 : m->dynamic ? 2 : 1; }
 
 static int level_code(const char *fidelity) {
+    if (!fidelity) return 0;
     if (!strcmp(fidelity, "quasi-static") || !strcmp(fidelity, "auto")) return 1;
     if (!strcmp(fidelity, "dynamic")) return 2;
+    return 0;
+}
+
+/* ---- parameter ranges: the walker of the generated table (prsm_params_gen.h) --------------- */
+static const prsm_var *param_var(const char *name) {
+    for (int i = 0; i < PRSM_N_VARS; i++)
+        if (PRSM_VARS[i].kind == K_PARAM && !strcmp(PRSM_VARS[i].name, name)) return &PRSM_VARS[i];
+    return NULL;
+}
+
+/* the value of a Real or Integer parameter as a double; 0: not a settable parameter here */
+static int param_value(const snapshot *s, const char *name, double *value, int *is_int) {
+    const prsm_var *v = param_var(name);
+    if (!v) return 0;
+    *is_int = v->type != T_REAL;
+    if (v->type == T_REAL) *value = s->par_real[v->index];
+    else if (v->type == T_INTEGER || v->type == T_ENUM) *value = (double)s->par_int[v->index];
+    else return 0;
+    return 1;
+}
+
+/* Range.check of every row in order (structural parameters are constants, checked when the
+ * FMU was built); 0, or -1 and Range.message in msg */
+static int check_ranges(const snapshot *s, char *msg, int len) {
+    for (int i = 0; i < PRSM_N_RANGES; i++) {
+        const prsm_range *r = &PRSM_RANGES[i];
+        double v, w, hi = r->hi;
+        int is_int, w_int, has_hi = r->has_hi;
+        if (!param_value(s, r->name, &v, &is_int)) continue;
+        if (r->when && !(param_value(s, r->when, &w, &w_int) && w > 0.0)) continue;
+        if (r->hi_parameter) {
+            if (!param_value(s, r->hi_parameter, &w, &w_int)) continue;
+            hi = w;
+            has_hi = 1;
+        }
+        int ok = (r->integer ? is_int : !is_int) && isfinite(v) && v >= r->lo
+                 && !(r->lo_open && v == r->lo) && (!has_hi || v < hi || (v == hi && !r->hi_open));
+        if (ok) continue;
+        char val[40], lo[40], up[40];
+        if (is_int) snprintf(val, sizeof val, "%d", (int)v);
+        else prsm_fmt_num(val, sizeof val, v);
+        if (r->integer) {
+            snprintf(lo, sizeof lo, "%d", (int)r->lo);
+            snprintf(up, sizeof up, "%d", (int)hi);
+        } else {
+            prsm_fmt_num(lo, sizeof lo, r->lo);
+            prsm_fmt_num(up, sizeof up, hi);
+        }
+        const char *sp = r->unit[0] ? " " : "";
+        snprintf(msg, (size_t)len, "%s = %s%s%s is out of range: must be %s%s%s, %s%s%s%s%s%s%s",
+                 r->name, val, sp, r->unit, r->integer ? "an integer in " : "in ",
+                 r->lo_open ? "(" : "[", lo, has_hi ? up : "inf",
+                 !has_hi ? ")" : r->hi_open ? ")" : "]", sp, r->unit,
+                 r->note[0] ? " (" : "", r->note, r->note[0] ? ")" : "");
+        return -1;
+    }
+    return 0;
+}
+
+/* ---- bounds of the inputs and of the state (param_ranges.input_violation, state_violation) -- */
+static int in_bounds(double v, double bound) {
+    return v == 0.0 || (PRSM_SMALLEST <= fabs(v) && fabs(v) <= bound);
+}
+
+static int input_violation(const double u[2], char *msg, int len) {
+    static const char *const names[2] = {"screw_torque", "load_force"}, *const units[2] = {"N.m", "N"};
+    const double bounds[2] = {PRSM_MAX_TORQUE, PRSM_MAX_LOAD};
+    for (int i = 0; i < 2; i++) {
+        if (in_bounds(u[i], bounds[i])) continue;
+        char v[40], lo[40], hi[40];
+        prsm_fmt_num(v, sizeof v, u[i]);
+        prsm_fmt_num(lo, sizeof lo, PRSM_SMALLEST);
+        prsm_fmt_num(hi, sizeof hi, bounds[i]);
+        snprintf(msg, (size_t)len, "input %s = %s %s is out of range: must be 0 or of magnitude in "
+                 "[%s, %s] %s", names[i], v, units[i], lo, hi, units[i]);
+        return -1;
+    }
+    return 0;
+}
+
+static int state_violation(const double *x, int n, char *msg, int len) {
+    char v[40], w[40], q[40];
+    for (int i = 0; i < n; i++) {
+        int angle = i == 0, work = i >= n - 3;
+        double bound = angle ? PRSM_MAX_ANGLE : work ? PRSM_MAX_WORK : PRSM_MAX_SPEED;
+        if (fabs(x[i]) <= bound) continue;
+        prsm_fmt_num(v, sizeof v, x[i]);
+        prsm_fmt_num(w, sizeof w, bound);
+        const char *unit = angle ? "rad" : work ? "J" : "rad/s";
+        snprintf(msg, (size_t)len, "state x[%d] (%s) = %s %s is out of range: must be in [-%s, %s] %s",
+                 i, angle ? "angle" : work ? "work" : "speed", v, unit, w, w, unit);
+        return -1;
+    }
+    double omega = x[1], w_in = x[n - 3], w_out = x[n - 2];
+    prsm_fmt_num(q, sizeof q, PRSM_MAX_QUOTIENT);
+    for (int i = 2; i < n - 3; i++)
+        if (omega != 0.0 && fabs(x[i]) > PRSM_MAX_QUOTIENT * fabs(omega)) {
+            prsm_fmt_num(v, sizeof v, x[i]);
+            prsm_fmt_num(w, sizeof w, omega);
+            snprintf(msg, (size_t)len, "state x[%d] (carrier speed) = %s rad/s is out of range for the "
+                     "screw speed %s rad/s: carrier_speed_ratio must stay within %s", i, v, w, q);
+            return -1;
+        }
+    if (w_in > 0.0 && fabs(w_out) > PRSM_MAX_QUOTIENT * w_in) {
+        prsm_fmt_num(v, sizeof v, w_out);
+        prsm_fmt_num(w, sizeof w, w_in);
+        snprintf(msg, (size_t)len, "state x[%d] (output work) = %s J is out of range for the input "
+                 "work %s J: overall_efficiency must stay within %s", n - 2, v, w, q);
+        return -1;
+    }
     return 0;
 }
 
 /* the model's configuration from the parameters; 0, or -1 with the reason */
 static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len) {
     memset(cfg, 0, sizeof *cfg);
+    if (check_ranges(s, msg, len)) return -1;
     for (int k = 0; k < PRSM_N_STAGES; k++) {
         prsm_stage_values *v = &cfg->stage[k];
         v->screw_mass = s->par_real[P_SCREW_MASS[k]];
@@ -174,6 +305,10 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         }
     }
     const char *fid = choice(s, P_FIDELITY_TYPE, P_FIDELITY, P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
+    if (!fid) {
+        no_item(msg, len, "fidelity", s->par_int[P_FIDELITY], P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
+        return -1;
+    }
     if (!strcmp(fid, "kinematic")) cfg->kinematic = 1;
     else if (!strcmp(fid, "quasi-static")) cfg->kinematic = 0;
     else if (!strcmp(fid, "dynamic")) cfg->dynamic = 1;
@@ -187,6 +322,10 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         return -1;
     }
     const char *st = choice(s, P_STEPPER_TYPE, P_STEPPER, P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
+    if (!st) {
+        no_item(msg, len, "stepper", s->par_int[P_STEPPER], P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
+        return -1;
+    }
     /* the friction band is stepped by Dormand-Prince 5(4) here: the Python FMU's
      * closed_form_explicit; its closed_form (scalar exponential band step) is not translated.
      * The dynamic level runs the Python FMU's default, ROS34PW2. */
@@ -203,13 +342,6 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
                  "default (= closed_form_explicit), closed_form_explicit, explicit_adaptive", st);
         return -1;
     }
-    const char *names[2] = {"initial_screw_speed", "initial_screw_angle"};
-    double vals[2] = {s->par_real[P_INITIAL_SCREW_SPEED], s->par_real[P_INITIAL_SCREW_ANGLE]};
-    for (int i = 0; i < 2; i++)
-        if (!isfinite(vals[i])) {
-            snprintf(msg, (size_t)len, "%s = %.17g is out of range: must be finite", names[i], vals[i]);
-            return -1;
-        }
     return 0;
 }
 
@@ -581,6 +713,7 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     COMPONENT_OR_ERROR(comp);
     set_starts(&c->s);
     c->y_valid = 0;
+    c->has_refused = c->stuck = 0;
     return fmi2OK;
 }
 
@@ -588,6 +721,16 @@ fmi2Status fmi2Reset(fmi2Component comp) {
 static fmi2Status refuse(component *c, const char *reason) {
     log_msg(c, fmi2Discard, "doStep refused, state unchanged: %s", reason);
     return fmi2Discard;
+}
+
+/* a refused doStep(t, h) with the inputs set: remembered, and a second identical one in a row
+ * marks the instance stuck (fmi2Terminated true) until a call differs */
+static fmi2Status refuse_call(component *c, double t, double h, const char *reason) {
+    double call[4] = {t, h, c->s.u[0], c->s.u[1]};
+    c->stuck = c->has_refused && !memcmp(call, c->refused_call, sizeof call);
+    memcpy(c->refused_call, call, sizeof call);
+    c->has_refused = 1;
+    return refuse(c, reason);
 }
 
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
@@ -598,33 +741,43 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
         return wrong_phase(c, c->s.phase == PH_TERMINATED ? "fmi2DoStep after fmi2Terminate"
                                                           : "fmi2DoStep before fmi2ExitInitializationMode");
     double u[2] = {c->s.u[0], c->s.u[1]};
-    if (!(0.0 < h && h < INFINITY)) {
-        snprintf(reason, sizeof reason, "communication step size = %.17g s is out of range: must be a finite number > 0", h);
-        return refuse(c, reason);
+    if (!(0.0 < h && h < INFINITY) || !(t + h > t)) {
+        snprintf(reason, sizeof reason, "communication step size = %.17g s is out of range: must be "
+                 "a finite number > 0 that advances the time", h);
+        return refuse_call(c, t, h, reason);
     }
     if (!(isfinite(u[0]) && isfinite(u[1]))) {
         snprintf(reason, sizeof reason, "inputs screw_torque = %.17g N.m, load_force = %.17g N: every input must be finite", u[0], u[1]);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
     if (!isfinite(t)) {
         snprintf(reason, sizeof reason, "currentCommunicationPoint = %.17g s must be finite", t);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
-    /* hosts compute communication times their own way: a point within 1e-9 of the step (or of
-       the time) from the FMU's own time is the same point */
-    if (fabs(t - c->s.t) > 1e-9 * fmax(fabs(c->s.t), h)) {
+    /* hosts compute communication times their own way: a point within PRSM_TIME_MATCH
+       (prsm_fmu.slave.TIME_MATCH) of max(1 s, |time|) from the FMU's own time is the same point;
+       the step size does not widen it */
+    if (!(fabs(t - c->s.t) <= PRSM_TIME_MATCH * fmax(1.0, fabs(c->s.t)))) {
         log_msg(c, fmi2Error, "fmi2DoStep: currentCommunicationPoint = %.17g s is not the FMU's time "
                 "%.17g s (the end of the last step); restore an FMU state to step from elsewhere",
                 t, c->s.t);
         return fmi2Error;
     }
+    if (input_violation(u, reason, sizeof reason)) return refuse_call(c, t, h, reason);
     double x_new[PRSM_NX_MAX] = {0.0};
     prsm_stats stats;
     char msg[700];
+    prsm_memory mem_before = c->s.mem;
     if (prsm_advance(&c->model, &c->s.mem, t, c->s.x, u, h, x_new, &stats, msg, sizeof msg)) {
         snprintf(reason, sizeof reason, "integration failed: %s", msg);
-        return refuse(c, reason);
+        return refuse_call(c, t, h, reason);
     }
+    if (state_violation(x_new, c->model.nx, msg, sizeof msg)) {   /* outputs could overflow */
+        c->s.mem = mem_before;
+        snprintf(reason, sizeof reason, "the step would end out of the state's bounds: %s", msg);
+        return refuse_call(c, t, h, reason);
+    }
+    c->has_refused = c->stuck = 0;
     memcpy(c->s.x, x_new, sizeof x_new);
     c->s.t = t + h;
     c->s.u_held[0] = u[0];
@@ -661,9 +814,20 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component comp, const fmi2StatusKind s, fmi2
     return fmi2Discard;
 }
 
+/* fmi2Terminated: fmi2OK and false while the instance can go on (a refused doStep may be
+ * retried from the unchanged state with other inputs, another step size or another state);
+ * true once fmi2Terminate has been called, or after the same doStep (t, h, inputs) was refused
+ * twice in a row: the FMU is deterministic, so repeating it cannot succeed, and a host that
+ * retries without changing anything (fmpy's simulate_fmu, fmusim) stops instead of looping
+ * (docs/fmu.md, Errors) */
 fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
-    (void)comp; (void)s; (void)value;
-    return fmi2Discard;
+    COMPONENT_OR_ERROR(comp);
+    if (s != fmi2Terminated || !value) {
+        log_msg(c, fmi2Discard, "fmi2GetBooleanStatus: only fmi2Terminated is answered");
+        return fmi2Discard;
+    }
+    *value = c->s.phase == PH_TERMINATED || c->stuck ? fmi2True : fmi2False;
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component comp, const fmi2StatusKind s, fmi2String *value) {
@@ -749,11 +913,13 @@ static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) 
             snprintf(msg, (size_t)len, "state vector or held inputs not finite");
             return -1;
         }
+        if (input_violation(s->u_held, msg, len)) return -1;
         char why[600];
         if (build_model(s, m, why, sizeof why)) {
             snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
             return -1;
         }
+        if (state_violation(s->x, m->nx, msg, len)) return -1;
         if (s->stats[2] != model_level(m)) {
             snprintf(msg, (size_t)len, "step_fidelity %d does not match the fidelity parameter", s->stats[2]);
             return -1;
@@ -762,27 +928,54 @@ static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) 
     return 0;
 }
 
+/* What fmi2GetFMUstate hands out: a tag, the instance it belongs to and the snapshot.  Every call
+ * that takes a state checks the tag and the owner before it reads further (a state of another
+ * FMU or instance is refused whole: a PRSM2 state is smaller than a PRSM3 snapshot). */
+#define BLOCK_TAG "PRSMBLK1"
+typedef struct {
+    char tag[8];
+    const component *owner;
+    snapshot s;
+} state_block;
+
+/* the block behind a state handed in by the host, or NULL (logged) if it is not one of ours */
+static state_block *own_block(component *c, fmi2FMUstate state, const char *call) {
+    state_block *b = (state_block *)state;
+    if (!b || memcmp(b->tag, BLOCK_TAG, 8) || b->owner != c) {
+        log_msg(c, fmi2Error, "%s: the FMU state %p was not made by this instance (%s) of %s "
+                "(GUID %s) with fmi2GetFMUstate or fmi2DeSerializeFMUstate; nothing done", call,
+                state, c->name, PRSM_MODEL_IDENTIFIER, PRSM_GUID);
+        return NULL;
+    }
+    return b;
+}
+
+static state_block *new_block(component *c) {
+    state_block *b = (state_block *)malloc(sizeof *b);
+    if (!b) return NULL;
+    memcpy(b->tag, BLOCK_TAG, 8);
+    b->owner = c;
+    return b;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *state) {
     COMPONENT_OR_ERROR(comp);
     if (!state) return fmi2Error;
-    snapshot *s = (snapshot *)*state;
-    if (!s) s = (snapshot *)malloc(sizeof *s);
-    if (!s) {
-        log_msg(c, fmi2Error, "fmi2GetFMUstate: out of memory");
+    state_block *b = *state ? own_block(c, *state, "fmi2GetFMUstate") : new_block(c);
+    if (!b) {
+        if (!*state) log_msg(c, fmi2Error, "fmi2GetFMUstate: out of memory");
         return fmi2Error;
     }
-    memcpy(s, &c->s, sizeof *s);
-    *state = s;
+    memcpy(&b->s, &c->s, sizeof b->s);
+    *state = b;
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
     COMPONENT_OR_ERROR(comp);
-    if (!state) {
-        log_msg(c, fmi2Error, "fmi2SetFMUstate: no state");
-        return fmi2Error;
-    }
-    const snapshot *s = (const snapshot *)state;
+    const state_block *b = own_block(c, state, "fmi2SetFMUstate");
+    if (!b) return fmi2Error;
+    const snapshot *s = &b->s;
     char msg[800];
     prsm_model *m = (prsm_model *)malloc(sizeof *m);
     if (!m) return fmi2Error;
@@ -792,6 +985,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
         return fmi2Error;
     }
     memcpy(&c->s, s, sizeof c->s);
+    c->has_refused = c->stuck = 0;
     if (c->s.phase >= PH_STEPPING) c->model = *m;
     free(m);
     c->y_valid = 0;
@@ -799,29 +993,30 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *state) {
-    (void)comp;
-    if (state) {
-        free(*state);
-        *state = NULL;
-    }
+    COMPONENT_OR_ERROR(comp);
+    if (!state || !*state) return fmi2OK;
+    if (!own_block(c, *state, "fmi2FreeFMUstate")) return fmi2Error;
+    free(*state);
+    *state = NULL;
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate state, size_t *size) {
     COMPONENT_OR_ERROR(comp);
-    (void)state;
-    if (!size) return fmi2Error;
+    if (!own_block(c, state, "fmi2SerializedFMUstateSize") || !size) return fmi2Error;
     *size = sizeof(snapshot);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
     COMPONENT_OR_ERROR(comp);
-    if (!state || !bytes || size < sizeof(snapshot)) {
-        log_msg(c, fmi2Error, "fmi2SerializeFMUstate: needs a state and %u bytes", (unsigned)sizeof(snapshot));
+    const state_block *b = own_block(c, state, "fmi2SerializeFMUstate");
+    if (!b) return fmi2Error;
+    if (!bytes || size < sizeof(snapshot)) {
+        log_msg(c, fmi2Error, "fmi2SerializeFMUstate: needs %u bytes", (unsigned)sizeof(snapshot));
         return fmi2Error;
     }
-    memcpy(bytes, state, sizeof(snapshot));
+    memcpy(bytes, &b->s, sizeof(snapshot));
     return fmi2OK;
 }
 
@@ -833,22 +1028,23 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte bytes[], s
                 "FMU (%u bytes, expected %u)", (unsigned)size, (unsigned)sizeof(snapshot));
         return fmi2Error;
     }
-    snapshot *s = (snapshot *)malloc(sizeof *s);
+    if (*state && !own_block(c, *state, "fmi2DeSerializeFMUstate")) return fmi2Error;
+    state_block *b = new_block(c);
     prsm_model *m = (prsm_model *)malloc(sizeof *m);
-    if (!s || !m) {
-        free(s);
+    if (!b || !m) {
+        free(b);
         free(m);
         return fmi2Error;
     }
-    memcpy(s, bytes, sizeof *s);
-    if (check_snapshot(s, m, msg, sizeof msg)) {
+    memcpy(&b->s, bytes, sizeof b->s);
+    if (check_snapshot(&b->s, m, msg, sizeof msg)) {
         log_msg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state: %s", msg);
-        free(s);
+        free(b);
         free(m);
         return fmi2Error;
     }
     free(m);
     if (*state) free(*state);
-    *state = s;
+    *state = b;
     return fmi2OK;
 }

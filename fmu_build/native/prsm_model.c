@@ -398,80 +398,14 @@ static int fail(char *msg, int len, const char *text) {
     return -1;
 }
 
-static int check_positive(const char *name, int k, double v, char *msg, int len) {
-    if (isfinite(v) && v > 0.0) return 0;
-    if (k) snprintf(msg, (size_t)len, "stage[%d].%s = %.17g is out of range: must be a finite number > 0", k, name, v);
-    else snprintf(msg, (size_t)len, "%s = %.17g is out of range: must be a finite number > 0", name, v);
-    return -1;
-}
-
-static int check_non_negative(const char *name, int k, double v, char *msg, int len) {
-    if (isfinite(v) && v >= 0.0) return 0;
-    snprintf(msg, (size_t)len, "stage[%d].%s = %.17g is out of range: must be a finite number >= 0", k, name, v);
-    return -1;
-}
-
-static int check_int(const char *name, int k, int v, int minimum, char *msg, int len) {
-    if (v >= minimum) return 0;
-    snprintf(msg, (size_t)len, "stage[%d].%s = %d is out of range: must be an integer >= %d", k, name, v, minimum);
-    return -1;
-}
-
-static int check_friction(const char *name, double v, char *msg, int len) {
-    if (isfinite(v) && v >= 0.0 && v < 1.0) return 0;
-    snprintf(msg, (size_t)len, "%s = %.17g is out of range: friction coefficient must be in [0, 1)", name, v);
-    return -1;
-}
-
-/* MechanismParams.validate (the tunable fields), configure's solver checks, Mechanism.__init__,
- * KinematicModel.__init__, SlavedAdvance.__init__ and the stepper's options */
+/* Mechanism.__init__, KinematicModel.__init__, SlavedAdvance.__init__ and the stepper's options */
 int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     memset(m, 0, sizeof *m);
     m->n = NS;
-    for (int k = 0; k < NS; k++) {
-        const prsm_stage_values *v = &cfg->stage[k];
-        int K = k + 1;
-        if (check_positive("screw_mass", K, v->screw_mass, msg, len) ||
-            check_positive("nut_mass", K, v->nut_mass, msg, len) ||
-            check_positive("roller_mass", K, v->roller_mass, msg, len) ||
-            check_positive("carrier_mass", K, v->carrier_mass, msg, len) ||
-            check_positive("screw_inertia", K, v->screw_inertia, msg, len) ||
-            check_positive("roller_inertia", K, v->roller_inertia, msg, len) ||
-            check_positive("carrier_inertia", K, v->carrier_inertia, msg, len) ||
-            check_non_negative("spline_radius", K, v->spline_radius, msg, len) ||
-            check_non_negative("bearing_radius", K, v->bearing_radius, msg, len) ||
-            check_int("n_rollers", K, v->n_rollers, 1, msg, len) ||
-            check_int("carriers", K, v->carriers, 1, msg, len))
-            return -1;
-        if (K > 1 && cfg->mu_spline > 0.0 && check_positive("spline_radius", K, v->spline_radius, msg, len))
-            return -1;
-        if (K < NS && cfg->mu_nut_screw > 0.0 && check_positive("bearing_radius", K, v->bearing_radius, msg, len))
-            return -1;
-    }
-    if (check_friction("mu_screw_roller", cfg->mu_screw_roller, msg, len) ||
-        check_friction("mu_spline", cfg->mu_spline, msg, len) ||
-        check_friction("mu_nut_screw", cfg->mu_nut_screw, msg, len) ||
-        check_positive("slip_velocity_scale", 0, cfg->slip_velocity_scale, msg, len))
-        return -1;
-    double tol = cfg->tolerance;
-    if (!(isfinite(tol) && 0.0 < tol && tol < 1.0)) {
-        snprintf(msg, (size_t)len, "tolerance = %.17g is out of range: must be in (0, 1)", tol);
-        return -1;
-    }
-    if (cfg->substeps < 0) {
-        snprintf(msg, (size_t)len, "substeps = %d is out of range: must be an integer >= 0 (0: adaptive)", cfg->substeps);
-        return -1;
-    }
-    if (cfg->max_substeps < 1) {
-        snprintf(msg, (size_t)len, "max_substeps = %d is out of range: must be an integer >= 1", cfg->max_substeps);
-        return -1;
-    }
-    double eff = cfg->kinematic_efficiency;
-    if (!(isfinite(eff) && 0.0 < eff && eff <= 1.0)) {
-        snprintf(msg, (size_t)len, "kinematic_efficiency = %.17g is out of range: must be in (0, 1]", eff);
-        return -1;
-    }
-
+    /* the parameters' ranges are checked before (prsm_fmi2.c walks the table generated from
+     * prsm_fmu.param_ranges; fmu_build.native_stepper passes a model the Python package
+     * validated) */
+    double tol = cfg->tolerance, eff = cfg->kinematic_efficiency;
     m->kinematic = cfg->kinematic;
     m->dynamic = cfg->dynamic && !cfg->kinematic;
     if (cfg->speed_drive && !m->dynamic)
@@ -515,9 +449,11 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
         if (sc[5] < limit) limit = sc[5];
     }
     if (m->mu >= limit) {
-        snprintf(msg, (size_t)len, "mu_screw_roller = %.17g is out of range for this geometry: must be "
+        char mu[40];
+        prsm_fmt_num(mu, sizeof mu, m->mu);
+        snprintf(msg, (size_t)len, "mu_screw_roller = %s is out of range for this geometry: must be "
                  "< %.4f (the axial part of the contact normal); above it the thread self-locks "
-                 "and the rigid model has no solution", m->mu, limit);
+                 "and the rigid model has no solution", mu, limit);
         return -1;
     }
     m->c_out = m->st[NS - 1].c;

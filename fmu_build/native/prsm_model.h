@@ -20,6 +20,9 @@
 #ifndef PRSM_MODEL_H
 #define PRSM_MODEL_H
 
+#include <stdio.h>
+#include <stdlib.h>
+
 #include "prsm_constants.h"
 
 /* Python's x ** y for floats, i.e. libm's pow.  Compilers replace pow(x, 2.0) by x * x, which
@@ -38,6 +41,20 @@ static inline int finite_sum(const double *v, int n) {
     double s = 0.0;
     for (int i = 0; i < n; i++) s += v[i];
     return s - s == 0.0;
+}
+
+/* a number as prsm_fmu.param_ranges.fmt writes it in messages: the shortest %.<p>g (p = 1..17)
+ * that reads back to the same double, "nan" for any NaN */
+static inline void prsm_fmt_num(char *buf, size_t n, double v) {
+    if (v != v) {
+        snprintf(buf, n, "nan");
+        return;
+    }
+    for (int p = 1; p <= 17; p++) {
+        snprintf(buf, n, "%.*g", p, v);
+        if (strtod(buf, NULL) == v) return;
+    }
+    snprintf(buf, n, "%.17g", v);
 }
 
 #define PRSM_NX 5
