@@ -41,6 +41,7 @@ import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 from xml.dom.minidom import parseString
 
@@ -49,6 +50,8 @@ from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
+from prsm_fmu.steppers.band import _GAUSS
+from prsm_fmu.steppers.base import _SQRT_EPS
 
 from . import model_description
 from .builder import BuildError, build_fmu, validate
@@ -60,8 +63,8 @@ __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_fmi2.c")
-HEADERS = ("prsm_model.h", "prsm_ros.h")
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2.c")
+HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 #: gcc flags of the Linux binary (no fused multiply-add: the Python model's rounding)
 COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
@@ -141,7 +144,10 @@ def _c_string(s: str) -> str:
 
 def constants_header(params: MechanismParams) -> str:
     """``prsm_constants.h``: geometry-derived constants of ``params`` and the DP5(4) tableau."""
-    mech = Mechanism(params, "equilibrium")
+    # the geometry's constants do not depend on friction; without it the Mechanism accepts a
+    # screw-roller coefficient at or beyond the self-locking limit, which the kinematic level
+    # (no contact friction) runs and the C refuses at the other levels itself
+    mech = Mechanism(replace(params, mu_screw_roller=0.0), "equilibrium")
     flanks, consts = [], []
     for st, s in zip(params.stages, mech.stages):
         flanks.append("    {" + ", ".join("{" + ", ".join(_hex(v) for v in fl.consts) + "}"
@@ -193,6 +199,14 @@ static const double PRSM_ROS_M[4] = {{{", ".join(_hex(v) for v in _ROS_M)}}};
 static const double PRSM_ROS_E[4] = {{{", ".join(_hex(v) for v in _ROS_E)}}};
 static const double PRSM_ROS_WQ[4] = {{{", ".join(_hex(v) for v in _ROS_WQ)}}};
 static const double PRSM_ROS_EQ[4] = {{{", ".join(_hex(v) for v in _ROS_EQ)}}};
+
+/* the friction band's exponential step (prsm_fmu.steppers.band): sqrt(eps) of the difference
+   increment; Gauss-Legendre nodes on [-1, 1] and weights, 5 and 3 points */
+#define PRSM_SQRT_EPS {_hex(_SQRT_EPS)}
+static const double PRSM_GAUSS5_X[5] = {{{", ".join(_hex(v) for v in _GAUSS[0][0])}}};
+static const double PRSM_GAUSS5_W[5] = {{{", ".join(_hex(v) for v in _GAUSS[0][1])}}};
+static const double PRSM_GAUSS3_X[3] = {{{", ".join(_hex(v) for v in _GAUSS[1][0])}}};
+static const double PRSM_GAUSS3_W[3] = {{{", ".join(_hex(v) for v in _GAUSS[1][1])}}};
 
 #endif
 """

@@ -30,10 +30,15 @@ from .builder import BuildError
 __all__ = ["NativeStepper", "native_library"]
 
 #: the library's sources: the model, its steppers and the flat interface
-LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_api.c")
+LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_api.c")
 _STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
                 "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
 _LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
+#: the Python steppers the C translates, per level, and the band method of each (1: the
+#: exponential band step, 0: Dormand-Prince 5(4); None: the dynamic level's ROS34PW2)
+STEPPERS = {"kinematic": {"closed_form": 1, "closed_form_explicit": 0},
+            "quasi-static": {"closed_form": 1, "closed_form_explicit": 0},
+            "dynamic": {"rosenbrock": None}}
 _MSG = 600
 #: libraries loaded in this process, by source hash and by the parameters' repr
 _loaded: dict[str, ctypes.CDLL] = {}
@@ -71,13 +76,14 @@ def native_library(params) -> ctypes.CDLL:
     dll.prsm_api_get_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_set_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_free.argtypes = [vp]
+    dll.prsm_api_set_band.argtypes = [vp, ctypes.c_int]
     _loaded[digest] = _by_params[key] = dll
     return dll
 
 
 class NativeStepper(Stepper):
-    """ROS34PW2 (dynamic level) or the closed form with its Dormand-Prince fallback (slaved
-    levels, torque drive) in C, for a :mod:`prsm_fmu` model of the mechanism.
+    """ROS34PW2 (dynamic level) or the closed form with its exponential or Dormand-Prince band
+    step (slaved levels, torque drive) in C, for a :mod:`prsm_fmu` model of the mechanism.
 
     Parameters
     ----------
@@ -90,8 +96,12 @@ class NativeStepper(Stepper):
     max_substeps : int
         Internal steps (accepted and rejected) allowed per advance.
     fixed_substeps : int or None
-        Equal internal steps per advance (ROS34PW2 without error control) instead of adaptive
-        ones.
+        Equal internal steps per advance (without error control) instead of adaptive ones.
+    stepper : str or None
+        The Python stepper whose steps the C repeats (:data:`STEPPERS`): at the slaved levels
+        ``"closed_form"`` (the exponential band step, the Python default) or
+        ``"closed_form_explicit"``; at the dynamic level ``"rosenbrock"``.  None: at the slaved
+        levels ``closed_form_explicit``, at the dynamic level ``rosenbrock``.
 
     Raises
     ------
@@ -102,13 +112,19 @@ class NativeStepper(Stepper):
     name = "native"
 
     def __init__(self, model: Any, rtol: float = 1e-6, atol: float = 1e-8,
-                 max_substeps: int = 100000, fixed_substeps: int | None = None) -> None:
+                 max_substeps: int = 100000, fixed_substeps: int | None = None,
+                 stepper: str | None = None) -> None:
         super().__init__(model)
         params = model.params
         level = getattr(model, "fidelity", "")
         if level not in _LEVELS:
             raise ValueError(f"fidelity = {level!r} is not allowed for the native stepper: must "
                              f"be one of {', '.join(_LEVELS)}")
+        allowed = STEPPERS[level]
+        if stepper is not None and stepper not in allowed:
+            raise ValueError(f"stepper = {stepper!r} is not allowed for the native stepper at "
+                             f"fidelity = {level!r}: must be one of {', '.join(allowed)}")
+        band = allowed.get(stepper or "closed_form_explicit")
         for name in ("mu_viscous", "mu_differential"):
             if getattr(params, name):
                 raise ValueError(f"{name} = {getattr(params, name)!r} is not modelled in C: it "
@@ -134,6 +150,8 @@ class NativeStepper(Stepper):
             raise ValueError(msg.value.decode())
         self._handle = ctypes.c_void_p(handle)
         lib.prsm_api_set_tolerances(self._handle, rtol, atol)
+        if band is not None:
+            lib.prsm_api_set_band(self._handle, band)
         n = lib.prsm_api_n_states(self._handle)
         if n != self.n_states:
             raise ValueError(f"the C model has {n} states, the model {self.n_states}")

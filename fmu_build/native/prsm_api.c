@@ -65,11 +65,21 @@ void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
 }
 
 /* The adaptive steppers' relative [-] and absolute [state units] tolerances, instead of the
- * FMU's (tolerance and 1e-2 tolerance). */
+ * FMU's (tolerance and 1e-2 tolerance); all three steppers (Dormand-Prince, ROS34PW2, the
+ * exponential band step). */
 void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
     prsm_handle *h = (prsm_handle *)handle;
-    h->model.rtol = h->model.ros.rtol = rtol;
-    h->model.atol = h->model.ros.atol = atol;
+    h->model.rtol = h->model.ros.rtol = h->model.band.rtol = rtol;
+    h->model.atol = h->model.ros.atol = h->model.band.atol = atol;
+}
+
+/* The slaved levels' method where the closed form declines: 1 the exponential band step (the
+ * Python stepper closed_form), 0 Dormand-Prince 5(4) (closed_form_explicit, the default of
+ * prsm_api_new).  Returns 0, or -1 for another value. */
+int prsm_api_set_band(void *handle, int exponential) {
+    if (exponential != 0 && exponential != 1) return -1;
+    ((prsm_handle *)handle)->model.band_exponential = exponential;
+    return 0;
 }
 
 int prsm_api_n_states(void *handle) { return ((prsm_handle *)handle)->model.nx; }

@@ -8,6 +8,7 @@
  */
 #include "prsm_model.h"
 #include "prsm_ros.h"
+#include "prsm_band.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -392,6 +393,11 @@ static int slaved_advance(prsm_model *m, const double *x, const double *u, doubl
     return 1;
 }
 
+/* slaved_advance with the signature of prsm_band.h's closed-form step */
+static int exact_ctx(void *ctx, const double *x, const double *u, double h, double *y) {
+    return slaved_advance((prsm_model *)ctx, x, u, h, y);
+}
+
 /* ---- model set-up ------------------------------------------------------------------------- */
 static int fail(char *msg, int len, const char *text) {
     snprintf(msg, (size_t)len, "%s", text);
@@ -558,6 +564,46 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     }
     if (m->loss_factor != 0.0 && m->c_out < fmin_) fmin_ = m->c_out;
     m->band_speed = m->v_eps / fmin_;
+    /* SlavedLevel.smooth_breaks: 0 and +-v_eps / f for the sliding speed per unit screw speed f
+     * of every regularised law that acts (SlavedAdvance.law_factors), finite, ascending */
+    double edges[PRSM_MAX_BREAKS];
+    int n_edges = 0;
+    for (int k = 0; k < NS; k++) {
+        const prsm_stage *s = &m->st[k];
+        double laws[4];
+        int n_laws = 0;
+        if (m->mu != 0.0)
+            for (int f = 0; f < 2; f++) {
+                const prsm_flank *fl = &m->fl[k][f];
+                double dx = fl->ax + s->zeta * fl->bx, dy = fl->ay + s->zeta * fl->by, dz = fl->az;
+                laws[n_laws++] = sqrt(dx * dx + dy * dy + dz * dz);
+            }
+        if (s->e_spline != 0.0) laws[n_laws++] = s->spline_f;
+        if (s->g_bearing != 0.0) laws[n_laws++] = s->bearing_f;
+        for (int j = 0; j < n_laws; j++)
+            if (laws[j] > 0.0) edges[n_edges++] = m->v_eps / laws[j];
+    }
+    if (m->loss_factor != 0.0 && m->c_out > 0.0) edges[n_edges++] = m->v_eps / m->c_out;
+    qsort(edges, (size_t)n_edges, sizeof edges[0], cmp_double);
+    prsm_band *bd = &m->band;
+    int nb = 0;
+    for (int j = n_edges - 1; j >= 0; j--)      /* -edges descending, 0, edges ascending */
+        if (isfinite(edges[j]) && (j == n_edges - 1 || edges[j] != edges[j + 1]))
+            bd->breaks[nb++] = -edges[j];
+    bd->breaks[nb++] = 0.0;
+    for (int j = 0; j < n_edges; j++)
+        if (isfinite(edges[j]) && (j == 0 || edges[j] != edges[j - 1])) bd->breaks[nb++] = edges[j];
+    bd->n_breaks = nb;
+    bd->w_scale = 1.0;                          /* the speed's state_scale without a break */
+    {
+        int found = 0;
+        double smallest = 0.0;
+        for (int j = 0; j < nb; j++) {
+            double a = fabs(bd->breaks[j]);
+            if (a != 0.0 && (!found || a < smallest)) { smallest = a; found = 1; }
+        }
+        if (found) bd->w_scale = smallest;
+    }
     /* stepper: ClosedForm or ExplicitAdaptive (order 5), tuned_stepper_options */
     m->closed_form = cfg->closed_form;
     m->rtol = tol;
@@ -588,6 +634,16 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     r->first_step_stiffness = cfg->substeps ? 0.0 : 8.0;
     r->max_substeps = cfg->max_substeps;
     r->fixed_substeps = cfg->substeps;
+    /* the slaved levels' band step: ScalarExponential with the FMU's options */
+    m->band_exponential = cfg->band_exponential;
+    bd->rtol = m->rtol;
+    bd->atol = m->atol;
+    bd->h_min = m->h_min;
+    bd->safety = m->safety;
+    bd->fac_min = m->fac_min;
+    bd->fac_max = m->fac_max;
+    bd->max_substeps = cfg->max_substeps;
+    bd->fixed_substeps = cfg->substeps;
     return 0;
 }
 
@@ -859,6 +915,16 @@ int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_
             return fail(msg, len, "closed_form: non-finite value in the closed-form step");
         stats->rhs_calls = 1;
         stats->substeps = 1;
+        return 0;
+    }
+    if (m->closed_form && m->band_exponential) {
+        prsm_memory trial = *mem;
+        double y[PRSM_NX_MAX] = {0.0};
+        if (prsm_band_advance(&m->band, rhs_ctx, exact_ctx, m, &trial, t, x, u, h, y, stats, msg,
+                              len))
+            return -1;
+        *mem = trial;
+        memcpy(x_new, y, sizeof y);
         return 0;
     }
     prsm_memory trial = *mem;

@@ -9,6 +9,8 @@
  *   prsm_fmu/models/slaved.py      the exact step with held inputs outside the friction band
  *   prsm_fmu/steppers/closed_form.py, explicit.py, control.py
  *                                  Dormand-Prince 5(4) where the exact step declines
+ *                                  (closed_form_explicit), or
+ *   prsm_fmu/steppers/band.py      the exponential band step (closed_form), in prsm_band.c
  *   prsm_fmu/models/dynamic.py     the dynamic level (carrier speeds as states; torque or speed
  *                                  drive), stepped by steppers/rosenbrock.py in prsm_ros.c
  * Geometry-derived constants (contact points, normals, slip Jacobians of both flanks, c_k,
@@ -65,6 +67,17 @@ typedef struct {
     int max_substeps, fixed_substeps;    /* fixed_substeps 0: adaptive */
 } prsm_ros;
 
+/* the friction band's exponential step (prsm_band.h): ScalarExponential.__init__ with the FMU's
+ * options; the breaks are the model's smooth_breaks (SlavedLevel.smooth_breaks), ascending */
+#define PRSM_MAX_BREAKS (2 * (4 * PRSM_N_STAGES + 1) + 1)
+typedef struct {
+    int n_breaks;
+    double breaks[PRSM_MAX_BREAKS];
+    double w_scale;                      /* the free state's scale of the difference increment */
+    double rtol, atol, h_min, safety, fac_min, fac_max;
+    int max_substeps, fixed_substeps;    /* fixed_substeps 0: adaptive */
+} prsm_band;
+
 typedef struct {
     prsm_stage_values stage[PRSM_N_STAGES];
     double mu_screw_roller, mu_spline, mu_nut_screw, slip_velocity_scale;
@@ -75,6 +88,8 @@ typedef struct {
     int closed_form;           /* 1: closed form with DP5(4) fallback; 0: DP5(4) only */
     double tolerance;
     int substeps, max_substeps;
+    int band_exponential;      /* with closed_form: 1 the exponential band step (Python's
+                                  closed_form), 0 Dormand-Prince (closed_form_explicit) */
 } prsm_config;
 
 /* per-stage constants of the recursion (mechanics._Stage after Mechanism.__init__) */
@@ -105,6 +120,8 @@ typedef struct {
     double rtol, atol, h_min, safety, fac_min, fac_max;
     int max_substeps, fixed_substeps;
     prsm_ros ros;                      /* the dynamic level's stepper */
+    int band_exponential;              /* the band's method: 1 exponential, 0 Dormand-Prince */
+    prsm_band band;                    /* the slaved levels' exponential band step */
 } prsm_model;
 
 /* what a step carries from one advance to the next: the proposal of the first step
