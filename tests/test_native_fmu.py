@@ -35,9 +35,9 @@ from test_fmu_c_host import STEPS as HOST_STEPS, c_host  # noqa: E402,F401 - fix
 NATIVE = ("PRSM2", "PRSM3")
 ERROR = 3
 H = 1e-3
-#: the Python FMU's stepper that runs the native FMU's method (its default ``closed_form`` steps
-#: the friction band by a scalar exponential step, the native FMU by Dormand-Prince 5(4))
-PY_SAME_METHOD = {"stepper": "closed_form_explicit"}
+#: the Python FMU's stepper that runs the native FMU's default method: ``closed_form``, the
+#: friction band stepped by the scalar exponential step (prsm_band.c in C)
+PY_SAME_METHOD = {"stepper": "closed_form"}
 
 #: the per-stage parameters the contact geometry is computed from (structural in the native FMU)
 GEOMETRY = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
@@ -137,13 +137,19 @@ def test_model_description_mirrors_the_python_fmu_and_validates(native, name):
 
 # ---- one source of truth ------------------------------------------------------------------------
 
-@pytest.mark.parametrize("fidelity,load", [("quasi-static", 3000.0), ("quasi-static", -3000.0),
-                                           ("kinematic", 3000.0)])
-def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, load):
+@pytest.mark.parametrize("fidelity,load,stepper", [("quasi-static", 3000.0, None),
+                                                   ("quasi-static", -3000.0, None),
+                                                   ("kinematic", 3000.0, None),
+                                                   ("quasi-static", 3000.0, "closed_form_explicit")])
+def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, load, stepper):
+    """The native FMU's default (``closed_form``) and its ``closed_form_explicit`` against the
+    Python FMU's same stepper."""
     start = {"fidelity": fidelity}
     if fidelity == "kinematic":
         start["kinematic_efficiency"] = 0.85
-    py, nat, names = both_loops("PRSM2", {**start, **PY_SAME_METHOD}, start, load)
+    same = PY_SAME_METHOD if stepper is None else {"stepper": stepper}
+    py, nat, names = both_loops("PRSM2", {**start, **same}, {**start, **same} if stepper else start,
+                                load)
     assert nat == py                                              # bit for bit
     i_speed, i_calls = names.index("screw_speed"), names.index("step_rhs_calls")
     speeds = [r[i_speed] for r in py]
@@ -305,8 +311,7 @@ def test_refused_calls_are_logged_and_change_nothing(native):
                                         # the dynamic level runs ROS34PW2 only
                                         ({"fidelity": "dynamic", "stepper": "explicit_adaptive"},
                                          "stepper"),
-                                        # the Python FMU's exponential band step is not in C
-                                        ({"stepper": "closed_form"}, "stepper"),
+                                        ({"stepper": "exponential"}, "stepper"),
                                         ({"mu_screw_roller": 0.9}, "mu_screw_roller"),
                                         ({"stage[2].nut_mass": -1.0}, "stage[2].nut_mass")])
 def test_initialization_refuses_what_it_does_not_run(native, start, word):
@@ -427,7 +432,7 @@ def test_regression_case_passes_with_the_native_fmu(native, case):
 def test_actuator_loop_with_the_native_fmu_equals_the_python_fmu(native, tmp_path, capsys):
     """``prsm-ema run --prsm native``: the position-step loop (quasi-static) through the native
     FMU equals the same loop through the Python FMU running the native FMU's method
-    (``closed_form_explicit``) to 1e-9 of each output's largest magnitude.  Independent reason:
+    (``closed_form``) to 1e-9 of each output's largest magnitude.  Independent reason:
     both take the same steps with the same arithmetic (1e-12 per step in the tests above); the
     loop (PI controller, motor, load) only passes the values on, over 300 steps here."""
     import numpy as np
@@ -444,7 +449,7 @@ def test_actuator_loop_with_the_native_fmu_equals_the_python_fmu(native, tmp_pat
     scene_native = tmp_path / "step_native.toml"
     scene_native.write_text(short, encoding="utf-8")
     scene_python = tmp_path / "step_python.toml"
-    scene_python.write_text(short + '\n[prsm]\nparameters = { stepper = "closed_form_explicit" }\n',
+    scene_python.write_text(short + '\n[prsm]\nparameters = { stepper = "closed_form" }\n',
                             encoding="utf-8")
     out = tmp_path / "out"
     status = main(["run", "--scene", str(scene_native), "--prsm", "native", "--fmu",

@@ -11,7 +11,8 @@
  *    parameters (geometry: causality local, variability constant) cannot be set at all;
  *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
  *    in initialization mode) a value out of range, fidelity auto, a stepper the level does not
- *    run here (kinematic, quasi-static: default, closed_form_explicit, explicit_adaptive;
+ *    run here (kinematic, quasi-static: default = closed_form, closed_form_explicit,
+ *    explicit_adaptive;
  *    dynamic: default, rosenbrock), or a value of a parameter this code does not model (it must
  *    stay at its start value, 0);
  *  - doStep refuses with fmi2Discard (logged, state unchanged) a non-finite or non-positive
@@ -187,20 +188,23 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         return -1;
     }
     const char *st = choice(s, P_STEPPER_TYPE, P_STEPPER, P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
-    /* the friction band is stepped by Dormand-Prince 5(4) here: the Python FMU's
-     * closed_form_explicit; its closed_form (scalar exponential band step) is not translated.
-     * The dynamic level runs the Python FMU's default, ROS34PW2. */
+    /* the slaved levels run the Python FMU's default, closed_form (the friction band stepped by
+     * the exponential step of prsm_band.c), or closed_form_explicit (Dormand-Prince 5(4) in the
+     * band) or explicit_adaptive; the dynamic level the Python FMU's default, ROS34PW2. */
     if (cfg->dynamic) {
         if (strcmp(st, "default") && strcmp(st, "rosenbrock")) {
             snprintf(msg, (size_t)len, "stepper = '%s' is not allowed with fidelity = 'dynamic' in "
                      "the native FMU: must be one of default (= rosenbrock), rosenbrock", st);
             return -1;
         }
-    } else if (!strcmp(st, "default") || !strcmp(st, "closed_form_explicit")) cfg->closed_form = 1;
+    } else if (!strcmp(st, "default") || !strcmp(st, "closed_form")) {
+        cfg->closed_form = 1;
+        cfg->band_exponential = 1;
+    } else if (!strcmp(st, "closed_form_explicit")) cfg->closed_form = 1;
     else if (!strcmp(st, "explicit_adaptive")) cfg->closed_form = 0;
     else {
         snprintf(msg, (size_t)len, "stepper = '%s' is not allowed in the native FMU: must be one of "
-                 "default (= closed_form_explicit), closed_form_explicit, explicit_adaptive", st);
+                 "default (= closed_form), closed_form, closed_form_explicit, explicit_adaptive", st);
         return -1;
     }
     const char *names[2] = {"initial_screw_speed", "initial_screw_angle"};
