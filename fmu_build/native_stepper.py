@@ -11,9 +11,10 @@ work-precision study times the seed 000 start-up with it.
 The C is compiled with gcc, with the geometry of the model's preset built in
 (:func:`fmu_build.native.constants_header`), into a shared library cached by the hash of its
 sources in a directory of the user's own in the system's temporary directory; it exchanges only
-doubles and ints with Python (``prsm_api.c``, through ctypes).  What the C does not model
-(viscous and differential-sliding friction, the speed drive below the dynamic level) is refused
-on construction.
+doubles and ints with Python (``prsm_api.c``, through ctypes).  Every friction term is modelled
+(Coulomb, the friction-torque article's viscous and differential-sliding terms, the joints);
+what the C does not model (the speed drive below the dynamic level, ``auto``) is refused on
+construction.
 """
 
 from __future__ import annotations
@@ -68,6 +69,8 @@ def native_library(params) -> ctypes.CDLL:
     dbl, i32, vp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
     dll.prsm_api_new.restype = vp
     dll.prsm_api_new.argtypes = [dbl, i32, ctypes.c_char_p, ctypes.c_int]
+    dll.prsm_api_new_terms.restype = vp
+    dll.prsm_api_new_terms.argtypes = [dbl, i32, dbl, i32, ctypes.c_char_p, ctypes.c_int]
     dll.prsm_api_set_tolerances.argtypes = [vp, ctypes.c_double, ctypes.c_double]
     dll.prsm_api_n_states.argtypes = [vp]
     dll.prsm_api_advance_many.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double,
@@ -125,10 +128,6 @@ class NativeStepper(Stepper):
             raise ValueError(f"stepper = {stepper!r} is not allowed for the native stepper at "
                              f"fidelity = {level!r}: must be one of {', '.join(allowed)}")
         band = allowed.get(stepper or "closed_form_explicit")
-        for name in ("mu_viscous", "mu_differential"):
-            if getattr(params, name):
-                raise ValueError(f"{name} = {getattr(params, name)!r} is not modelled in C: it "
-                                 "must be 0 for the native stepper")
         for name, value in (("rtol", rtol), ("atol", atol)):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
@@ -144,8 +143,12 @@ class NativeStepper(Stepper):
             raise ValueError(f"the C model reads {lib.prsm_api_n_reals()} doubles and "
                              f"{lib.prsm_api_n_ints()} ints, not {len(reals)} and {len(ints)}")
         msg = ctypes.create_string_buffer(_MSG)
-        handle = lib.prsm_api_new((ctypes.c_double * len(reals))(*reals),
-                                  (ctypes.c_int * len(ints))(*ints), msg, _MSG)
+        term_reals = [float(params.mu_viscous), float(params.mu_differential)]
+        term_ints = [int(st.threads_per_roller) for st in params.stages]
+        handle = lib.prsm_api_new_terms((ctypes.c_double * len(reals))(*reals),
+                                        (ctypes.c_int * len(ints))(*ints),
+                                        (ctypes.c_double * 2)(*term_reals),
+                                        (ctypes.c_int * len(term_ints))(*term_ints), msg, _MSG)
         if not handle:
             raise ValueError(msg.value.decode())
         self._handle = ctypes.c_void_p(handle)

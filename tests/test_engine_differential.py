@@ -2,8 +2,9 @@
 reference (the model and the stepper it translates), and of both against a tight reference.
 
 Each case draws a mechanism (one, two or three stages; masses, inertias, roller and carrier
-counts, spline and bearing radii, the three Coulomb coefficients and the slip velocity scale
-drawn within their bounds around a preset's values) and a scenario: a level (kinematic,
+counts, spline and bearing radii, the three Coulomb coefficients, the viscous and
+differential-sliding terms and the slip velocity scale drawn within their bounds around a
+preset's values) and a scenario: a level (kinematic,
 quasi-static, dynamic), a stepper (at the slaved levels the Python default ``closed_form`` and
 ``closed_form_explicit``; at the dynamic level ``rosenbrock``, torque or speed drive), adaptive
 or fixed internal steps, a tolerance, a communication step, a start (at rest, creeping inside
@@ -62,9 +63,9 @@ def _three_stage():
 
 
 def _single_stage():
-    # the friction-torque article's single stage with its Coulomb coefficients only: the
-    # viscous and differential-sliding terms are drawn separately (see _draw_mechanism)
-    return replace(presets.load("seed003_single_stage"), mu_viscous=0.0, mu_differential=0.0)
+    # the friction-torque article's single stage (its viscous and differential-sliding terms
+    # are drawn in _draw_one like the others)
+    return presets.load("seed003_single_stage")
 
 
 BASES = {1: _single_stage, 2: lambda: presets.load("seed000_two_stage"), 3: _three_stage}
@@ -117,8 +118,13 @@ def _draw_one(rng: random.Random):
     # part of the contact normal, ~0.7 for 45 degree flanks): refused on construction, or
     # Painleve states (no rigid-contact solution) along the run
     mu_sr = rng.uniform(0.55, 0.95) if rng.random() < 0.08 else mu(0.3)
+    # the viscous term per thread (the article: 1e-3 N.s/m; up to its bound 1e5 here) and the
+    # differential-sliding arm (the article: ~1e-6 m; bound 1e-3 m), each absent in half of
+    # the cases
+    mu_v = 0.0 if rng.random() < 0.5 else _log_uniform(rng, 1e-4, 1e2)
+    mu_d = 0.0 if rng.random() < 0.5 else _log_uniform(rng, 1e-7, 1e-4)
     params = replace(base, stages=tuple(stages), mu_screw_roller=mu_sr, mu_spline=mu(0.2),
-                     mu_nut_screw=mu(0.2),
+                     mu_nut_screw=mu(0.2), mu_viscous=mu_v, mu_differential=mu_d,
                      slip_velocity_scale=_log_uniform(rng, 1e-4, 1e-2))
     return params.validate()
 
@@ -222,7 +228,8 @@ def run_case(rng: random.Random, tally: Tally, long: bool) -> list[str]:
     model_q = make_model(replace(params, mu_screw_roller=0.0), "quasi-static", "torque")
     sc = _draw_scenario(rng, params, model_q)
     label = (f"{params.n_stages} stages mu=({params.mu_screw_roller:.3g}, {params.mu_spline:.3g},"
-             f" {params.mu_nut_screw:.3g}) v_eps={params.slip_velocity_scale:.3g} {sc}")
+             f" {params.mu_nut_screw:.3g}, viscous {params.mu_viscous:.3g}, differential "
+             f"{params.mu_differential:.3g}) v_eps={params.slip_velocity_scale:.3g} {sc}")
     tally.cases += 1
     try:
         model = make_model(params, sc.level, sc.drive)

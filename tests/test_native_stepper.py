@@ -99,8 +99,8 @@ def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
         _native(make_model(params, "dynamic", "torque"), rtol=0.0)
     from dataclasses import replace
 
-    with pytest.raises(ValueError, match="mu_viscous"):
-        _native(make_model(replace(params, mu_viscous=0.01), "dynamic", "torque"))
+    with pytest.raises(ValueError, match="stepper"):
+        _native(make_model(params, "dynamic", "torque"), stepper="closed_form")
     model = make_model(params, "dynamic", "speed")
     nat = _native(model, max_substeps=1)
     x = model.initial_state((0.0, 5000.0), screw_speed=100.0, carrier_ratio=0.0)

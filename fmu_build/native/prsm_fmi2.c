@@ -290,8 +290,8 @@ static void compute_outputs(component *c) {
         case Q_FRICTION_WORK: v = x[ie + 2]; break;
         /* the viscous and differential-sliding terms are pinned to 0 in the native FMU */
         case Q_FRICTION_POWER_COULOMB: v = o.p_coulomb; break;
-        case Q_FRICTION_POWER_VISCOUS: v = 0.0; break;
-        case Q_FRICTION_POWER_DIFFERENTIAL: v = 0.0; break;
+        case Q_FRICTION_POWER_VISCOUS: v = o.p_viscous; break;
+        case Q_FRICTION_POWER_DIFFERENTIAL: v = o.p_differential; break;
         case Q_FRICTION_POWER_JOINTS: v = o.p_joints; break;
         case Q_SCREW_FRICTION_TORQUE:
             v = o.motor - load * c_out - m->equivalent_inertia * o.alpha; break;

@@ -46,9 +46,10 @@ static inline int finite_sum(const double *v, int n) {
 /* the dynamic level's states: angle, speed, one speed per carrier, the three work integrals */
 #define PRSM_NX_MAX (5 + PRSM_N_STAGES)
 
-/* per-flank constants of one stage's screw-roller contact (mechanics._Flank.consts) */
+/* per-flank constants of one stage's screw-roller contact (mechanics._Flank.consts) and its
+ * contact radius [m] */
 typedef struct {
-    double ax, ay, az, bx, by, px, py, nz, pn;
+    double ax, ay, az, bx, by, px, py, nz, pn, radius;
 } prsm_flank;
 
 /* the mechanism's tunable values (one stage) */
@@ -69,7 +70,7 @@ typedef struct {
 
 /* the friction band's exponential step (prsm_band.h): ScalarExponential.__init__ with the FMU's
  * options; the breaks are the model's smooth_breaks (SlavedLevel.smooth_breaks), ascending */
-#define PRSM_MAX_BREAKS (2 * (4 * PRSM_N_STAGES + 1) + 1)
+#define PRSM_MAX_BREAKS (2 * (6 * PRSM_N_STAGES + 1) + 1)
 typedef struct {
     int n_breaks;
     double breaks[PRSM_MAX_BREAKS];
@@ -90,12 +91,17 @@ typedef struct {
     int substeps, max_substeps;
     int band_exponential;      /* with closed_form: 1 the exponential band step (Python's
                                   closed_form), 0 Dormand-Prince (closed_form_explicit) */
+    /* the friction-torque article's other terms (0: Coulomb friction only) */
+    double mu_viscous;         /* mu_1 per engaged thread [N.s/m] */
+    double mu_differential;    /* mu_3 [m] */
+    int threads_per_roller[PRSM_N_STAGES];   /* n_t [-] (read only with mu_viscous > 0) */
 } prsm_config;
 
 /* per-stage constants of the recursion (mechanics._Stage after Mechanism.__init__) */
 typedef struct {
     double n_rollers, c, c_prev, m_assembly, m_screw, j_screw, j_carrier;
     double e_spline, g_bearing, spline_f, bearing_f, m_sc, mass_below, zeta;
+    double c_viscous, vz_factor;     /* N_R mu_1 n_t [N.s/m]; its axial force per unit omega */
 } prsm_stage;
 
 /* the linear law of one (sign w, sign F) pair (slaved.SlavedAdvance._law) */
@@ -114,6 +120,10 @@ typedef struct {
     int kinematic, dynamic, speed_drive;
     int nx, ie;                        /* states; index of input_work (after the carriers) */
     double mu, v_eps, c_out, last_mass, equivalent_inertia, loss_factor, band_speed;
+    double mu3;                        /* differential sliding mu_3 [m] (0 at the kinematic level) */
+    double viscous_loss, differential_loss;   /* the kinematic level's C_v [N.m.s/rad], C_d [m] */
+    int coulomb_loss;                  /* the kinematic level's Coulomb-like loss acts */
+    int viscous;                       /* a viscous term acts: the closed form declines */
     prsm_law law[2][2];
     /* stepper */
     int closed_form;
@@ -145,6 +155,7 @@ typedef struct {
 typedef struct {
     double alpha, motor, friction_power, kinetic_energy, efficiency, loss;
     double p_coulomb, p_joints;      /* friction_power's Coulomb (contacts) and joints parts [W] */
+    double p_viscous, p_differential;   /* its viscous and differential-sliding parts [W] */
     int consistent;                  /* 0: the rigid contact has no solution here (Painleve) */
     double contact_force[PRSM_N_STAGES], normal_force[PRSM_N_STAGES],
         driven_torque[PRSM_N_STAGES], spline_friction[PRSM_N_STAGES],
