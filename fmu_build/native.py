@@ -47,7 +47,8 @@ from xml.dom.minidom import parseString
 
 import prsm_fmu
 from prsm_fmu.mechanics import Mechanism
-from prsm_fmu.params import MechanismParams
+from prsm_fmu.params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
+                             MechanismParams)
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
 from prsm_fmu.steppers.band import _GAUSS
@@ -77,9 +78,10 @@ STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "scre
 _STAGE_PARAMS = {"screw_mass": "Real", "nut_mass": "Real", "roller_mass": "Real",
                  "carrier_mass": "Real", "screw_inertia": "Real", "roller_inertia": "Real",
                  "carrier_inertia": "Real", "spline_radius": "Real", "bearing_radius": "Real",
-                 "n_rollers": "Integer", "carriers": "Integer"}
+                 "n_rollers": "Integer", "carriers": "Integer", "threads_per_roller": "Integer"}
 _SCALAR_PARAMS = {"mu_screw_roller": ("Real",), "mu_spline": ("Real",),
-                  "mu_nut_screw": ("Real",), "slip_velocity_scale": ("Real",),
+                  "mu_nut_screw": ("Real",), "mu_viscous": ("Real",),
+                  "mu_differential": ("Real",), "slip_velocity_scale": ("Real",),
                   "tolerance": ("Real",), "substeps": ("Integer",),
                   "max_substeps": ("Integer",), "kinematic_efficiency": ("Real",),
                   "initial_screw_speed": ("Real",), "initial_screw_angle": ("Real",),
@@ -108,7 +110,7 @@ _STAGE_OUTPUTS = {"contact_force": "Q_CONTACT_FORCE", "normal_force": "Q_NORMAL_
 _COUNTERS = {"step_rhs_calls": "C_RHS_CALLS", "step_substeps": "C_SUBSTEPS",
              "step_fidelity": "C_FIDELITY", "contact_status": "C_CONTACT"}
 #: stage fields that only scale a term the native FMU leaves out (pinned to their start value)
-_SCALE_OF_ABSENT_TERM = ("threads_per_roller",)
+_SCALE_OF_ABSENT_TERM: tuple = ()
 _STAGE_NAME = re.compile(r"^stage\[(\d+)\]\.(\w+)$")
 _TYPE_CODE = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN",
               "String": "T_STRING", "Enumeration": "T_ENUM"}
@@ -206,6 +208,11 @@ static const double PRSM_ROS_M[4] = {{{", ".join(_hex(v) for v in _ROS_M)}}};
 static const double PRSM_ROS_E[4] = {{{", ".join(_hex(v) for v in _ROS_E)}}};
 static const double PRSM_ROS_WQ[4] = {{{", ".join(_hex(v) for v in _ROS_WQ)}}};
 static const double PRSM_ROS_EQ[4] = {{{", ".join(_hex(v) for v in _ROS_EQ)}}};
+
+/* the bounds of the friction-torque article's terms (prsm_fmu.params) */
+#define PRSM_MAX_MU_VISCOUS {_hex(float(MAX_MU_VISCOUS))}
+#define PRSM_MAX_MU_DIFFERENTIAL {_hex(float(MAX_MU_DIFFERENTIAL))}
+#define PRSM_MAX_THREADS_PER_ROLLER {int(MAX_THREADS_PER_ROLLER)}
 
 /* the friction band's exponential step (prsm_fmu.steppers.band): sqrt(eps) of the difference
    increment; Gauss-Legendre nodes on [-1, 1] and weights, 5 and 3 points */

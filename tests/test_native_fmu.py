@@ -30,9 +30,9 @@ from fmpy.validation import validate_fmu  # noqa: E402
 from test_fmu import OK, DISCARD, Host, built_fmus, max_relative_difference, subprocess_env  # noqa: E402
 from test_fmu_c_host import STEPS as HOST_STEPS, c_host  # noqa: E402,F401 - fixture
 
-#: PRSM1 (the friction-torque article's preset) has a viscous and a differential-sliding term,
-#: which the native FMU does not model: it is built for PRSM2 and PRSM3 only
-NATIVE = ("PRSM2", "PRSM3")
+#: the standard FMUs, PRSM1 (the friction-torque article's preset, with its viscous and
+#: differential-sliding terms) included
+NATIVE = ("PRSM1", "PRSM2", "PRSM3")
 ERROR = 3
 H = 1e-3
 #: the Python FMU's stepper that runs the native FMU's default method: ``closed_form``, the
@@ -156,6 +156,22 @@ def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, 
     assert min(speeds) < -50.0 < 90.0 < max(speeds)              # it reversed
     assert max(r[i_calls] for r in py) > 1                        # the band's numerical steps ran
     assert [r[i_calls] for r in nat] == [r[i_calls] for r in py]  # ... the same ones
+
+
+@pytest.mark.parametrize("fidelity,stepper", [("quasi-static", None), ("kinematic", None),
+                                              ("quasi-static", "closed_form_explicit"),
+                                              ("dynamic", None)])
+def test_friction_preset_prsm1_equals_the_python_fmu_bit_for_bit(native, fidelity, stepper):
+    """PRSM1, the friction-torque article's single stage with its viscous (mu_1) and
+    differential-sliding (mu_3) terms: the native FMU's outputs, the per-term friction powers
+    among them, equal the Python FMU's with the same stepper in the speed loop with a reversal."""
+    start = {"fidelity": fidelity, **({"stepper": stepper} if stepper else {})}
+    py, nat, names = both_loops("PRSM1", {**start, **({} if stepper or fidelity == "dynamic"
+                                                        else PY_SAME_METHOD)}, start, 500.0,
+                                n=300)
+    assert nat == py
+    i_visc, i_diff = names.index("friction_power_viscous"), names.index("friction_power_differential")
+    assert max(abs(r[i_visc]) for r in py) > 0.0 and max(abs(r[i_diff]) for r in py) > 0.0
 
 
 @pytest.mark.parametrize("name,load,start", [
@@ -313,6 +329,9 @@ def test_refused_calls_are_logged_and_change_nothing(native):
                                          "stepper"),
                                         ({"stepper": "exponential"}, "stepper"),
                                         ({"mu_screw_roller": 0.9}, "mu_screw_roller"),
+                                        # the friction-torque article's terms' bounds (1e5, 1e-3)
+                                        ({"mu_viscous": 2e5}, "mu_viscous"),
+                                        ({"mu_differential": 2e-3}, "mu_differential"),
                                         ({"stage[2].nut_mass": -1.0}, "stage[2].nut_mass")])
 def test_initialization_refuses_what_it_does_not_run(native, start, word):
     from fmpy.fmi1 import FMICallException
@@ -343,12 +362,12 @@ def test_generator_pins_unmodelled_parameters_to_zero_and_refuses_unknown_output
         ET.SubElement(sv, "Real", {"start": start} if start else {})
         return ET.tostring(root)
 
-    # the real FMU's own unmodelled terms (mu_viscous, mu_differential and the threads per roller
-    # that scale the viscous term: 2 + 2 stages) are pinned; a parameter added to it is one more
+    # every parameter of the real FMU is modelled (the viscous and differential-sliding terms
+    # too); a parameter added to it is pinned to its start value
     base = variables_header(md, params, "X", "g")
-    assert '#define N_UNMODELLED 4' in base and '"mu_viscous"' in base
+    assert '#define N_UNMODELLED 0' in base
     header = variables_header(with_variable("mu_new_term", "parameter", "0.0"), params, "X", "g")
-    assert '#define N_UNMODELLED 5' in header and '"mu_new_term"' in header
+    assert '#define N_UNMODELLED 1' in header and '"mu_new_term"' in header
     with pytest.raises(BuildError, match="mu_new_term"):
         variables_header(with_variable("mu_new_term", "parameter", "0.1"), params, "X", "g")
     with pytest.raises(BuildError, match="viscous_torque"):

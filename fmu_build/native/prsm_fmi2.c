@@ -152,10 +152,13 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         v->bearing_radius = s->par_real[P_BEARING_RADIUS[k]];
         v->n_rollers = s->par_int[P_N_ROLLERS[k]];
         v->carriers = s->par_int[P_CARRIERS[k]];
+        cfg->threads_per_roller[k] = s->par_int[P_THREADS_PER_ROLLER[k]];
     }
     cfg->mu_screw_roller = s->par_real[P_MU_SCREW_ROLLER];
     cfg->mu_spline = s->par_real[P_MU_SPLINE];
     cfg->mu_nut_screw = s->par_real[P_MU_NUT_SCREW];
+    cfg->mu_viscous = s->par_real[P_MU_VISCOUS];
+    cfg->mu_differential = s->par_real[P_MU_DIFFERENTIAL];
     cfg->slip_velocity_scale = s->par_real[P_SLIP_VELOCITY_SCALE];
     cfg->tolerance = s->par_real[P_TOLERANCE];
     cfg->substeps = s->par_int[P_SUBSTEPS];
@@ -288,7 +291,6 @@ static void compute_outputs(component *c) {
         case Q_INPUT_WORK: v = x[ie]; break;
         case Q_OUTPUT_WORK: v = x[ie + 1]; break;
         case Q_FRICTION_WORK: v = x[ie + 2]; break;
-        /* the viscous and differential-sliding terms are pinned to 0 in the native FMU */
         case Q_FRICTION_POWER_COULOMB: v = o.p_coulomb; break;
         case Q_FRICTION_POWER_VISCOUS: v = o.p_viscous; break;
         case Q_FRICTION_POWER_DIFFERENTIAL: v = o.p_differential; break;

@@ -483,19 +483,26 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
         check_friction("mu_nut_screw", cfg->mu_nut_screw, msg, len) ||
         check_positive("slip_velocity_scale", 0, cfg->slip_velocity_scale, msg, len))
         return -1;
-    if (!(isfinite(cfg->mu_viscous) && cfg->mu_viscous >= 0.0))
-    {
-        snprintf(msg, (size_t)len, "mu_viscous = %.17g is out of range: must be a finite number >= 0 [N.s/m]", cfg->mu_viscous);
+    /* MechanismParams.validate's bounds of the viscous and differential-sliding terms */
+    if (!(isfinite(cfg->mu_viscous) && cfg->mu_viscous >= 0.0 && cfg->mu_viscous <= PRSM_MAX_MU_VISCOUS)) {
+        snprintf(msg, (size_t)len, "mu_viscous = %.17g N.s/m is out of range: must be in [0, %g] N.s/m",
+                 cfg->mu_viscous, PRSM_MAX_MU_VISCOUS);
         return -1;
     }
-    if (!(isfinite(cfg->mu_differential) && cfg->mu_differential >= 0.0))
-    {
-        snprintf(msg, (size_t)len, "mu_differential = %.17g is out of range: must be a finite number >= 0 [m]", cfg->mu_differential);
+    if (!(isfinite(cfg->mu_differential) && cfg->mu_differential >= 0.0
+          && cfg->mu_differential <= PRSM_MAX_MU_DIFFERENTIAL)) {
+        snprintf(msg, (size_t)len, "mu_differential = %.17g m is out of range: must be in [0, %g] m",
+                 cfg->mu_differential, PRSM_MAX_MU_DIFFERENTIAL);
         return -1;
     }
-    for (int k = 0; k < NS; k++)
-        if (cfg->mu_viscous > 0.0 && check_int("threads_per_roller", k + 1, cfg->threads_per_roller[k], 1, msg, len))
+    for (int k = 0; k < NS; k++) {
+        int t = cfg->threads_per_roller[k];
+        if (cfg->mu_viscous > 0.0 && !(t >= 1 && t <= PRSM_MAX_THREADS_PER_ROLLER)) {
+            snprintf(msg, (size_t)len, "stage[%d].threads_per_roller = %d is out of range: must be "
+                     "in [1, %d]", k + 1, t, PRSM_MAX_THREADS_PER_ROLLER);
             return -1;
+        }
+    }
     double tol = cfg->tolerance;
     if (!(isfinite(tol) && 0.0 < tol && tol < 1.0)) {
         snprintf(msg, (size_t)len, "tolerance = %.17g is out of range: must be in (0, 1)", tol);
