@@ -122,16 +122,18 @@ def test_advance_many_equals_single_advances():
     assert stats.rhs_calls == calls
 
 
-def test_quasi_static_level_equals_the_python_closed_form_explicit():
-    """The slaved level in C: the closed form under held inputs and Dormand-Prince 5(4) where it
-    declines (the screw starting from rest against a load: the friction band), against the Python
-    stepper ``closed_form_explicit`` at the same tolerances."""
+@pytest.mark.parametrize("stepper", [None, "closed_form_explicit", "closed_form"])
+def test_quasi_static_level_equals_the_python_closed_form_explicit(stepper):
+    """The slaved level in C: the closed form under held inputs and, where it declines (the
+    screw starting from rest against a load: the friction band), Dormand-Prince 5(4) (None, the
+    former default, and closed_form_explicit) or the exponential band step (closed_form),
+    against the Python stepper of that name at the same tolerances."""
     model = make_model(presets.load("seed000_two_stage"), "quasi-static", "torque")
     u = (19.75, 5000.0)
     x0 = model.initial_state(u)
-    py = make_stepper("closed_form_explicit", model,
-                      **tuned_stepper_options("closed_form_explicit", 1e-6, 1e-8))
-    nat = _native(model, rtol=1e-6, atol=1e-8)
+    name = stepper or "closed_form_explicit"
+    py = make_stepper(name, model, **tuned_stepper_options(name, 1e-6, 1e-8))
+    nat = _native(model, rtol=1e-6, atol=1e-8, stepper=stepper)
     xa = xb = x0
     band_steps = 0
     for i in range(50):
