@@ -13,8 +13,7 @@ The C is compiled with gcc, with the geometry of the model's preset built in
 sources in a directory of the user's own in the system's temporary directory; it exchanges only
 doubles and ints with Python (``prsm_api.c``, through ctypes).  Every friction term is modelled
 (Coulomb, the friction-torque article's viscous and differential-sliding terms, the joints);
-what the C does not model (the speed drive below the dynamic level, ``auto``) is refused on
-construction.
+both drives at every level; what the C does not model (``auto``) is refused on construction.
 """
 
 from __future__ import annotations
@@ -86,13 +85,13 @@ def native_library(params) -> ctypes.CDLL:
 
 class NativeStepper(Stepper):
     """ROS34PW2 (dynamic level) or the closed form with its exponential or Dormand-Prince band
-    step (slaved levels, torque drive) in C, for a :mod:`prsm_fmu` model of the mechanism.
+    step (slaved levels) in C, for a :mod:`prsm_fmu` model of the mechanism (either drive).
 
     Parameters
     ----------
     model : prsm_fmu.models.base.Model
-        A kinematic, quasi-static or dynamic model (torque drive; speed drive at the dynamic
-        level); its parameters, level and drive select the C model.
+        A kinematic, quasi-static or dynamic model, torque or speed drive; its parameters,
+        level and drive select the C model.
     rtol, atol : float
         Relative [-] and absolute [state units] tolerances of the adaptive steps (the Python
         steppers' meaning).

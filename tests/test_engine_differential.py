@@ -5,8 +5,9 @@ Each case draws a mechanism (one, two or three stages; masses, inertias, roller 
 counts, spline and bearing radii, the three Coulomb coefficients, the viscous and
 differential-sliding terms and the slip velocity scale drawn within their bounds around a
 preset's values) and a scenario: a level (kinematic,
-quasi-static, dynamic), a stepper (at the slaved levels the Python default ``closed_form`` and
-``closed_form_explicit``; at the dynamic level ``rosenbrock``, torque or speed drive), adaptive
+quasi-static, dynamic), a drive (torque, or speed: a prescribed acceleration, zero in some
+pieces), a stepper (at the slaved levels the Python default ``closed_form`` and
+``closed_form_explicit``; at the dynamic level ``rosenbrock``), adaptive
 or fixed internal steps, a tolerance, a communication step, a start (at rest, creeping inside
 the friction band, moving either way) and piecewise-constant inputs of either sign (step inputs,
 reversals through zero, holding torques inside the friction band).
@@ -143,11 +144,10 @@ class Scenario:
 
 def _draw_scenario(rng: random.Random, params, model_q) -> Scenario:
     level = rng.choice(("kinematic", "quasi-static", "quasi-static", "dynamic", "dynamic"))
+    drive = rng.choice(("torque", "torque", "speed"))
     if level == "dynamic":
-        drive = rng.choice(("torque", "torque", "speed"))
         stepper = "rosenbrock"
     else:
-        drive = "torque"
         stepper = rng.choice(("closed_form", "closed_form", "closed_form_explicit"))
     tol = rng.choice((1e-3, 1e-4, 1e-6, 1e-8))
     substeps = rng.choice((0, 0, 0, 0, 0, 2, 5))

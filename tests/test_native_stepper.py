@@ -93,8 +93,8 @@ def test_memory_round_trip_repeats_the_next_advance():
 
 def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
     params = presets.load("seed000_two_stage")
-    with pytest.raises(ValueError, match="drive = 'speed'"):
-        _native(make_model(params, "quasi-static", "speed"))
+    with pytest.raises(ValueError, match="fidelity"):
+        _native(make_model(params, "auto", "torque", tolerance=1e-3))
     with pytest.raises(ValueError, match="rtol"):
         _native(make_model(params, "dynamic", "torque"), rtol=0.0)
     from dataclasses import replace

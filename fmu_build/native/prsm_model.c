@@ -401,8 +401,14 @@ static int slaved_advance(prsm_model *m, const double *x, const double *u, doubl
     const prsm_law *law = law_of(m, sign_w, load > 0.0 ? 1.0 : -1.0);
     if (!law) return 0;
     double loss = law->loss_per_load * fabs(load) * sign_w;
-    double torque = u[0];
-    double alpha = (torque - loss - law->k_load * load) / law->k_alpha;
+    double torque, alpha;
+    if (m->speed_drive) {
+        alpha = u[0];
+        torque = law->k_load * load + law->k_alpha * alpha + loss;
+    } else {
+        torque = u[0];
+        alpha = (torque - loss - law->k_load * load) / law->k_alpha;
+    }
     for (int i = 0; i < law->n_checks; i++)
         if ((law->c_load[i] * load + law->c_alpha[i] * alpha >= 0.0) != law->positive[i]) return 0;
     double w1 = w0 + alpha * h;
@@ -417,9 +423,22 @@ static int slaved_advance(prsm_model *m, const double *x, const double *u, doubl
     return 1;
 }
 
-/* slaved_advance with the signature of prsm_band.h's closed-form step */
+/* SlavedLevel.closed_form_advance: at a constant prescribed speed (speed drive, acceleration 0)
+ * one Euler step, exact; otherwise slaved_advance.  1 and y if exact, 0 if not */
+static int closed_form_advance(prsm_model *m, const double *x, const double *u, double h,
+                               double *y) {
+    if (m->speed_drive && u[0] == 0.0) {
+        double dx[PRSM_NX_MAX];
+        rhs(m, x, u, dx);
+        for (int i = 0; i < PRSM_NX; i++) y[i] = x[i] + h * dx[i];
+        return 1;
+    }
+    return slaved_advance(m, x, u, h, y);
+}
+
+/* closed_form_advance with the signature of prsm_band.h's closed-form step */
 static int exact_ctx(void *ctx, const double *x, const double *u, double h, double *y) {
-    return slaved_advance((prsm_model *)ctx, x, u, h, y);
+    return closed_form_advance((prsm_model *)ctx, x, u, h, y);
 }
 
 /* ---- model set-up ------------------------------------------------------------------------- */
@@ -524,9 +543,6 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
 
     m->kinematic = cfg->kinematic;
     m->dynamic = cfg->dynamic && !cfg->kinematic;
-    if (cfg->speed_drive && !m->dynamic)
-        return fail(msg, len, "drive = 'speed' is not available at this level in C: the speed drive "
-                    "runs at the dynamic level only");
     m->speed_drive = cfg->speed_drive;
     m->nx = m->dynamic ? PRSM_NX_MAX : PRSM_NX;
     m->ie = m->dynamic ? 2 + NS : 2;
@@ -988,7 +1004,7 @@ int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_
         memcpy(x_new, y, sizeof y);
         return 0;
     }
-    if (m->closed_form && slaved_advance(m, x, u, h, x_new)) {
+    if (m->closed_form && closed_form_advance(m, x, u, h, x_new)) {
         if (!finite_sum(x_new, PRSM_NX))
             return fail(msg, len, "closed_form: non-finite value in the closed-form step");
         stats->rhs_calls = 1;

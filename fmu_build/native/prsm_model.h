@@ -1,5 +1,5 @@
-/* The PRSM's kinematic, quasi-static and dynamic levels in C (torque drive; the dynamic level also
- * the speed drive): the model and its steppers.
+/* The PRSM's kinematic, quasi-static and dynamic levels in C (torque or speed drive; every
+ * friction term): the model and its steppers.
  *
  * A translation of the Python package, operation for operation, so that the results are the
  * Python FMU's bit for bit (tests/test_native_fmu.py):
@@ -84,7 +84,7 @@ typedef struct {
     double mu_screw_roller, mu_spline, mu_nut_screw, slip_velocity_scale;
     int kinematic;             /* 1: kinematic level, 0: quasi-static or dynamic */
     int dynamic;               /* 1: dynamic level (carrier speeds are states) */
-    int speed_drive;           /* 1: inputs (screw acceleration [rad/s2], load [N]); dynamic only */
+    int speed_drive;           /* 1: inputs (screw acceleration [rad/s2], load [N]) */
     double kinematic_efficiency;
     int closed_form;           /* 1: closed form with DP5(4) fallback; 0: DP5(4) only */
     double tolerance;
