@@ -530,7 +530,7 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         guid = str(uuid.uuid5(uuid.NAMESPACE_URL, "prsm-fmu-native:" + digest.hexdigest()))
         (src / "prsm_variables.h").write_text(variables_header(md, params, identifier, guid),
                                               encoding="utf-8")
-        (src / "README.txt").write_text(SOURCES_README.format(id=identifier), encoding="utf-8")
+        (src / "README.txt").write_text(SOURCES_README.format(id=identifier, sources=" ".join(SOURCES)), encoding="utf-8")
         lib = tmp / "binaries" / "linux64" / f"{identifier}.so"
         lib.parent.mkdir(parents=True)
         compile_library(src, lib)
@@ -553,9 +553,9 @@ SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation, C99, 
 
 Compile for another platform, e.g.
 
-  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.so -lm
-  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.dylib
-  Windows  cl /O2 /fp:precise /LD prsm_model.c prsm_ros.c prsm_fmi2.c /Fe{id}.dll
+  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off {sources} -o {id}.so -lm
+  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off {sources} -o {id}.dylib
+  Windows  cl /O2 /fp:precise /LD {sources} /Fe{id}.dll
 
 and put the library under binaries/<platform>/ (linux64, darwin64, win64).  Keep fused
 multiply-add off (-ffp-contract=off; MSVC /fp:precise) and no fast-math: the results then equal

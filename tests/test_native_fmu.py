@@ -125,6 +125,10 @@ def test_model_description_mirrors_the_python_fmu_and_validates(native, name):
         listed = [f.get("name") for f in ET.fromstring(z.read("modelDescription.xml"))
                   .iterfind("CoSimulation/SourceFiles/File")]
         assert listed and all(f"sources/{f}" in names for f in listed)
+        # the compile lines of the sources' README name every listed source
+        readme = z.read("sources/README.txt").decode()
+        assert all(f in line for f in listed for line in readme.splitlines()
+                   if line.strip().startswith(("Linux", "macOS", "Windows")))
         so = z.read(f"binaries/linux64/{name}_native.so")
         assert not any(n.startswith("resources/") for n in names)      # no Python inside
     lib = Path(tempfile.mkdtemp()) / "lib.so"
