@@ -56,8 +56,7 @@ STEPPER_ITEMS: dict[str, tuple[int, str]] = {
     "exponential": (6, "exponential Rosenbrock exprb32 with error control: the stiff speeds "
                        "integrated exactly through their phi-functions (stiff)"),
     "closed_form_explicit": (7, "exact constant-acceleration step, adaptive Dormand-Prince 5(4) in "
-                                "the friction band (kinematic and quasi-static only; the native C "
-                                "FMU's method)"),
+                                "the friction band (kinematic and quasi-static only)"),
 }
 
 #: Enumeration name -> its items, as the modelDescription's TypeDefinitions declare them
