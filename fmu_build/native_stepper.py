@@ -11,9 +11,9 @@ work-precision study times the Li et al. (2021) start-up with it.
 The C is compiled with gcc, with the geometry of the model's preset built in
 (:func:`fmu_build.native.constants_header`), into a shared library cached by the hash of its
 sources in a directory of the user's own in the system's temporary directory; it exchanges only
-doubles and ints with Python (``prsm_api.c``, through ctypes).  What the C does not model
-(viscous and differential-sliding friction, the speed drive below the dynamic level) is refused
-on construction.
+doubles and ints with Python (``prsm_api.c``, through ctypes).  Every friction term is modelled
+(Coulomb, the friction-torque article's viscous and differential-sliding terms, the joints);
+both drives at every level; what the C does not model (``auto``) is refused on construction.
 """
 
 from __future__ import annotations
@@ -28,10 +28,15 @@ from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
 __all__ = ["NativeStepper", "native_library", "load_library", "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
-LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_api.c")
+LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_api.c")
 _STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
                 "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
 _LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
+#: the Python steppers the C translates, per level, and the band method of each (1: the
+#: exponential band step, 0: Dormand-Prince 5(4); None: the dynamic level's ROS34PW2)
+STEPPERS = {"kinematic": {"closed_form": 1, "closed_form_explicit": 0},
+            "quasi-static": {"closed_form": 1, "closed_form_explicit": 0},
+            "dynamic": {"rosenbrock": None}}
 _MSG = 600
 #: libraries loaded in this process, by source hash and by the parameters' repr
 _loaded: dict[str, ctypes.CDLL] = {}
@@ -86,6 +91,8 @@ def load_library(path: str) -> ctypes.CDLL:
     dbl, i32, vp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
     dll.prsm_api_new.restype = vp
     dll.prsm_api_new.argtypes = [dbl, i32, ctypes.c_char_p, ctypes.c_int]
+    dll.prsm_api_new_terms.restype = vp
+    dll.prsm_api_new_terms.argtypes = [dbl, i32, dbl, i32, ctypes.c_char_p, ctypes.c_int]
     dll.prsm_api_set_tolerances.argtypes = [vp, ctypes.c_double, ctypes.c_double]
     dll.prsm_api_n_states.argtypes = [vp]
     dll.prsm_api_advance_many.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double,
@@ -94,30 +101,35 @@ def load_library(path: str) -> ctypes.CDLL:
     dll.prsm_api_get_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_set_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_free.argtypes = [vp]
+    dll.prsm_api_set_band.argtypes = [vp, ctypes.c_int]
     _loaded[path] = dll
     return dll
 
 
 class NativeStepper(Stepper):
-    """ROS34PW2 (dynamic level) or the closed form with its Dormand-Prince fallback (slaved
-    levels, torque drive) in C, for a :mod:`prsm_fmu` model of the mechanism.
+    """ROS34PW2 (dynamic level) or the closed form with its exponential or Dormand-Prince band
+    step (slaved levels) in C, for a :mod:`prsm_fmu` model of the mechanism (either drive).
 
     Parameters
     ----------
     model : prsm_fmu.models.base.Model
-        A kinematic, quasi-static or dynamic model (torque drive; speed drive at the dynamic
-        level); its parameters, level and drive select the C model.
+        A kinematic, quasi-static or dynamic model, torque or speed drive; its parameters,
+        level and drive select the C model.
     rtol, atol : float
         Relative [-] and absolute [state units] tolerances of the adaptive steps (the Python
         steppers' meaning).
     max_substeps : int
         Internal steps (accepted and rejected) allowed per advance.
     fixed_substeps : int or None
-        Equal internal steps per advance (ROS34PW2 without error control) instead of adaptive
-        ones.
+        Equal internal steps per advance (without error control) instead of adaptive ones.
     library : ctypes.CDLL, optional
         The loaded library (:func:`load_library`) to run, e.g. the one packed in an FMU, built
         for ``model``'s geometry; default: :func:`native_library` of the model's parameters.
+    stepper : str or None
+        The Python stepper whose steps the C repeats (:data:`STEPPERS`): at the slaved levels
+        ``"closed_form"`` (the exponential band step, the Python default) or
+        ``"closed_form_explicit"``; at the dynamic level ``"rosenbrock"``.  None: at the slaved
+        levels ``closed_form_explicit``, at the dynamic level ``rosenbrock``.
 
     Raises
     ------
@@ -129,17 +141,18 @@ class NativeStepper(Stepper):
 
     def __init__(self, model: Any, rtol: float = 1e-6, atol: float = 1e-8,
                  max_substeps: int = 100000, fixed_substeps: int | None = None,
-                 library: ctypes.CDLL | None = None) -> None:
+                 library: ctypes.CDLL | None = None, stepper: str | None = None) -> None:
         super().__init__(model)
         params = model.params
         level = getattr(model, "fidelity", "")
         if level not in _LEVELS:
             raise ValueError(f"fidelity = {level!r} is not allowed for the native stepper: must "
                              f"be one of {', '.join(_LEVELS)}")
-        for name in ("mu_viscous", "mu_differential"):
-            if getattr(params, name):
-                raise ValueError(f"{name} = {getattr(params, name)!r} is not modelled in C: it "
-                                 "must be 0 for the native stepper")
+        allowed = STEPPERS[level]
+        if stepper is not None and stepper not in allowed:
+            raise ValueError(f"stepper = {stepper!r} is not allowed for the native stepper at "
+                             f"fidelity = {level!r}: must be one of {', '.join(allowed)}")
+        band = allowed.get(stepper or "closed_form_explicit")
         for name, value in (("rtol", rtol), ("atol", atol)):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
@@ -155,12 +168,18 @@ class NativeStepper(Stepper):
             raise ValueError(f"the C model reads {lib.prsm_api_n_reals()} doubles and "
                              f"{lib.prsm_api_n_ints()} ints, not {len(reals)} and {len(ints)}")
         msg = ctypes.create_string_buffer(_MSG)
-        handle = lib.prsm_api_new((ctypes.c_double * len(reals))(*reals),
-                                  (ctypes.c_int * len(ints))(*ints), msg, _MSG)
+        term_reals = [float(params.mu_viscous), float(params.mu_differential)]
+        term_ints = [int(st.threads_per_roller) for st in params.stages]
+        handle = lib.prsm_api_new_terms((ctypes.c_double * len(reals))(*reals),
+                                        (ctypes.c_int * len(ints))(*ints),
+                                        (ctypes.c_double * 2)(*term_reals),
+                                        (ctypes.c_int * len(term_ints))(*term_ints), msg, _MSG)
         if not handle:
             raise ValueError(msg.value.decode())
         self._handle = ctypes.c_void_p(handle)
         lib.prsm_api_set_tolerances(self._handle, rtol, atol)
+        if band is not None:
+            lib.prsm_api_set_band(self._handle, band)
         n = lib.prsm_api_n_states(self._handle)
         if n != self.n_states:
             raise ValueError(f"the C model has {n} states, the model {self.n_states}")

@@ -58,8 +58,7 @@ STEPPER_ITEMS: dict[str, tuple[int, str]] = {
     "exponential": (6, "exponential Rosenbrock exprb32 with error control: the stiff speeds "
                        "integrated exactly through their phi-functions (stiff)"),
     "closed_form_explicit": (7, "exact constant-acceleration step, adaptive Dormand-Prince 5(4) in "
-                                "the friction band (kinematic and quasi-static only; the native C "
-                                "FMU's method)"),
+                                "the friction band (kinematic and quasi-static only)"),
 }
 
 #: Enumeration name -> its items, as the modelDescription's TypeDefinitions declare them
@@ -228,7 +227,7 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         if why is not None:
             stepper.engine_fallback = why
     else:
-        name = ENGINE_METHOD.get(level, name)
+        name = ENGINE_METHOD.get(level, name) if asked == "default" else asked
     x0 = model.initial_state(tuple(inputs), screw_speed=solver["initial_screw_speed"],
                              screw_angle=solver["initial_screw_angle"],
                              carrier_ratio=None if solver["initial_carrier_equilibrium"] else 0.0)

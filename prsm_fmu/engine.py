@@ -42,8 +42,13 @@ ENGINE_ENV = "PRSM_FMU_ENGINE"
 #: per level, the Python stepper the engine translates operation for operation (equal states
 #: bit for bit, tests/test_engine.py); ``default`` means this stepper when the engine runs.  A
 #: level not listed (``auto``) is offered to the engine with ``default`` and it decides.
-ENGINE_METHOD = {"kinematic": "closed_form_explicit", "quasi-static": "closed_form_explicit",
+ENGINE_METHOD = {"kinematic": "closed_form", "quasi-static": "closed_form",
                  "dynamic": "rosenbrock"}
+#: per level, every Python stepper the engine translates (the level's method first); any other
+#: stepper runs in Python
+ENGINE_STEPPERS = {"kinematic": ("closed_form", "closed_form_explicit"),
+                   "quasi-static": ("closed_form", "closed_form_explicit"),
+                   "dynamic": ("rosenbrock",)}
 #: the library's file name in an FMU's ``resources/binaries/<platform>/``
 LIBRARY_STEM = "prsm_engine"
 
@@ -182,9 +187,11 @@ def engine_stepper(model: Any, level: str, stepper: str, rtol: float, atol: floa
         ``(stepper, None)`` with the engine's stepper, or ``(None, reason)``.
     """
     method = ENGINE_METHOD.get(level)
-    if stepper not in ("default", method):
+    allowed = ENGINE_STEPPERS.get(level, ())
+    if stepper != "default" and stepper not in allowed:
         return None, (f"stepper = {stepper!r} is not the engine's (it runs "
-                      f"{method or 'no fixed method'} at fidelity = {level!r})")
+                      f"{', '.join(allowed) or 'no fixed method'} at fidelity = {level!r})")
+    name = method if stepper == "default" else stepper
     if refusal:
         return None, refusal
     if not (math.isfinite(rtol) and math.isfinite(atol)):
@@ -194,7 +201,8 @@ def engine_stepper(model: Any, level: str, stepper: str, rtol: float, atol: floa
         return None, lib
     try:
         st = _engine_class()(model, rtol=rtol, atol=atol, max_substeps=max_substeps,
-                             fixed_substeps=fixed_substeps or None, library=lib)
+                             fixed_substeps=fixed_substeps or None, library=lib,
+                             stepper=name)
     except ValueError as exc:
         return None, f"the engine refuses this configuration: {exc}"
     return st, None

@@ -94,7 +94,7 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         Default: :func:`prsm_fmu.engine.default_engine` (``native`` unless the environment
         variable ``PRSM_FMU_ENGINE`` says otherwise).  ``native``: the compiled engine steps
         the model where it can (:mod:`prsm_fmu.engine`: the level's engine method, e.g.
-        ``closed_form_explicit`` at the quasi-static level when ``stepper`` is None; only
+        ``closed_form`` at the quasi-static level when ``stepper`` is None; only
         ``max_substeps`` and ``fixed_substeps`` among ``stepper_options``), else the Python
         stepper;
         ``python``: the Python reference.  The result's ``engine`` says which ran and

@@ -32,7 +32,7 @@ SOLVER = {"fidelity": "quasi-static", "tolerance": 1e-6, "stepper": "default", "
           "max_substeps": 100000, "kinematic_efficiency": 1.0, "initial_screw_speed": 0.0,
           "initial_screw_angle": 0.0, "initial_carrier_equilibrium": False}
 #: the Python stepper the engine translates at each level (docs/fmu.md, "The native FMU")
-REFERENCE = {"kinematic": "closed_form_explicit", "quasi-static": "closed_form_explicit",
+REFERENCE = {"kinematic": "closed_form", "quasi-static": "closed_form",
              "dynamic": "rosenbrock"}
 
 
@@ -69,15 +69,14 @@ def test_configure_runs_the_engine_equal_to_the_reference_on_random_cases(level,
     print(f"{cases} random cases x 30 steps equal at {level}, substeps = {substeps}")
 
 
-@pytest.mark.parametrize("change,words", [
-    ({"mu_viscous": 10.0}, "mu_viscous"),                  # a friction term the C lacks
-    ({"mu_differential": 1e-5}, "mu_differential"),
-])
-def test_configure_falls_back_to_python_naming_the_reason(change, words):
+@pytest.mark.parametrize("change", [{"mu_viscous": 10.0}, {"mu_differential": 1e-5}])
+def test_configure_runs_the_engine_with_every_friction_term(change):
+    """The viscous and differential-sliding terms are in the engine (its equality with the
+    reference on random mechanisms with each term: tests/test_engine_differential.py)."""
     params = replace(presets.load("li2021_two_stage"), **change)
-    _m, st, _x, _l, _n = configure(params, SOLVER, (0.0, 0.0))
-    assert not is_engine(st) and words in fallback_reason(st)
-    assert st.name == "closed_form"          # the reference's default at the level
+    _m, st, _x, _l, name = configure(params, SOLVER, (0.0, 0.0))
+    assert is_engine(st) and fallback_reason(st) is None
+    assert name == "closed_form"             # the reference's default at the level, translated
 
 
 def test_configure_falls_back_for_a_stepper_or_level_the_engine_lacks():
@@ -186,7 +185,7 @@ def test_a_plain_and_a_start_build_in_one_process_keep_their_own_start_values(bu
         h.free()
 
 
-@pytest.mark.parametrize("fidelity,stepper", [(1, "closed_form_explicit"), (2, "rosenbrock")])
+@pytest.mark.parametrize("fidelity,stepper", [(1, "closed_form"), (2, "rosenbrock")])
 def test_the_fmu_runs_the_engine_equal_to_the_reference_fmu(builds, fidelity, stepper):
     """The engine FMU (default stepper) against the ``--engine python`` build with the method
     the engine translates: 300 steps with new inputs every step (a torque reversal through
@@ -211,7 +210,6 @@ def test_the_fmu_runs_the_engine_equal_to_the_reference_fmu(builds, fidelity, st
 
 
 @pytest.mark.parametrize("change,reason", [
-    ({"mu_viscous": 10.0}, "mu_viscous"),
     ({"stage[1].screw_lead": 0.0021}, "stage[1].screw_lead = 0.0021 differs from the value the "
                                       "engine library was built with"),
 ])

@@ -60,7 +60,7 @@ from text_numbers import number_after  # noqa: E402
 TOLERANCE = 1e-6              # the FMU's default ``tolerance``: rtol = tol, atol = 0.01 tol
 #: the Python steppers the compiled engine translates (docs/fmu.md, "One engine"), which the
 #: FMU's ``default`` runs where the engine runs (PRSM2, PRSM3: Coulomb friction only)
-ENGINE_REFERENCE = {"kinematic": "closed_form_explicit", "quasi-static": "closed_form_explicit",
+ENGINE_REFERENCE = {"kinematic": "closed_form", "quasi-static": "closed_form",
                     "dynamic": "rosenbrock"}
 
 
@@ -325,14 +325,14 @@ def test_fmpy_simulate_fmu_with_start_values_moves_and_closes_the_energy_balance
 
 
 # The FMU runs the compiled engine where it can (docs/fmu.md, "One engine"): with ``default``
-# its method of the level, the Python stepper it translates (closed_form_explicit at the
-# kinematic and quasi-static levels, rosenbrock at the dynamic one); PRSM1's viscous and
-# differential-sliding friction are not in the engine, so there the Python model runs with
-# the Python default (closed_form).  ``reference``: the Python stepper each case must equal.
+# its method of the level, the Python stepper it translates (closed_form at the kinematic and
+# quasi-static levels, rosenbrock at the dynamic one: the Python defaults), and
+# closed_form_explicit when asked for; PRSM1 (viscous and differential-sliding friction) too.  ``reference``: the Python stepper each case must equal.
 @pytest.mark.parametrize("name,fidelity,stepper,reference", [
-    ("PRSM2", "quasi-static", "default", "closed_form_explicit"),
+    ("PRSM2", "quasi-static", "default", "closed_form"),
     ("PRSM2", "dynamic", "default", "rosenbrock"),
-    ("PRSM2", "kinematic", "default", "closed_form_explicit"),
+    ("PRSM2", "kinematic", "default", "closed_form"),
+    ("PRSM2", "quasi-static", "closed_form_explicit", "closed_form_explicit"),
     ("PRSM2", "quasi-static", "explicit_adaptive", "explicit_adaptive"),
     ("PRSM2", "quasi-static", "closed_form", "closed_form"),
     ("PRSM1", "quasi-static", "default", "closed_form"),

@@ -31,14 +31,14 @@ from test_fmu import OK, DISCARD, Host, built_fmus, max_relative_difference, sub
 from test_fmu_c_host import STEPS as HOST_STEPS, c_host  # noqa: E402,F401 - fixture
 from text_numbers import number_after  # noqa: E402
 
-#: PRSM1 (the friction-torque article's preset) has a viscous and a differential-sliding term,
-#: which the native FMU does not model: it is built for PRSM2 and PRSM3 only
-NATIVE = ("PRSM2", "PRSM3")
+#: the standard FMUs, PRSM1 (the friction-torque article's preset, with its viscous and
+#: differential-sliding terms) included
+NATIVE = ("PRSM1", "PRSM2", "PRSM3")
 ERROR = 3
 H = 1e-3
-#: the Python FMU's stepper that runs the native FMU's method (its default ``closed_form`` steps
-#: the friction band by a scalar exponential step, the native FMU by Dormand-Prince 5(4))
-PY_SAME_METHOD = {"stepper": "closed_form_explicit"}
+#: the Python FMU's stepper that runs the native FMU's default method: ``closed_form``, the
+#: friction band stepped by the scalar exponential step (prsm_band.c in C)
+PY_SAME_METHOD = {"stepper": "closed_form"}
 
 #: the per-stage parameters the contact geometry is computed from (structural in the native FMU)
 GEOMETRY = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
@@ -126,6 +126,10 @@ def test_model_description_mirrors_the_python_fmu_and_validates(native, name):
         listed = [f.get("name") for f in ET.fromstring(z.read("modelDescription.xml"))
                   .iterfind("CoSimulation/SourceFiles/File")]
         assert listed and all(f"sources/{f}" in names for f in listed)
+        # the compile lines of the sources' README name every listed source
+        readme = z.read("sources/README.txt").decode()
+        assert all(f in line for f in listed for line in readme.splitlines()
+                   if line.strip().startswith(("Linux", "macOS", "Windows")))
         so = z.read(f"binaries/linux64/{name}_native.so")
         assert not any(n.startswith("resources/") for n in names)      # no Python inside
     lib = Path(tempfile.mkdtemp()) / "lib.so"
@@ -138,19 +142,41 @@ def test_model_description_mirrors_the_python_fmu_and_validates(native, name):
 
 # ---- one source of truth ------------------------------------------------------------------------
 
-@pytest.mark.parametrize("fidelity,load", [("quasi-static", 3000.0), ("quasi-static", -3000.0),
-                                           ("kinematic", 3000.0)])
-def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, load):
+@pytest.mark.parametrize("fidelity,load,stepper", [("quasi-static", 3000.0, None),
+                                                   ("quasi-static", -3000.0, None),
+                                                   ("kinematic", 3000.0, None),
+                                                   ("quasi-static", 3000.0, "closed_form_explicit")])
+def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, load, stepper):
+    """The native FMU's default (``closed_form``) and its ``closed_form_explicit`` against the
+    Python FMU's same stepper."""
     start = {"fidelity": fidelity}
     if fidelity == "kinematic":
         start["kinematic_efficiency"] = 0.85
-    py, nat, names = both_loops("PRSM2", {**start, **PY_SAME_METHOD}, start, load)
+    same = PY_SAME_METHOD if stepper is None else {"stepper": stepper}
+    py, nat, names = both_loops("PRSM2", {**start, **same}, {**start, **same} if stepper else start,
+                                load)
     assert nat == py                                              # bit for bit
     i_speed, i_calls = names.index("screw_speed"), names.index("step_rhs_calls")
     speeds = [r[i_speed] for r in py]
     assert min(speeds) < -50.0 < 90.0 < max(speeds)              # it reversed
     assert max(r[i_calls] for r in py) > 1                        # the band's numerical steps ran
     assert [r[i_calls] for r in nat] == [r[i_calls] for r in py]  # ... the same ones
+
+
+@pytest.mark.parametrize("fidelity,stepper", [("quasi-static", None), ("kinematic", None),
+                                              ("quasi-static", "closed_form_explicit"),
+                                              ("dynamic", None)])
+def test_friction_preset_prsm1_equals_the_python_fmu_bit_for_bit(native, fidelity, stepper):
+    """PRSM1, the friction-torque article's single stage with its viscous (mu_1) and
+    differential-sliding (mu_3) terms: the native FMU's outputs, the per-term friction powers
+    among them, equal the Python FMU's with the same stepper in the speed loop with a reversal."""
+    start = {"fidelity": fidelity, **({"stepper": stepper} if stepper else {})}
+    py, nat, names = both_loops("PRSM1", {**start, **({} if stepper or fidelity == "dynamic"
+                                                        else PY_SAME_METHOD)}, start, 500.0,
+                                n=300)
+    assert nat == py
+    i_visc, i_diff = names.index("friction_power_viscous"), names.index("friction_power_differential")
+    assert max(abs(r[i_visc]) for r in py) > 0.0 and max(abs(r[i_diff]) for r in py) > 0.0
 
 
 @pytest.mark.parametrize("name,load,start", [
@@ -307,9 +333,11 @@ def test_refused_calls_are_logged_and_change_nothing(native):
                                         # the dynamic level runs ROS34PW2 only
                                         ({"fidelity": "dynamic", "stepper": "explicit_adaptive"},
                                          "stepper"),
-                                        # the Python FMU's exponential band step is not in C
-                                        ({"stepper": "closed_form"}, "stepper"),
+                                        ({"stepper": "exponential"}, "stepper"),
                                         ({"mu_screw_roller": 0.9}, "mu_screw_roller"),
+                                        # the friction-torque article's terms' bounds (1e5, 1e-3)
+                                        ({"mu_viscous": 2e5}, "mu_viscous"),
+                                        ({"mu_differential": 2e-3}, "mu_differential"),
                                         ({"stage[2].nut_mass": -1.0}, "stage[2].nut_mass")])
 def test_initialization_refuses_what_it_does_not_run(native, start, word):
     from fmpy.fmi1 import FMICallException
@@ -340,12 +368,12 @@ def test_generator_pins_unmodelled_parameters_to_zero_and_refuses_unknown_output
         ET.SubElement(sv, "Real", {"start": start} if start else {})
         return ET.tostring(root)
 
-    # the real FMU's own unmodelled terms (mu_viscous, mu_differential and the threads per roller
-    # that scale the viscous term: 2 + 2 stages) are pinned; a parameter added to it is one more
+    # every parameter of the real FMU is modelled (the viscous and differential-sliding terms
+    # too); a parameter added to it is pinned to its start value
     base = variables_header(md, params, "X", "g")
-    assert '#define N_UNMODELLED 4' in base and '"mu_viscous"' in base
+    assert '#define N_UNMODELLED 0' in base
     header = variables_header(with_variable("mu_new_term", "parameter", "0.0"), params, "X", "g")
-    assert '#define N_UNMODELLED 5' in header and '"mu_new_term"' in header
+    assert '#define N_UNMODELLED 1' in header and '"mu_new_term"' in header
     with pytest.raises(BuildError, match="mu_new_term"):
         variables_header(with_variable("mu_new_term", "parameter", "0.1"), params, "X", "g")
     with pytest.raises(BuildError, match="viscous_torque"):
@@ -429,7 +457,7 @@ def test_regression_case_passes_with_the_native_fmu(native, case):
 def test_actuator_loop_with_the_native_fmu_equals_the_python_fmu(native, tmp_path, capsys):
     """``prsm-ema run --prsm native``: the position-step loop (quasi-static) through the native
     FMU equals the same loop through the Python FMU running the native FMU's method
-    (``closed_form_explicit``) to 1e-9 of each output's largest magnitude.  Independent reason:
+    (``closed_form``) to 1e-9 of each output's largest magnitude.  Independent reason:
     both take the same steps with the same arithmetic (1e-12 per step in the tests above); the
     loop (PI controller, motor, load) only passes the values on, over 300 steps here."""
     import numpy as np
@@ -446,7 +474,7 @@ def test_actuator_loop_with_the_native_fmu_equals_the_python_fmu(native, tmp_pat
     scene_native = tmp_path / "step_native.toml"
     scene_native.write_text(short, encoding="utf-8")
     scene_python = tmp_path / "step_python.toml"
-    scene_python.write_text(short + '\n[prsm]\nparameters = { stepper = "closed_form_explicit" }\n',
+    scene_python.write_text(short + '\n[prsm]\nparameters = { stepper = "closed_form" }\n',
                             encoding="utf-8")
     out = tmp_path / "out"
     status = main(["run", "--scene", str(scene_native), "--prsm", "native", "--fmu",

@@ -93,14 +93,14 @@ def test_memory_round_trip_repeats_the_next_advance():
 
 def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
     params = presets.load("li2021_two_stage")
-    with pytest.raises(ValueError, match="drive = 'speed'"):
-        _native(make_model(params, "quasi-static", "speed"))
+    with pytest.raises(ValueError, match="fidelity"):
+        _native(make_model(params, "auto", "torque", tolerance=1e-3))
     with pytest.raises(ValueError, match="rtol"):
         _native(make_model(params, "dynamic", "torque"), rtol=0.0)
     from dataclasses import replace
 
-    with pytest.raises(ValueError, match="mu_viscous"):
-        _native(make_model(replace(params, mu_viscous=0.01), "dynamic", "torque"))
+    with pytest.raises(ValueError, match="stepper"):
+        _native(make_model(params, "dynamic", "torque"), stepper="closed_form")
     model = make_model(params, "dynamic", "speed")
     nat = _native(model, max_substeps=1)
     x = model.initial_state((0.0, 5000.0), screw_speed=100.0, carrier_ratio=0.0)
@@ -122,16 +122,18 @@ def test_advance_many_equals_single_advances():
     assert stats.rhs_calls == calls
 
 
-def test_quasi_static_level_equals_the_python_closed_form_explicit():
-    """The slaved level in C: the closed form under held inputs and Dormand-Prince 5(4) where it
-    declines (the screw starting from rest against a load: the friction band), against the Python
-    stepper ``closed_form_explicit`` at the same tolerances."""
+@pytest.mark.parametrize("stepper", [None, "closed_form_explicit", "closed_form"])
+def test_quasi_static_level_equals_the_python_closed_form_explicit(stepper):
+    """The slaved level in C: the closed form under held inputs and, where it declines (the
+    screw starting from rest against a load: the friction band), Dormand-Prince 5(4) (None, the
+    former default, and closed_form_explicit) or the exponential band step (closed_form),
+    against the Python stepper of that name at the same tolerances."""
     model = make_model(presets.load("li2021_two_stage"), "quasi-static", "torque")
     u = (19.75, 5000.0)
     x0 = model.initial_state(u)
-    py = make_stepper("closed_form_explicit", model,
-                      **tuned_stepper_options("closed_form_explicit", 1e-6, 1e-8))
-    nat = _native(model, rtol=1e-6, atol=1e-8)
+    name = stepper or "closed_form_explicit"
+    py = make_stepper(name, model, **tuned_stepper_options(name, 1e-6, 1e-8))
+    nat = _native(model, rtol=1e-6, atol=1e-8, stepper=stepper)
     xa = xb = x0
     band_steps = 0
     for i in range(50):

@@ -16,15 +16,28 @@ typedef struct {
 int prsm_api_n_reals(void) { return 9 * PRSM_N_STAGES + 6; }
 int prsm_api_n_ints(void) { return 2 * PRSM_N_STAGES + 4; }
 
+/* Number of doubles and ints prsm_api_new_terms reads besides prsm_api_new's. */
+int prsm_api_n_term_reals(void) { return 2; }
+int prsm_api_n_term_ints(void) { return PRSM_N_STAGES; }
+
+static int refuse(char *msg, int len, const char *text) {
+    strncpy(msg, text, (size_t)len - 1);
+    msg[len - 1] = 0;
+    return -1;
+}
+
 /* A model with its stepper from
  *   reals: per stage screw_mass, nut_mass, roller_mass, carrier_mass [kg], screw_inertia,
  *          roller_inertia, carrier_inertia [kg m2], spline_radius, bearing_radius [m]; then
  *          mu_screw_roller, mu_spline, mu_nut_screw [-], slip_velocity_scale [m/s],
  *          tolerance [-], kinematic_efficiency [-];
  *   ints:  per stage n_rollers, carriers; then the level (0 kinematic, 1 quasi-static,
- *          2 dynamic), the drive (0 torque, 1 speed), substeps (0: adaptive), max_substeps.
+ *          2 dynamic), the drive (0 torque, 1 speed), substeps (0: adaptive), max_substeps;
+ *   term_reals (NULL: zeros): mu_viscous [N.s/m], mu_differential [m];
+ *   term_ints (NULL: ones): per stage threads_per_roller.
  * Returns NULL with the reason in msg when a value is out of range. */
-void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
+void *prsm_api_new_terms(const double *reals, const int *ints, const double *term_reals,
+                         const int *term_ints, char *msg, int len) {
     prsm_config cfg;
     memset(&cfg, 0, sizeof cfg);
     for (int k = 0; k < PRSM_N_STAGES; k++) {
@@ -35,14 +48,18 @@ void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
         v->spline_radius = r[7]; v->bearing_radius = r[8];
         v->n_rollers = ints[2 * k];
         v->carriers = ints[2 * k + 1];
+        cfg.threads_per_roller[k] = term_ints ? term_ints[k] : 1;
     }
     const double *r = reals + 9 * PRSM_N_STAGES;
     const int *i = ints + 2 * PRSM_N_STAGES;
     cfg.mu_screw_roller = r[0]; cfg.mu_spline = r[1]; cfg.mu_nut_screw = r[2];
     cfg.slip_velocity_scale = r[3]; cfg.tolerance = r[4]; cfg.kinematic_efficiency = r[5];
+    if (term_reals) {
+        cfg.mu_viscous = term_reals[0];
+        cfg.mu_differential = term_reals[1];
+    }
     if (i[0] < 0 || i[0] > 2 || i[1] < 0 || i[1] > 1) {
-        strncpy(msg, "level must be 0, 1 or 2 and drive 0 or 1", (size_t)len - 1);
-        msg[len - 1] = 0;
+        refuse(msg, len, "level must be 0, 1 or 2 and drive 0 or 1");
         return NULL;
     }
     cfg.kinematic = i[0] == 0;
@@ -53,8 +70,7 @@ void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
     cfg.max_substeps = i[3];
     prsm_handle *h = (prsm_handle *)calloc(1, sizeof *h);
     if (!h) {
-        strncpy(msg, "out of memory", (size_t)len - 1);
-        msg[len - 1] = 0;
+        refuse(msg, len, "out of memory");
         return NULL;
     }
     if (prsm_model_init(&h->model, &cfg, msg, len)) {
@@ -64,12 +80,27 @@ void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
     return h;
 }
 
+/* prsm_api_new_terms with Coulomb friction only (no viscous or differential-sliding term). */
+void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
+    return prsm_api_new_terms(reals, ints, NULL, NULL, msg, len);
+}
+
 /* The adaptive steppers' relative [-] and absolute [state units] tolerances, instead of the
- * FMU's (tolerance and 1e-2 tolerance). */
+ * FMU's (tolerance and 1e-2 tolerance); all three steppers (Dormand-Prince, ROS34PW2, the
+ * exponential band step). */
 void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
     prsm_handle *h = (prsm_handle *)handle;
-    h->model.rtol = h->model.ros.rtol = rtol;
-    h->model.atol = h->model.ros.atol = atol;
+    h->model.rtol = h->model.ros.rtol = h->model.band.rtol = rtol;
+    h->model.atol = h->model.ros.atol = h->model.band.atol = atol;
+}
+
+/* The slaved levels' method where the closed form declines: 1 the exponential band step (the
+ * Python stepper closed_form), 0 Dormand-Prince 5(4) (closed_form_explicit, the default of
+ * prsm_api_new).  Returns 0, or -1 for another value. */
+int prsm_api_set_band(void *handle, int exponential) {
+    if (exponential != 0 && exponential != 1) return -1;
+    ((prsm_handle *)handle)->model.band_exponential = exponential;
+    return 0;
 }
 
 int prsm_api_n_states(void *handle) { return ((prsm_handle *)handle)->model.nx; }

@@ -11,8 +11,9 @@
  *    parameters (geometry: causality local, variability constant) cannot be set at all;
  *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
  *    in initialization mode) a value out of range (the rows of prsm_params_gen.h, generated from
- *    prsm_fmu/param_ranges.py: the Python FMU's rules and messages), fidelity auto, a stepper the level does not
- *    run here (kinematic, quasi-static: default, closed_form_explicit, explicit_adaptive;
+ *    prsm_fmu/param_ranges.py: the Python FMU's rules and messages), fidelity auto, a stepper the
+ *    level does not run here (kinematic, quasi-static: default = closed_form, closed_form_explicit,
+ *    explicit_adaptive;
  *    dynamic: default, rosenbrock), or a value of a parameter this code does not model (it must
  *    stay at its start value, 0);
  *  - doStep refuses with fmi2Discard (logged, state unchanged) a non-finite or non-positive
@@ -282,10 +283,13 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         v->bearing_radius = s->par_real[P_BEARING_RADIUS[k]];
         v->n_rollers = s->par_int[P_N_ROLLERS[k]];
         v->carriers = s->par_int[P_CARRIERS[k]];
+        cfg->threads_per_roller[k] = s->par_int[P_THREADS_PER_ROLLER[k]];
     }
     cfg->mu_screw_roller = s->par_real[P_MU_SCREW_ROLLER];
     cfg->mu_spline = s->par_real[P_MU_SPLINE];
     cfg->mu_nut_screw = s->par_real[P_MU_NUT_SCREW];
+    cfg->mu_viscous = s->par_real[P_MU_VISCOUS];
+    cfg->mu_differential = s->par_real[P_MU_DIFFERENTIAL];
     cfg->slip_velocity_scale = s->par_real[P_SLIP_VELOCITY_SCALE];
     cfg->tolerance = s->par_real[P_TOLERANCE];
     cfg->substeps = s->par_int[P_SUBSTEPS];
@@ -326,20 +330,23 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         no_item(msg, len, "stepper", s->par_int[P_STEPPER], P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
         return -1;
     }
-    /* the friction band is stepped by Dormand-Prince 5(4) here: the Python FMU's
-     * closed_form_explicit; its closed_form (scalar exponential band step) is not translated.
-     * The dynamic level runs the Python FMU's default, ROS34PW2. */
+    /* the slaved levels run the Python FMU's default, closed_form (the friction band stepped by
+     * the exponential step of prsm_band.c), or closed_form_explicit (Dormand-Prince 5(4) in the
+     * band) or explicit_adaptive; the dynamic level the Python FMU's default, ROS34PW2. */
     if (cfg->dynamic) {
         if (strcmp(st, "default") && strcmp(st, "rosenbrock")) {
             snprintf(msg, (size_t)len, "stepper = '%s' is not allowed with fidelity = 'dynamic' in "
                      "the native FMU: must be one of default (= rosenbrock), rosenbrock", st);
             return -1;
         }
-    } else if (!strcmp(st, "default") || !strcmp(st, "closed_form_explicit")) cfg->closed_form = 1;
+    } else if (!strcmp(st, "default") || !strcmp(st, "closed_form")) {
+        cfg->closed_form = 1;
+        cfg->band_exponential = 1;
+    } else if (!strcmp(st, "closed_form_explicit")) cfg->closed_form = 1;
     else if (!strcmp(st, "explicit_adaptive")) cfg->closed_form = 0;
     else {
         snprintf(msg, (size_t)len, "stepper = '%s' is not allowed in the native FMU: must be one of "
-                 "default (= closed_form_explicit), closed_form_explicit, explicit_adaptive", st);
+                 "default (= closed_form), closed_form, closed_form_explicit, explicit_adaptive", st);
         return -1;
     }
     return 0;
@@ -416,10 +423,9 @@ static void compute_outputs(component *c) {
         case Q_INPUT_WORK: v = x[ie]; break;
         case Q_OUTPUT_WORK: v = x[ie + 1]; break;
         case Q_FRICTION_WORK: v = x[ie + 2]; break;
-        /* the viscous and differential-sliding terms are pinned to 0 in the native FMU */
         case Q_FRICTION_POWER_COULOMB: v = o.p_coulomb; break;
-        case Q_FRICTION_POWER_VISCOUS: v = 0.0; break;
-        case Q_FRICTION_POWER_DIFFERENTIAL: v = 0.0; break;
+        case Q_FRICTION_POWER_VISCOUS: v = o.p_viscous; break;
+        case Q_FRICTION_POWER_DIFFERENTIAL: v = o.p_differential; break;
         case Q_FRICTION_POWER_JOINTS: v = o.p_joints; break;
         case Q_SCREW_FRICTION_TORQUE:
             v = o.motor - load * c_out - m->equivalent_inertia * o.alpha; break;

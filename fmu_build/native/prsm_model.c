@@ -8,6 +8,7 @@
  */
 #include "prsm_model.h"
 #include "prsm_ros.h"
+#include "prsm_band.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -48,12 +49,13 @@ typedef struct {
 
 typedef struct {
     int have[2 * NS];
-    double co[2 * NS][4];
+    double co[2 * NS][9];
 } coef_cache;
 
-/* Mechanism._coefficients */
-static void coefficients(const prsm_model *m, const prsm_flank *f, double omega, double wp,
-                         double *co) {
+/* Mechanism._coefficients: (kappa, gamma, pi, q, tau_v, gamma_v, p_v, pi_c, pi_d) of a flank
+ * of stage s */
+static void coefficients(const prsm_model *m, const prsm_stage *s, const prsm_flank *f,
+                         double omega, double wp, double *co) {
     double sx = omega * f->ax + wp * f->bx;
     double sy = omega * f->ay + wp * f->by;
     double sz = omega * f->az;
@@ -61,10 +63,26 @@ static void coefficients(const prsm_model *m, const prsm_flank *f, double omega,
     double v = sqrt(v2);
     double mphi = m->mu * (v >= m->v_eps ? 1.0 / v : regularised_factor(v, m->v_eps));
     double q = 1.0 / (f->nz - mphi * sz);
-    co[0] = (f->pn - mphi * (f->px * sy - f->py * sx)) * q;
-    co[1] = -mphi * (sx * f->bx + sy * f->by) * q;
-    co[2] = mphi * v2 * q;
+    double kappa = f->pn - mphi * (f->px * sy - f->py * sx);
+    double p_c = mphi * v2 * q;
+    double p_d = 0.0;
+    if (m->mu3 != 0.0) {
+        double w = omega * f->radius;
+        double sg = w >= m->v_eps ? 1.0 : w <= -m->v_eps ? -1.0 : regularised_sign(w, m->v_eps);
+        kappa -= m->mu3 * sg;
+        p_d = m->mu3 * sg * omega * q;
+    }
+    double sb = sx * f->bx + sy * f->by;
+    double cv = s->c_viscous;
+    co[0] = kappa * q;
+    co[1] = -mphi * sb * q;
+    co[2] = p_c + p_d;
     co[3] = q;
+    co[4] = -cv * (f->px * sy - f->py * sx);
+    co[5] = -cv * sb;
+    co[6] = cv * v2;
+    co[7] = p_c;
+    co[8] = p_d;
 }
 
 /* Mechanism._sweep */
@@ -75,19 +93,21 @@ static void sweep(const prsm_model *m, double omega, const double *wps, double l
     double mn0 = 0.0, mn1 = 0.0, hn0 = 0.0, hn1 = 0.0;
     for (int k = m->n - 1; k >= 0; k--) {
         const prsm_stage *s = &m->st[k];
-        int fi = a0 + a1 * ag >= 0.0 ? 0 : 1;
+        /* the threads carry the effective axial force A + V_z */
+        double ae0 = a0 + s->vz_factor * omega;
+        int fi = ae0 + a1 * ag >= 0.0 ? 0 : 1;
         int ci = 2 * k + fi;
         if (!cache->have[ci]) {
-            coefficients(m, &m->fl[k][fi], omega, wps[k], cache->co[ci]);
+            coefficients(m, s, &m->fl[k][fi], omega, wps[k], cache->co[ci]);
             cache->have[ci] = 1;
         }
         const double *co = cache->co[ci];
         double kappa = co[0];
-        double x0 = mn0 - kappa * a0;
+        double x0 = mn0 - kappa * ae0 - co[4];
         double x1 = s->j_screw + mn1 - kappa * a1;
         rec_stage *r = &rec->s[k];
         if (k == 0) {
-            r->fi = fi; r->a0 = a0; r->a1 = a1; r->co = co; r->x0 = x0; r->x1 = x1;
+            r->fi = fi; r->a0 = ae0; r->a1 = a1; r->co = co; r->x0 = x0; r->x1 = x1;
             r->h0 = r->h1 = r->b0 = r->b1 = r->e = r->g = 0.0;
             r->sm = r->sb = 1.0;
             rec->m0 = x0;
@@ -129,7 +149,7 @@ static void sweep(const prsm_model *m, double omega, const double *wps, double l
             b1 = y1 + e * sm * m1;
         }
         double h0 = e * sm * m0, h1 = e * sm * m1;
-        r->fi = fi; r->a0 = a0; r->a1 = a1; r->co = co; r->x0 = m0; r->x1 = m1;
+        r->fi = fi; r->a0 = ae0; r->a1 = a1; r->co = co; r->x0 = m0; r->x1 = m1;
         r->h0 = h0; r->h1 = h1; r->b0 = b0; r->b1 = b1; r->e = e; r->g = g; r->sm = sm; r->sb = sb;
         a0 = b0;
         a1 = b1 + s->mass_below;
@@ -245,7 +265,7 @@ static double rates_power(const prsm_model *m, double omega, double alpha, const
     for (int k = 0; k < m->n; k++) {
         const rec_stage *r = &rec->s[k];
         double a = r->a0 + r->a1 * alpha;
-        p_fric += r->co[2] * a;
+        p_fric += r->co[2] * a + r->co[6];
         if (r->e != 0.0) p_fric += (r->h0 + r->h1 * alpha) * omega * m->st[k].spline_f;
         if (r->g != 0.0) p_fric += r->g * r->sb * (r->b0 + r->b1 * alpha) * omega;
     }
@@ -267,8 +287,12 @@ static void speeds_of(const prsm_model *m, const double *x, double *wps) {
 
 /* KinematicModel._extra_loss_torque (0 for the quasi-static level) */
 static double extra_loss(const prsm_model *m, double omega, double load) {
-    if (m->loss_factor == 0.0) return 0.0;
-    return m->loss_factor * fabs(load) * regularised_sign(omega * m->c_out, m->v_eps);
+    if (!m->kinematic) return 0.0;
+    double torque = m->viscous_loss * omega;
+    if (m->coulomb_loss)
+        torque += (m->loss_factor + m->differential_loss) * fabs(load)
+                  * regularised_sign(omega * m->c_out, m->v_eps);
+    return torque;
 }
 
 /* Mechanism.solve/rates with slaved carriers: the carrier speeds, alpha and the sweep record
@@ -306,7 +330,8 @@ static void rhs(const prsm_model *m, const double *x, const double *u, double *d
     if (m->dynamic)      /* Mechanism._rates: carrier generalized forces over their inertias */
         for (int k = 0; k < NS; k++) {
             const rec_stage *r = &rec.s[k];
-            dx[2 + k] = consistent ? r->co[1] * (r->a0 + r->a1 * alpha) / m->st[k].j_carrier : NAN;
+            dx[2 + k] = consistent ? (r->co[1] * (r->a0 + r->a1 * alpha) + r->co[5]) / m->st[k].j_carrier
+                                   : NAN;
         }
     int ie = m->ie;
     dx[0] = omega;
@@ -371,13 +396,19 @@ static const prsm_law *law_of(prsm_model *m, double sign_w, double sign_load) {
 /* SlavedAdvance.advance: 1 and y if exact, 0 if the caller must integrate */
 static int slaved_advance(prsm_model *m, const double *x, const double *u, double h, double *y) {
     double w0 = x[1], load = u[1], band = m->band_speed;
-    if (fabs(w0) < band || load == 0.0) return 0;
+    if (fabs(w0) < band || load == 0.0 || m->viscous) return 0;
     double sign_w = w0 > 0.0 ? 1.0 : -1.0;
     const prsm_law *law = law_of(m, sign_w, load > 0.0 ? 1.0 : -1.0);
     if (!law) return 0;
     double loss = law->loss_per_load * fabs(load) * sign_w;
-    double torque = u[0];
-    double alpha = (torque - loss - law->k_load * load) / law->k_alpha;
+    double torque, alpha;
+    if (m->speed_drive) {
+        alpha = u[0];
+        torque = law->k_load * load + law->k_alpha * alpha + loss;
+    } else {
+        torque = u[0];
+        alpha = (torque - loss - law->k_load * load) / law->k_alpha;
+    }
     for (int i = 0; i < law->n_checks; i++)
         if ((law->c_load[i] * load + law->c_alpha[i] * alpha >= 0.0) != law->positive[i]) return 0;
     double w1 = w0 + alpha * h;
@@ -390,6 +421,24 @@ static int slaved_advance(prsm_model *m, const double *x, const double *u, doubl
     y[3] = x[3] + load * m->c_out * dth;
     y[4] = x[4] + p_per_speed * sign_w * dth;
     return 1;
+}
+
+/* SlavedLevel.closed_form_advance: at a constant prescribed speed (speed drive, acceleration 0)
+ * one Euler step, exact; otherwise slaved_advance.  1 and y if exact, 0 if not */
+static int closed_form_advance(prsm_model *m, const double *x, const double *u, double h,
+                               double *y) {
+    if (m->speed_drive && u[0] == 0.0) {
+        double dx[PRSM_NX_MAX];
+        rhs(m, x, u, dx);
+        for (int i = 0; i < PRSM_NX; i++) y[i] = x[i] + h * dx[i];
+        return 1;
+    }
+    return slaved_advance(m, x, u, h, y);
+}
+
+/* closed_form_advance with the signature of prsm_band.h's closed-form step */
+static int exact_ctx(void *ctx, const double *x, const double *u, double h, double *y) {
+    return closed_form_advance((prsm_model *)ctx, x, u, h, y);
 }
 
 /* ---- model set-up ------------------------------------------------------------------------- */
@@ -408,13 +457,11 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     double tol = cfg->tolerance, eff = cfg->kinematic_efficiency;
     m->kinematic = cfg->kinematic;
     m->dynamic = cfg->dynamic && !cfg->kinematic;
-    if (cfg->speed_drive && !m->dynamic)
-        return fail(msg, len, "drive = 'speed' is not available at this level in C: the speed drive "
-                    "runs at the dynamic level only");
     m->speed_drive = cfg->speed_drive;
     m->nx = m->dynamic ? PRSM_NX_MAX : PRSM_NX;
     m->ie = m->dynamic ? 2 + NS : 2;
     m->mu = m->kinematic ? 0.0 : cfg->mu_screw_roller;
+    m->mu3 = m->kinematic ? 0.0 : cfg->mu_differential;
     m->v_eps = cfg->slip_velocity_scale;
     double limit = INFINITY;
     for (int k = 0; k < NS; k++) {
@@ -441,11 +488,16 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
             prsm_flank *fl = &m->fl[k][f];
             fl->ax = c[0]; fl->ay = c[1]; fl->az = c[2]; fl->bx = c[3]; fl->by = c[4];
             fl->px = c[5]; fl->py = c[6]; fl->nz = c[7]; fl->pn = c[8];
+            fl->radius = PRSM_FLANK_RADIUS[k][f];
         }
+        s->c_viscous = cfg->mu_viscous * (double)v->n_rollers * (double)cfg->threads_per_roller[k];
         if (m->kinematic) {
             s->e_spline = 0.0;
             s->g_bearing = 0.0;
+            s->c_viscous = 0.0;
         }
+        s->vz_factor = s->c_viscous * m->fl[k][0].az;
+        if (s->c_viscous > 0.0) m->viscous = 1;
         if (sc[5] < limit) limit = sc[5];
     }
     if (m->mu >= limit) {
@@ -476,6 +528,23 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     }
     m->equivalent_inertia = j;
     m->loss_factor = m->kinematic ? (1.0 / eff - 1.0) * m->c_out : 0.0;
+    /* KinematicModel.__init__: the lumped viscous and differential-sliding losses */
+    if (m->kinematic) {
+        double c_v = 0.0, c_d = 0.0;
+        for (int k = 0; k < NS; k++) {
+            const prsm_flank *fl = &m->fl[k][0];
+            double z = PRSM_STAGE_CONSTS[k][2];
+            double sx = fl->ax + z * fl->bx, sy = fl->ay + z * fl->by, sz = fl->az;
+            double cvis = cfg->mu_viscous * (double)cfg->stage[k].n_rollers
+                          * (double)cfg->threads_per_roller[k];
+            c_v += cvis * (sx * sx + sy * sy + sz * sz);
+            c_d += cfg->mu_differential / fabs(fl->nz);
+        }
+        m->viscous_loss = c_v;
+        m->differential_loss = c_d;
+        m->coulomb_loss = m->loss_factor > 0.0 || c_d > 0.0;
+        m->viscous = c_v > 0.0;
+    }
     /* SlavedAdvance.__init__: the slowest sliding speed per unit screw speed */
     double fmin_ = INFINITY;
     int first = 1;
@@ -488,12 +557,53 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
             double v = sqrt(dx * dx + dy * dy + dz * dz);
             if (first || v < fmin_) fmin_ = v;
             first = 0;
+            if (m->mu3 != 0.0 && fl->radius < fmin_) fmin_ = fl->radius;
         }
         if (s->e_spline != 0.0 && s->spline_f < fmin_) fmin_ = s->spline_f;
         if (s->g_bearing != 0.0 && s->bearing_f < fmin_) fmin_ = s->bearing_f;
     }
-    if (m->loss_factor != 0.0 && m->c_out < fmin_) fmin_ = m->c_out;
+    if (m->coulomb_loss && m->c_out < fmin_) fmin_ = m->c_out;
     m->band_speed = m->v_eps / fmin_;
+    /* SlavedLevel.smooth_breaks: 0 and +-v_eps / f for the sliding speed per unit screw speed f
+     * of every regularised law that acts (SlavedAdvance.law_factors), finite, ascending */
+    double edges[PRSM_MAX_BREAKS];
+    int n_edges = 0;
+    for (int k = 0; k < NS; k++) {
+        const prsm_stage *s = &m->st[k];
+        double laws[6];
+        int n_laws = 0;
+        for (int f = 0; f < 2; f++) {
+            const prsm_flank *fl = &m->fl[k][f];
+            double dx = fl->ax + s->zeta * fl->bx, dy = fl->ay + s->zeta * fl->by, dz = fl->az;
+            if (m->mu != 0.0) laws[n_laws++] = sqrt(dx * dx + dy * dy + dz * dz);
+            if (m->mu3 != 0.0) laws[n_laws++] = fl->radius;
+        }
+        if (s->e_spline != 0.0) laws[n_laws++] = s->spline_f;
+        if (s->g_bearing != 0.0) laws[n_laws++] = s->bearing_f;
+        for (int j = 0; j < n_laws; j++)
+            if (laws[j] > 0.0) edges[n_edges++] = m->v_eps / laws[j];
+    }
+    if (m->coulomb_loss && m->c_out > 0.0) edges[n_edges++] = m->v_eps / m->c_out;
+    qsort(edges, (size_t)n_edges, sizeof edges[0], cmp_double);
+    prsm_band *bd = &m->band;
+    int nb = 0;
+    for (int j = n_edges - 1; j >= 0; j--)      /* -edges descending, 0, edges ascending */
+        if (isfinite(edges[j]) && (j == n_edges - 1 || edges[j] != edges[j + 1]))
+            bd->breaks[nb++] = -edges[j];
+    bd->breaks[nb++] = 0.0;
+    for (int j = 0; j < n_edges; j++)
+        if (isfinite(edges[j]) && (j == 0 || edges[j] != edges[j - 1])) bd->breaks[nb++] = edges[j];
+    bd->n_breaks = nb;
+    bd->w_scale = 1.0;                          /* the speed's state_scale without a break */
+    {
+        int found = 0;
+        double smallest = 0.0;
+        for (int j = 0; j < nb; j++) {
+            double a = fabs(bd->breaks[j]);
+            if (a != 0.0 && (!found || a < smallest)) { smallest = a; found = 1; }
+        }
+        if (found) bd->w_scale = smallest;
+    }
     /* stepper: ClosedForm or ExplicitAdaptive (order 5), tuned_stepper_options */
     m->closed_form = cfg->closed_form;
     m->rtol = tol;
@@ -524,6 +634,16 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     r->first_step_stiffness = cfg->substeps ? 0.0 : 8.0;
     r->max_substeps = cfg->max_substeps;
     r->fixed_substeps = cfg->substeps;
+    /* the slaved levels' band step: ScalarExponential with the FMU's options */
+    m->band_exponential = cfg->band_exponential;
+    bd->rtol = m->rtol;
+    bd->atol = m->atol;
+    bd->h_min = m->h_min;
+    bd->safety = m->safety;
+    bd->fac_min = m->fac_min;
+    bd->fac_max = m->fac_max;
+    bd->max_substeps = cfg->max_substeps;
+    bd->fixed_substeps = cfg->substeps;
     return 0;
 }
 
@@ -555,13 +675,15 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
     double alpha = solve(m, x, load, u[0] - loss, wps, &cache, &rec, &consistent);
     /* Mechanism._assemble(detail=True) */
     double motor_sol = rec.m0 + rec.m1 * alpha;
-    double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0;
+    double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0, p_viscous = 0.0, p_differential = 0.0;
     for (int k = 0; k < m->n; k++) {
         const rec_stage *r = &rec.s[k];
         const prsm_stage *s = &m->st[k];
         double a = r->a0 + r->a1 * alpha;
-        double pk = r->co[2] * a;
-        p_coulomb += r->co[2] * a;
+        double pk = r->co[2] * a + r->co[6];
+        p_coulomb += r->co[7] * a;
+        p_differential += r->co[8] * a;
+        p_viscous += r->co[6];
         if (k > 0) {
             double hk = r->h0 + r->h1 * alpha;
             double b = r->b0 + r->b1 * alpha;
@@ -587,7 +709,15 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
     y->loss = loss;
     y->efficiency = efficiency(p_in, p_out);
     y->friction_power = p_fric + loss * omega;
-    y->p_coulomb = loss != 0.0 ? p_coulomb + loss * omega : p_coulomb;
+    y->p_coulomb = p_coulomb;
+    y->p_viscous = p_viscous;
+    y->p_differential = p_differential;
+    if (loss != 0.0) {      /* KinematicModel._extra_loss_terms */
+        double sg = regularised_sign(omega * m->c_out, m->v_eps);
+        y->p_coulomb += m->loss_factor * fabs(load) * sg * omega;
+        y->p_viscous += m->viscous_loss * omega * omega;
+        y->p_differential += m->differential_loss * fabs(load) * sg * omega;
+    }
     y->p_joints = p_joints;
     y->consistent = consistent;
     /* Mechanism.kinetic_energy */
@@ -790,11 +920,21 @@ int prsm_advance(prsm_model *m, prsm_memory *mem, double t, const double x[PRSM_
         memcpy(x_new, y, sizeof y);
         return 0;
     }
-    if (m->closed_form && slaved_advance(m, x, u, h, x_new)) {
+    if (m->closed_form && closed_form_advance(m, x, u, h, x_new)) {
         if (!finite_sum(x_new, PRSM_NX))
             return fail(msg, len, "closed_form: non-finite value in the closed-form step");
         stats->rhs_calls = 1;
         stats->substeps = 1;
+        return 0;
+    }
+    if (m->closed_form && m->band_exponential) {
+        prsm_memory trial = *mem;
+        double y[PRSM_NX_MAX] = {0.0};
+        if (prsm_band_advance(&m->band, rhs_ctx, exact_ctx, m, &trial, t, x, u, h, y, stats, msg,
+                              len))
+            return -1;
+        *mem = trial;
+        memcpy(x_new, y, sizeof y);
         return 0;
     }
     prsm_memory trial = *mem;

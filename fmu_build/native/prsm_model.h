@@ -1,5 +1,5 @@
-/* The PRSM's kinematic, quasi-static and dynamic levels in C (torque drive; the dynamic level also
- * the speed drive): the model and its steppers.
+/* The PRSM's kinematic, quasi-static and dynamic levels in C (torque or speed drive; every
+ * friction term): the model and its steppers.
  *
  * A translation of the Python package, operation for operation, so that the results are the
  * Python FMU's bit for bit (tests/test_native_fmu.py):
@@ -9,6 +9,8 @@
  *   prsm_fmu/models/slaved.py      the exact step with held inputs outside the friction band
  *   prsm_fmu/steppers/closed_form.py, explicit.py, control.py
  *                                  Dormand-Prince 5(4) where the exact step declines
+ *                                  (closed_form_explicit), or
+ *   prsm_fmu/steppers/band.py      the exponential band step (closed_form), in prsm_band.c
  *   prsm_fmu/models/dynamic.py     the dynamic level (carrier speeds as states; torque or speed
  *                                  drive), stepped by steppers/rosenbrock.py in prsm_ros.c
  * Geometry-derived constants (contact points, normals, slip Jacobians of both flanks, c_k,
@@ -61,9 +63,10 @@ static inline void prsm_fmt_num(char *buf, size_t n, double v) {
 /* the dynamic level's states: angle, speed, one speed per carrier, the three work integrals */
 #define PRSM_NX_MAX (5 + PRSM_N_STAGES)
 
-/* per-flank constants of one stage's screw-roller contact (mechanics._Flank.consts) */
+/* per-flank constants of one stage's screw-roller contact (mechanics._Flank.consts) and its
+ * contact radius [m] */
 typedef struct {
-    double ax, ay, az, bx, by, px, py, nz, pn;
+    double ax, ay, az, bx, by, px, py, nz, pn, radius;
 } prsm_flank;
 
 /* the mechanism's tunable values (one stage) */
@@ -82,22 +85,40 @@ typedef struct {
     int max_substeps, fixed_substeps;    /* fixed_substeps 0: adaptive */
 } prsm_ros;
 
+/* the friction band's exponential step (prsm_band.h): ScalarExponential.__init__ with the FMU's
+ * options; the breaks are the model's smooth_breaks (SlavedLevel.smooth_breaks), ascending */
+#define PRSM_MAX_BREAKS (2 * (6 * PRSM_N_STAGES + 1) + 1)
+typedef struct {
+    int n_breaks;
+    double breaks[PRSM_MAX_BREAKS];
+    double w_scale;                      /* the free state's scale of the difference increment */
+    double rtol, atol, h_min, safety, fac_min, fac_max;
+    int max_substeps, fixed_substeps;    /* fixed_substeps 0: adaptive */
+} prsm_band;
+
 typedef struct {
     prsm_stage_values stage[PRSM_N_STAGES];
     double mu_screw_roller, mu_spline, mu_nut_screw, slip_velocity_scale;
     int kinematic;             /* 1: kinematic level, 0: quasi-static or dynamic */
     int dynamic;               /* 1: dynamic level (carrier speeds are states) */
-    int speed_drive;           /* 1: inputs (screw acceleration [rad/s2], load [N]); dynamic only */
+    int speed_drive;           /* 1: inputs (screw acceleration [rad/s2], load [N]) */
     double kinematic_efficiency;
     int closed_form;           /* 1: closed form with DP5(4) fallback; 0: DP5(4) only */
     double tolerance;
     int substeps, max_substeps;
+    int band_exponential;      /* with closed_form: 1 the exponential band step (Python's
+                                  closed_form), 0 Dormand-Prince (closed_form_explicit) */
+    /* the friction-torque article's other terms (0: Coulomb friction only) */
+    double mu_viscous;         /* mu_1 per engaged thread [N.s/m] */
+    double mu_differential;    /* mu_3 [m] */
+    int threads_per_roller[PRSM_N_STAGES];   /* n_t [-] (read only with mu_viscous > 0) */
 } prsm_config;
 
 /* per-stage constants of the recursion (mechanics._Stage after Mechanism.__init__) */
 typedef struct {
     double n_rollers, c, c_prev, m_assembly, m_screw, j_screw, j_carrier;
     double e_spline, g_bearing, spline_f, bearing_f, m_sc, mass_below, zeta;
+    double c_viscous, vz_factor;     /* N_R mu_1 n_t [N.s/m]; its axial force per unit omega */
 } prsm_stage;
 
 /* the linear law of one (sign w, sign F) pair (slaved.SlavedAdvance._law) */
@@ -116,12 +137,18 @@ typedef struct {
     int kinematic, dynamic, speed_drive;
     int nx, ie;                        /* states; index of input_work (after the carriers) */
     double mu, v_eps, c_out, last_mass, equivalent_inertia, loss_factor, band_speed;
+    double mu3;                        /* differential sliding mu_3 [m] (0 at the kinematic level) */
+    double viscous_loss, differential_loss;   /* the kinematic level's C_v [N.m.s/rad], C_d [m] */
+    int coulomb_loss;                  /* the kinematic level's Coulomb-like loss acts */
+    int viscous;                       /* a viscous term acts: the closed form declines */
     prsm_law law[2][2];
     /* stepper */
     int closed_form;
     double rtol, atol, h_min, safety, fac_min, fac_max;
     int max_substeps, fixed_substeps;
     prsm_ros ros;                      /* the dynamic level's stepper */
+    int band_exponential;              /* the band's method: 1 exponential, 0 Dormand-Prince */
+    prsm_band band;                    /* the slaved levels' exponential band step */
 } prsm_model;
 
 /* what a step carries from one advance to the next: the proposal of the first step
@@ -145,6 +172,7 @@ typedef struct {
 typedef struct {
     double alpha, motor, friction_power, kinetic_energy, efficiency, loss;
     double p_coulomb, p_joints;      /* friction_power's Coulomb (contacts) and joints parts [W] */
+    double p_viscous, p_differential;   /* its viscous and differential-sliding parts [W] */
     int consistent;                  /* 0: the rigid contact has no solution here (Painleve) */
     double contact_force[PRSM_N_STAGES], normal_force[PRSM_N_STAGES],
         driven_torque[PRSM_N_STAGES], spline_friction[PRSM_N_STAGES],
