@@ -20,13 +20,14 @@ __all__ = ["build_fmu", "build_native", "build_named", "validate", "BuildError",
 
 
 def build_named(name: str, dest="dist", check: bool = True, start: dict | None = None,
-                native: bool = False):
+                native: bool = False, targets: tuple[str, ...] | None = None):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
     (``start``: parameter start values other than the preset's, see ``builder.start_values``;
     for the native FMU not the structural ones).
 
     ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
-    levels, :mod:`fmu_build.native`) instead of the Python one.
+    levels, :mod:`fmu_build.native`) instead of the Python one; ``targets``: its platforms
+    (default: all of :data:`fmu_build.platforms.FMI2_PLATFORMS`).
 
     Returns
     -------
@@ -39,5 +40,7 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
         raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
                          "(or use --preset)") from None
     if native:
-        return build_native(name, make(), source, dest, check, start)
+        if targets is None:
+            return build_native(name, make(), source, dest, check, start)
+        return build_native(name, make(), source, dest, check, start, targets)
     return build_fmu(name, make(), source, dest, check, start)

@@ -2,11 +2,13 @@
 
 ::
 
-    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native] [--dest DIR] [--no-validate]
+    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native [--platform P ...]] [--dest DIR] [--no-validate]
     prsm-fmu-build --preset NAME --name ID [--native] [--dest DIR]
 
 ``--native`` builds ``<name>-native.fmu`` instead: the kinematic, quasi-static and dynamic
-levels in C, no Python needed to run it (:mod:`fmu_build.native`; needs gcc).
+levels in C, no Python needed to run it (:mod:`fmu_build.native`), with binaries for linux64,
+win64 and darwin64 cross-compiled by Zig's C compiler (``pip install ziglang``), or only the
+platforms named by ``--platform``.
 
 A bad argument is answered with one line naming it and its allowed values, exit status 2,
 before anything is built (:mod:`prsm_fmu.arguments`); a failed build exits with 1.
@@ -20,6 +22,7 @@ from prsm_fmu.arguments import ArgumentParser, one_line, writable_dir
 
 from . import FMUS, BuildError, build_fmu, build_named, build_native
 from .native import structural_start
+from .platforms import FMI2_PLATFORMS
 
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
                "DIR: PRSM2 by default, any of the standard FMUs by name or all with --all, or "
@@ -27,7 +30,9 @@ DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, py
                "is the FMI modelIdentifier, e.g. PRSM2_seed002). Each FMU is checked with "
                "fmpy validate and the project's modelDescription rules unless --no-validate. "
                "With --native: the native C FMU <name>-native.fmu (kinematic, quasi-static and "
-               "dynamic levels, needs gcc; runs without Python). "
+               "dynamic levels; runs without Python), with binaries for linux64 (glibc 2.17 "
+               "and later), win64 and darwin64 (x86_64 and arm64), cross-compiled with Zig's C "
+               "compiler (pip install ziglang). "
                "Also runs as 'python -m fmu_build'.")
 
 
@@ -46,7 +51,10 @@ def build_parser() -> ArgumentParser:
                          "fidelity=dynamic (for hosts that cannot set it); repeatable")
     ap.add_argument("--native", action="store_true",
                     help="build the native C FMU <name>-native.fmu (kinematic, quasi-static and "
-                         "dynamic levels; needs gcc) instead of the Python one")
+                         "dynamic levels; needs ziglang) instead of the Python one")
+    ap.add_argument("--platform", action="append", choices=FMI2_PLATFORMS, metavar="P",
+                    help="with --native: build the binary of this platform only, of "
+                         f"{', '.join(FMI2_PLATFORMS)} (default: all); repeatable")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
     return ap
@@ -71,6 +79,11 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print("prsm-fmu-build: error: argument --start: must be NAME=VALUE", file=sys.stderr)
         return 2
+    if args.platform and not args.native:
+        print("prsm-fmu-build: error: argument --platform: not allowed without --native: "
+              "must be used with --native (the native FMU's binaries)", file=sys.stderr)
+        return 2
+    plats = tuple(dict.fromkeys(args.platform)) if args.platform else FMI2_PLATFORMS
     problem = structural_start(start) if args.native else ""
     if problem:
         print(f"prsm-fmu-build: error: argument {problem}", file=sys.stderr)
@@ -95,7 +108,8 @@ def main(argv: list[str] | None = None) -> int:
                          + ", ".join(n for n in presets.names()
                                      if isinstance(presets.load(n), MechanismParams)))
             if args.native:
-                targets = [build_native(args.name, params, args.preset, args.dest, check, start)]
+                targets = [build_native(args.name, params, args.preset, args.dest, check, start,
+                                        plats)]
             else:
                 targets = [build_fmu(args.name, params, args.preset, args.dest, check, start)]
         else:
@@ -104,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
                 ap.error(f"argument FMU: invalid choice(s) {', '.join(map(repr, unknown))}: "
                          f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
-            targets = [build_named(n, args.dest, check, start, native=args.native) for n in names]
+            targets = [build_named(n, args.dest, check, start, native=args.native,
+                                   targets=plats) for n in names]
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2
     except (BuildError, ValueError, OSError) as exc:

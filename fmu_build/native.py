@@ -23,9 +23,13 @@ What this module does:
 3. marks the parameters the constants are computed from as structural: causality ``local``,
    variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
    ``parameter``, variability ``fixed`` (settable before ``exitInitializationMode``);
-4. compiles the sources with gcc (``-std=c99 -O2 -fPIC -shared -ffp-contract=off``, libm only)
-   into ``binaries/linux64``, packs the sources into ``sources/`` (listed in
-   ``<SourceFiles>``, with the FMI 2.0 headers fmpy ships) and validates the FMU.
+4. compiles the sources (``-std=c99 -O2 -fPIC -shared -ffp-contract=off``, libm only) with
+   Zig's C compiler for every platform of :mod:`fmu_build.platforms` (``binaries/linux64``
+   for glibc 2.17 and later, ``binaries/win64``, ``binaries/darwin64`` universal x86_64 +
+   arm64), reads each library back and fails naming a missing ``fmi2`` function, a library
+   other than the platform's C runtime or a glibc symbol above 2.17; packs the sources into
+   ``sources/`` (listed in ``<SourceFiles>``, with the FMI 2.0 headers fmpy ships) and
+   validates the FMU.
 """
 
 from __future__ import annotations
@@ -50,11 +54,11 @@ from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
 
-from . import model_description
+from . import model_description, platforms
 from .builder import BuildError, build_fmu, validate
 
 __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
-           "SOURCES", "COMPILE_FLAGS"]
+           "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
 
 #: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
@@ -63,8 +67,40 @@ SOURCE_DIR = Path(__file__).resolve().parent / "native"
 SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_fmi2.c")
 HEADERS = ("prsm_model.h", "prsm_ros.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-#: gcc flags of the Linux binary (no fused multiply-add: the Python model's rounding)
-COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
+#: compiler flags of every binary (no fused multiply-add: the Python model's rounding)
+COMPILE_FLAGS = platforms.COMPILE_FLAGS
+
+#: the functions every FMI 2.0 binary exports (FMI 2.0.4 §2.1.2: "common functions")
+FMI2_COMMON = ("fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
+               "fmi2FreeInstance", "fmi2SetupExperiment", "fmi2EnterInitializationMode",
+               "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset", "fmi2GetReal",
+               "fmi2GetInteger", "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal",
+               "fmi2SetInteger", "fmi2SetBoolean", "fmi2SetString", "fmi2GetFMUstate",
+               "fmi2SetFMUstate", "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize",
+               "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
+               "fmi2GetDirectionalDerivative")
+#: the co-simulation functions (FMI 2.0.4 §4.2)
+FMI2_COSIMULATION = ("fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
+                     "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus",
+                     "fmi2GetIntegerStatus", "fmi2GetBooleanStatus", "fmi2GetStringStatus")
+#: the model-exchange functions (FMI 2.0.4 §3.2)
+FMI2_MODEL_EXCHANGE = ("fmi2EnterEventMode", "fmi2NewDiscreteStates",
+                       "fmi2EnterContinuousTimeMode", "fmi2CompletedIntegratorStep",
+                       "fmi2SetTime", "fmi2SetContinuousStates", "fmi2GetDerivatives",
+                       "fmi2GetEventIndicators", "fmi2GetContinuousStates",
+                       "fmi2GetNominalsOfContinuousStates")
+
+
+def fmi2_functions(md: bytes) -> tuple[str, ...]:
+    """The functions a binary of the FMU with modelDescription ``md`` must export: the common
+    ones and those of each interface it declares (``<CoSimulation>``, ``<ModelExchange>``)."""
+    root = ET.fromstring(md)
+    out = FMI2_COMMON
+    if root.find("CoSimulation") is not None:
+        out += FMI2_COSIMULATION
+    if root.find("ModelExchange") is not None:
+        out += FMI2_MODEL_EXCHANGE
+    return out
 
 #: per-stage parameters the contact geometry is computed from: constants of the native FMU
 STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
@@ -446,7 +482,8 @@ def cached_library(prefix: str, files: dict[str, bytes], sources: tuple[str, ...
 
 
 def build_native(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",
-                 check: bool = True, start: dict | None = None) -> Path:
+                 check: bool = True, start: dict | None = None,
+                 targets: tuple[str, ...] = platforms.FMI2_PLATFORMS) -> Path:
     """Build ``<dest>/<name>-native.fmu`` (module docstring).
 
     Parameters
@@ -465,6 +502,8 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         Parameter start values other than the preset's (``builder.start_values``: e.g.
         ``fidelity = dynamic`` for hosts that cannot set an Enumeration); not the structural
         ones, which the geometry is built from (use a preset with that geometry).
+    targets : tuple of str
+        The platforms built (keys of :data:`fmu_build.platforms.PLATFORMS`): all by default.
 
     Returns
     -------
@@ -474,9 +513,14 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
     Raises
     ------
     BuildError
-        For a structural parameter in ``start``, or what the C cannot build.
+        For a structural parameter in ``start``, what the C cannot build, or a binary unfit
+        for its platform (named).
     """
     params = params.validate()
+    unknown = [t for t in targets if t not in platforms.PLATFORMS]
+    if unknown or not targets:
+        raise BuildError(f"platforms {unknown or targets!r} not allowed: must be one or more of "
+                         f"{', '.join(platforms.PLATFORMS)}")
     problem = structural_start(start)
     if problem:
         raise BuildError(problem)
@@ -503,13 +547,17 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         (src / "prsm_variables.h").write_text(variables_header(md, params, identifier, guid),
                                               encoding="utf-8")
         (src / "README.txt").write_text(SOURCES_README.format(id=identifier), encoding="utf-8")
-        lib = tmp / "binaries" / "linux64" / f"{identifier}.so"
-        lib.parent.mkdir(parents=True)
-        compile_library(src, lib)
+        native_md = native_model_description(md, identifier, guid)
+        libs = {}
+        for plat in targets:
+            rel = f"binaries/{plat}/{identifier}{platforms.PLATFORMS[plat].suffix}"
+            libs[rel] = platforms.compile_for(plat, src, SOURCES, tmp / rel,
+                                              fmi2_functions(native_md))
         fmu = tmp / f"{name}-native.fmu"
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("modelDescription.xml", native_model_description(md, identifier, guid))
-            z.write(lib, f"binaries/linux64/{identifier}.so")
+            z.writestr("modelDescription.xml", native_md)
+            for rel, lib in libs.items():
+                z.write(lib, rel)
             for f in sorted(src.iterdir()):
                 z.write(f, f"sources/{f.name}")
         if check:
@@ -523,7 +571,8 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
 
 SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation, C99, libm only).
 
-Compile for another platform, e.g.
+The FMU's binaries/ were built from these with Zig's C compiler (linux64 for glibc 2.17 and
+later, win64, darwin64 for x86_64 and arm64).  Compile for another platform, e.g.
 
   Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.so -lm
   macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.dylib

@@ -9,6 +9,7 @@ rules for refused calls, and the FMU's own outputs before a refused call or a sa
 from __future__ import annotations
 
 import functools
+import importlib.util
 import os
 import random
 import shutil
@@ -59,6 +60,9 @@ def built_native() -> dict[str, Path]:
 def native() -> dict[str, Path]:
     if sys.platform != "linux":
         pytest.skip("the native FMU is built here for Linux only")
+    if importlib.util.find_spec("ziglang") is None:
+        pytest.skip("ziglang is not installed (pip install -e \".[fmu]\"): the native FMU's "
+                    "binaries are compiled with its C compiler")
     return built_native()
 
 
