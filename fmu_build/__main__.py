@@ -2,13 +2,14 @@
 
 ::
 
-    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native [--platform P ...]] [--dest DIR] [--no-validate]
-    prsm-fmu-build --preset NAME --name ID [--native] [--dest DIR]
+    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native [--fmi3] [--platform P ...]] [--dest DIR] [--no-validate]
+    prsm-fmu-build --preset NAME --name ID [--native [--fmi3]] [--dest DIR]
 
 ``--native`` builds ``<name>-native.fmu`` instead: the kinematic, quasi-static and dynamic
 levels in C, no Python needed to run it (:mod:`fmu_build.native`), with binaries for linux64,
 win64 and darwin64 cross-compiled by Zig's C compiler (``pip install ziglang``), or only the
-platforms named by ``--platform``.
+platforms named by ``--platform``.  ``--fmi3`` also builds, from it, ``<name>-native-fmi3.fmu``:
+the same FMU as FMI 3.0 co-simulation, for the same platforms (:mod:`fmu_build.native_fmi3`).
 
 A bad argument is answered with one line naming it and its allowed values, exit status 2,
 before anything is built (:mod:`prsm_fmu.arguments`); a failed build exits with 1.
@@ -22,6 +23,7 @@ from prsm_fmu.arguments import ArgumentParser, one_line, writable_dir
 
 from . import FMUS, BuildError, build_fmu, build_named, build_native
 from .native import structural_start
+from .native_fmi3 import build_native_fmi3
 from .platforms import FMI2_PLATFORMS
 
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
@@ -52,6 +54,9 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--native", action="store_true",
                     help="build the native C FMU <name>-native.fmu (kinematic, quasi-static and "
                          "dynamic levels; needs ziglang) instead of the Python one")
+    ap.add_argument("--fmi3", action="store_true",
+                    help="with --native: also build <name>-native-fmi3.fmu, the native FMU as "
+                         "FMI 3.0 co-simulation (same variables and platforms)")
     ap.add_argument("--platform", action="append", choices=FMI2_PLATFORMS, metavar="P",
                     help="with --native: build the binary of this platform only, of "
                          f"{', '.join(FMI2_PLATFORMS)} (default: all); repeatable")
@@ -82,6 +87,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.platform and not args.native:
         print("prsm-fmu-build: error: argument --platform: not allowed without --native: "
               "must be used with --native (the native FMU's binaries)", file=sys.stderr)
+        return 2
+    if args.fmi3 and not args.native:
+        print("prsm-fmu-build: error: argument --fmi3: not allowed without --native: "
+              "must be used with --native (the native FMU as FMI 3.0)", file=sys.stderr)
         return 2
     plats = tuple(dict.fromkeys(args.platform)) if args.platform else FMI2_PLATFORMS
     problem = structural_start(start) if args.native else ""
@@ -120,6 +129,8 @@ def main(argv: list[str] | None = None) -> int:
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
             targets = [build_named(n, args.dest, check, start, native=args.native,
                                    targets=plats) for n in names]
+        if args.fmi3:
+            targets += [build_native_fmi3(t, args.dest, check) for t in list(targets)]
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2
     except (BuildError, ValueError, OSError) as exc:
