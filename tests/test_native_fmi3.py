@@ -332,3 +332,26 @@ def test_fmu_state_round_trip_is_bit_exact(fmu3):
         assert host.messages[-1][0] == ERROR and "not a serialized state" in _last(host)
     finally:
         host.free()
+
+
+def test_fmi3_without_native_is_refused_in_one_line(capsys):
+    from fmu_build.__main__ import main
+
+    assert main(["--fmi3", "PRSM2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--fmi3" in err[0] and "--native" in err[0]
+
+
+def test_universal_macos_library_splits_into_its_thin_files():
+    """FMI 3.0 has one folder per architecture: the universal file of the FMI 2.0 build is split
+    back into the thin files it was made of, byte for byte."""
+    import struct
+
+    from fmu_build.native_fmi3 import thin_slices
+    from fmu_build.platforms import universal_macho
+
+    # two fake thin Mach-O files: magic, cputype (x86_64 0x01000007, arm64 0x0100000C), body
+    parts = [b"\xcf\xfa\xed\xfe" + struct.pack("<ii", cpu, 3) + bytes([k]) * (5000 + 777 * k)
+             for k, cpu in enumerate((0x01000007, 0x0100000C))]
+    assert thin_slices(universal_macho(parts)) == parts
+    assert thin_slices(parts[0]) == [parts[0]]
