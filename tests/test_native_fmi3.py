@@ -23,7 +23,7 @@ from fmpy.fmi1 import FMICallException  # noqa: E402
 from fmpy.fmi3 import FMU3Slave  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
-from test_fmu import DISCARD, OK  # noqa: E402
+from test_fmu import DISCARD, OK, Host  # noqa: E402
 from test_native_fmu import ERROR, all_outputs, built_native, native, native_host  # noqa: E402,F401
 
 #: the bound of the issue: FMI 3.0 outputs equal the FMI 2.0 FMU's to 1e-12 (of each output's
@@ -41,8 +41,9 @@ def fmu3(native) -> Path:
     return build_native_fmi3(native["PRSM2"], dest, check=False, targets=("linux64",))
 
 
-class Host3:
-    """One instance of the FMI 3.0 FMU driven through fmpy's FMU3Slave; records every message."""
+class Host3(Host):
+    """One instance of the FMI 3.0 FMU driven through fmpy's FMU3Slave; records every message
+    (stepping and freeing as :class:`test_fmu.Host`)."""
 
     def __init__(self, path: Path, start: dict | None = None, initialize: bool = True) -> None:
         self.md = read_model_description(str(path))
@@ -81,23 +82,12 @@ class Host3:
             out.append(value.decode("utf-8") if isinstance(value, bytes) else value)
         return out
 
-    def step(self, t: float, h: float) -> int:
-        try:
-            self.fmu.doStep(t, h)
-        except FMICallException as exc:
-            return exc.status
-        return OK
-
     def state_bytes(self) -> bytes:
         s = self.fmu.getFMUState()
         try:
             return bytes(self.fmu.serializeFMUState(s))
         finally:
             self.fmu.freeFMUState(s)
-
-    def free(self) -> None:
-        self.fmu.terminate()
-        self.fmu.freeInstance()
 
 
 def test_model_description_has_the_fmi2_variables_and_validates(fmu3):
@@ -298,12 +288,16 @@ def test_calls_of_the_wrong_type_or_not_allowed_are_errors_naming_the_variable(f
                                         ({"stepper": "closed_form"}, "stepper"),
                                         ({"stage[2].nut_mass": -1.0}, "stage[2].nut_mass")])
 def test_initialization_refuses_what_the_fmi2_fmu_refuses(fmu3, start, word):
-    host = Host3(fmu3, start=start, initialize=False)
-    with pytest.raises(FMICallException) as exc:
-        host.fmu.exitInitializationMode()
-    assert exc.value.status == ERROR
-    assert word in _last(host) and _last(host).startswith("initialization failed")
-    host.fmu.freeInstance()
+    messages = []
+    for host in (native_host("PRSM2", start=start, initialize=False),
+                 Host3(fmu3, start=start, initialize=False)):
+        with pytest.raises(FMICallException) as exc:
+            host.fmu.exitInitializationMode()
+        assert exc.value.status == ERROR and host.messages[-1][0] == ERROR
+        messages.append(_last(host))
+        host.fmu.freeInstance()
+    assert word in messages[1] and messages[1].startswith("initialization failed")
+    assert messages[1] == messages[0]                  # the FMI 2.0 FMU's message, word for word
 
 
 def test_fmu_state_round_trip_is_bit_exact(fmu3):
