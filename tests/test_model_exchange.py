@@ -30,7 +30,9 @@ if sys.platform != "linux":
     pytest.skip("the tests run the native FMU's linux64 binary", allow_module_level=True)
 
 from fmpy import extract, read_model_description  # noqa: E402
-from fmpy.fmi2 import FMU2Model, FMU2Slave  # noqa: E402
+from fmpy.fmi2 import (FMU2Model, FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE,  # noqa: E402
+                        fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                        fmi2CallbackLoggerTYPE, free)
 
 from test_native_fmu import built_native  # noqa: E402
 
@@ -223,3 +225,53 @@ def test_fmu_state_round_trip_in_model_exchange(fmu):
         m.terminate()
     finally:
         m.freeInstance()
+
+
+def test_no_rigid_contact_solution_is_an_error_naming_the_cause(fmu):
+    """The state of tests/test_fmu.py's Painlevé case (seed 000 with every inertia 1000x too
+    small, dynamic level, -1 rad/s, carriers at rest, +20 N.m against 500 N): no acceleration
+    balances the torque.  The event indicator of the rigid contact reads -1, and the host's
+    first event update (and any derivative) is refused with fmi2Error, the cause logged; with
+    the preset's inertias the same start has a solution (+1)."""
+    import ctypes
+
+    md, unzip = fmu
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    light = {"stage[1].screw_inertia": 55e-9, "stage[1].roller_inertia": 0.08e-9,
+             "stage[1].carrier_inertia": 3e-9, "stage[2].screw_inertia": 170e-9,
+             "stage[2].roller_inertia": 0.48e-9, "stage[2].carrier_inertia": 12e-9}
+    start = {"fidelity": 2, "initial_screw_speed": -1.0, "screw_torque": 20.0, "load_force": 500.0}
+    messages = []
+
+    def logger(env, name, status, category, message):
+        messages.append(message.decode())
+
+    for inertias, indicator in ((light, -1.0), ({}, 1.0)):
+        m = FMU2Model(guid=md.guid, unzipDirectory=unzip,
+                      modelIdentifier=md.modelExchange.modelIdentifier, instanceName="painleve")
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        m.instantiate(loggingOn=True, callbacks=cb)
+        try:
+            m.setupExperiment(startTime=0.0)
+            m.enterInitializationMode()
+            _set(m, vr, {**start, **inertias})
+            m.exitInitializationMode()
+            z, dx = (ctypes.c_double * 4)(), (ctypes.c_double * md.numberOfContinuousStates)()
+            m.getEventIndicators(z, 4)
+            assert z[3] == indicator and z[0] == -1.0
+            if indicator < 0:
+                with pytest.raises(Exception, match="status 3"):
+                    m.newDiscreteStates()
+                assert "no solution" in messages[-1] and "screw_torque = 20 N.m" in messages[-1]
+                with pytest.raises(Exception, match="status 3"):
+                    m.getDerivatives(dx, len(dx))
+            else:
+                m.newDiscreteStates()
+                m.enterContinuousTimeMode()
+                m.getDerivatives(dx, len(dx))
+                assert all(np.isfinite(list(dx))) and dx[1] != 0.0
+        finally:
+            m.freeInstance()
