@@ -64,8 +64,10 @@ __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_fmi2.c")
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_fmi2_me.c")
 HEADERS = ("prsm_model.h", "prsm_ros.h")
+#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
+INCLUDED = ("prsm_fmi2.c",)
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 #: compiler flags of every binary (no fused multiply-add: the Python model's rounding)
 COMPILE_FLAGS = platforms.COMPILE_FLAGS
@@ -138,6 +140,16 @@ _STAGE_OUTPUTS = {"contact_force": "Q_CONTACT_FORCE", "normal_force": "Q_NORMAL_
                   "driven_torque": "Q_DRIVEN_TORQUE", "spline_friction": "Q_SPLINE_FRICTION",
                   "carrier_speed": "Q_CARRIER_SPEED",
                   "carrier_speed_ratio": "Q_CARRIER_SPEED_RATIO"}
+#: variables the native FMU adds for model exchange (per stage): the carrier states' derivatives
+_STAGE_LOCALS = {"carrier_acceleration": "Q_CARRIER_ACCELERATION"}
+#: model exchange: (state, its derivative) in the order of the continuous states (prsm_fmi2_me.c);
+#: "stage[k]." entries repeat per stage
+ME_STATES = (("screw_angle", "screw_speed"), ("screw_speed", "screw_acceleration"),
+             ("stage[k].carrier_speed", "stage[k].carrier_acceleration"),
+             ("input_work", "input_power"), ("output_work", "output_power"),
+             ("friction_work", "friction_power"))
+#: event indicators (prsm_fmi2_me.c): zero screw speed, both friction band edges, rigid contact
+N_EVENT_INDICATORS = 4
 _COUNTERS = {"step_rhs_calls": "C_RHS_CALLS", "step_substeps": "C_SUBSTEPS",
              "step_fidelity": "C_FIDELITY", "contact_status": "C_CONTACT"}
 #: stage fields that only scale a term the native FMU leaves out (pinned to their start value)
@@ -302,6 +314,10 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
             rows.append((v, "K_OUTPUT", len(out_q)))
             out_q.append(q)
             out_stage.append(stage - 1 if m else 0)
+        elif v.causality == "local" and v.type == "Real" and m and field in _STAGE_LOCALS:
+            rows.append((v, "K_OUTPUT", len(out_q)))
+            out_q.append(_STAGE_LOCALS[field])
+            out_stage.append(stage - 1)
         elif v.causality == "output" and v.name in _COUNTERS and v.type in ("Integer", "Enumeration"):
             rows.append((v, "K_COUNTER", len(counters)))
             counters.append(_COUNTERS[v.name])
@@ -355,6 +371,7 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
              f"{identifier.removesuffix('_native')}. Do not edit. */",
              f"#define PRSM_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define PRSM_GUID {_c_string(guid)}",
+             f"#define PRSM_N_EVENT_INDICATORS {N_EVENT_INDICATORS}",
              f"#define PRSM_N_VARS {len(rows)}",
              f"#define PRSM_MAX_VR {max(v.vr for v, _, _ in rows)}",
              "static const prsm_var PRSM_VARS[PRSM_N_VARS] = {"]
@@ -394,6 +411,62 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
     return "\n".join(lines) + "\n"
 
 
+def with_model_exchange_variables(md: bytes, n_stages: int) -> bytes:
+    """The Python FMU's modelDescription with the variables model exchange adds: per stage
+    ``stage[k].carrier_acceleration`` (local, rad/s2), the derivative of the carrier state."""
+    root = ET.fromstring(md)
+    variables = root.find("ModelVariables")
+    vr = max(int(sv.get("valueReference")) for sv in variables) + 1
+    for k in range(1, n_stages + 1):
+        sv = ET.SubElement(variables, "ScalarVariable", name=f"stage[{k}].carrier_acceleration",
+                           valueReference=str(vr + k - 1),
+                           description=f"stage {k}: angular acceleration of the carriers (the "
+                           "derivative of the carrier speed; model exchange)",
+                           causality="local", variability="continuous", initial="calculated")
+        ET.SubElement(sv, "Real", unit="rad/s2")
+    return ET.tostring(root, encoding="utf-8")
+
+
+def _model_exchange(root: ET.Element, identifier: str) -> None:
+    """Add ``<ModelExchange>``, the states' derivatives and the event indicators to ``root``."""
+    variables = list(root.find("ModelVariables"))
+    index = {sv.get("name"): i + 1 for i, sv in enumerate(variables)}
+    n = sum(1 for name in index if name.endswith(".carrier_acceleration"))
+    pairs = []
+    for state, der in ME_STATES:
+        ks = range(1, n + 1) if state.startswith("stage[k].") else [None]
+        pairs += [(state.replace("[k]", f"[{k}]"), der.replace("[k]", f"[{k}]")) if k else
+                  (state, der) for k in ks]
+    for state, der in pairs:
+        typed = model_description._typed(variables[index[der] - 1])
+        typed.set("derivative", str(index[state]))
+    root.set("numberOfEventIndicators", str(N_EVENT_INDICATORS))
+    me = ET.Element("ModelExchange", modelIdentifier=identifier, needsExecutionTool="false",
+                    completedIntegratorStepNotNeeded="true",
+                    canBeInstantiatedOnlyOncePerProcess="false",
+                    canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
+                    canSerializeFMUstate="true")
+    files = ET.SubElement(me, "SourceFiles")
+    for s in SOURCES:
+        ET.SubElement(files, "File", name=s)
+    root.insert(list(root).index(root.find("CoSimulation")), me)
+    structure = root.find("ModelStructure")
+    # in model exchange the outputs depend on the states and inputs: no "dependencies" claim
+    for u in structure.iterfind("Outputs/Unknown"):
+        u.attrib.pop("dependencies", None)
+        u.attrib.pop("dependenciesKind", None)
+    ders = ET.Element("Derivatives")
+    for _, der in pairs:
+        ET.SubElement(ders, "Unknown", index=str(index[der]))
+    structure.insert(1, ders)
+    initial = structure.find("InitialUnknowns")
+    listed = {int(u.get("index")) for u in initial}
+    for _, der in pairs:
+        if index[der] not in listed:
+            ET.SubElement(initial, "Unknown", index=str(index[der]))
+    initial[:] = sorted(initial, key=lambda u: int(u.get("index")))
+
+
 def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     """The native FMU's modelDescription.xml: the Python FMU's with its own identity, the
     structural parameters as constants and the sources listed (module docstring, step 3)."""
@@ -420,6 +493,7 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     files = ET.SubElement(cs, "SourceFiles")
     for s in SOURCES:
         ET.SubElement(files, "File", name=s)
+    _model_exchange(root, identifier)
     for sv in root.find("ModelVariables"):
         m = _STAGE_NAME.match(sv.get("name"))
         if sv.get("causality") == "parameter" and m and m.group(2) in STRUCTURAL:
@@ -531,10 +605,10 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         tmp = Path(tmp)
         py_fmu = build_fmu(name, params, preset, tmp / "python", check=False, start=start)
         with zipfile.ZipFile(py_fmu) as z:
-            md = z.read("modelDescription.xml")
+            md = with_model_exchange_variables(z.read("modelDescription.xml"), params.n_stages)
         src = tmp / "sources"
         src.mkdir()
-        for f in SOURCES + HEADERS:
+        for f in SOURCES + HEADERS + INCLUDED:
             shutil.copy(SOURCE_DIR / f, src / f)
         for f in FMI_HEADERS:
             shutil.copy(_fmi_headers() / f, src / f)
@@ -542,7 +616,8 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         (src / "prsm_constants.h").write_text(constants, encoding="utf-8")
         stable = re.sub(rb'(guid|generationDateAndTime|generationTool)="[^"]*"', b"", md)
         digest = hashlib.sha256(stable + constants.encode()
-                                + b"".join((SOURCE_DIR / f).read_bytes() for f in SOURCES + HEADERS))
+                                + b"".join((SOURCE_DIR / f).read_bytes()
+                                           for f in SOURCES + HEADERS + INCLUDED))
         guid = str(uuid.uuid5(uuid.NAMESPACE_URL, "prsm-fmu-native:" + digest.hexdigest()))
         (src / "prsm_variables.h").write_text(variables_header(md, params, identifier, guid),
                                               encoding="utf-8")
@@ -569,14 +644,15 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
     return target
 
 
-SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation, C99, libm only).
+SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation and model exchange, C99, libm only;
+prsm_fmi2_me.c includes prsm_fmi2.c).
 
 The FMU's binaries/ were built from these with Zig's C compiler (linux64 for glibc 2.17 and
 later, win64, darwin64 for x86_64 and arm64).  Compile for another platform, e.g.
 
-  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.so -lm
-  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2.c -o {id}.dylib
-  Windows  cl /O2 /fp:precise /LD prsm_model.c prsm_ros.c prsm_fmi2.c /Fe{id}.dll
+  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2_me.c -o {id}.so -lm
+  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off prsm_model.c prsm_ros.c prsm_fmi2_me.c -o {id}.dylib
+  Windows  cl /O2 /fp:precise /LD prsm_model.c prsm_ros.c prsm_fmi2_me.c /Fe{id}.dll
 
 and put the library under binaries/<platform>/ (linux64, darwin64, win64).  Keep fused
 multiply-add off (-ffp-contract=off; MSVC /fp:precise) and no fast-math: the results then equal

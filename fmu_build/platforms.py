@@ -31,7 +31,7 @@ import struct
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from . import binary_check
@@ -133,7 +133,8 @@ def check_library(path: Path, platform: Platform, exports: tuple[str, ...]) -> N
 
 
 def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
-                exports: tuple[str, ...], defines: tuple[str, ...] = ()) -> Path:
+                exports: tuple[str, ...], defines: tuple[str, ...] = (),
+                arches: tuple[str, ...] | None = None) -> Path:
     """Compile ``sources`` (in ``src``, headers there too) into the shared library ``out`` for
     ``platform`` (a key of :data:`PLATFORMS`) with Zig's C compiler, and check it
     (:func:`check_library`) for the functions ``exports``.
@@ -152,6 +153,9 @@ def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
         Functions it must export.
     defines : tuple of str
         Extra ``-D`` definitions (``NAME`` or ``NAME=VALUE``).
+    arches : tuple of str, optional
+        Only these of the platform's architectures (FMI 3.0: one library per architecture);
+        default all (darwin64: one universal file).
 
     Returns
     -------
@@ -171,6 +175,12 @@ def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
         raise BuildError(f"building for {platform} needs Zig's C compiler: pip install ziglang "
                          "(in the fmu extra: pip install -e \".[fmu]\")")
     p = PLATFORMS[platform]
+    if arches is not None:
+        if not arches or any(a not in p.arches for a in arches):
+            raise BuildError(f"architectures {arches!r} not allowed for {platform}: must be "
+                             f"of {', '.join(p.arches)}")
+        keep = [i for i, a in enumerate(p.arches) if a in arches]
+        p = replace(p, targets=tuple(p.targets[i] for i in keep), arches=tuple(arches))
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=f"prsm_{platform}_") as tmp:
         tmp = Path(tmp)
