@@ -20,11 +20,15 @@ C runtime, a glibc symbol version above 2.17, a wrong architecture.
 
 Zig keeps what it compiled (the C runtimes of each target: minutes the first time for Windows)
 in ``ZIG_GLOBAL_CACHE_DIR``; unless set, that is ``<user cache>/prsm-fmu/zig`` (``XDG_CACHE_HOME``
-or ``~/.cache``), and ``ZIG_LOCAL_CACHE_DIR`` is the build's temporary directory.
+or ``~/.cache``), and ``ZIG_LOCAL_CACHE_DIR`` is the build's temporary directory.  Each library
+built is kept in ``<user cache>/prsm-fmu/libraries`` under the hash of everything it is built
+from (every file of the source directory, target, flags, definitions, Zig's version) and reused,
+checked again, when the same library is built again.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import struct
@@ -85,13 +89,32 @@ def zig_available() -> bool:
     return True
 
 
+def _user_cache() -> Path:
+    """``<XDG_CACHE_HOME or ~/.cache>/prsm-fmu``."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "prsm-fmu"
+
+
 def _zig_env(local_cache: Path) -> dict[str, str]:
     env = dict(os.environ)
-    if "ZIG_GLOBAL_CACHE_DIR" not in env:
-        base = Path(env.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-        env["ZIG_GLOBAL_CACHE_DIR"] = str(base / "prsm-fmu" / "zig")
+    env.setdefault("ZIG_GLOBAL_CACHE_DIR", str(_user_cache() / "zig"))
     env.setdefault("ZIG_LOCAL_CACHE_DIR", str(local_cache))
     return env
+
+
+def _library_key(platform: Platform, src: Path, sources: tuple[str, ...],
+                 defines: tuple[str, ...], name: str) -> str:
+    """Hash of everything a library is built from: every file in ``src`` (sources and
+    headers), the sources compiled, the targets, flags, definitions, link flags and Zig's
+    version."""
+    from importlib.metadata import version
+
+    h = hashlib.sha256()
+    for part in (repr((platform, sources, defines, name, COMPILE_FLAGS)), version("ziglang")):
+        h.update(part.encode() + b"\0")
+    for f in sorted(src.iterdir()):
+        if f.is_file():
+            h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:32]
 
 
 def universal_macho(parts: list[bytes]) -> bytes:
@@ -182,6 +205,14 @@ def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
         keep = [i for i, a in enumerate(p.arches) if a in arches]
         p = replace(p, targets=tuple(p.targets[i] for i in keep), arches=tuple(arches))
     out.parent.mkdir(parents=True, exist_ok=True)
+    # a library built before from the same files is reused (Zig's own cache misses here: the
+    # sources are in a new temporary directory each build); it is checked again below
+    libs = _user_cache() / "libraries"
+    cached = libs / (_library_key(p, src, sources, defines, out.name) + p.suffix)
+    if cached.is_file():
+        check_library(cached, p, exports)
+        shutil.copyfile(cached, out)
+        return out
     with tempfile.TemporaryDirectory(prefix=f"prsm_{platform}_") as tmp:
         tmp = Path(tmp)
         env = _zig_env(tmp / "zig-local")
@@ -200,5 +231,9 @@ def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
         staged = tmp / out.name
         staged.write_bytes(data)
         check_library(staged, p, exports)
+        libs.mkdir(mode=0o700, parents=True, exist_ok=True)
+        part = libs / f".{cached.name}.{os.getpid()}"
+        shutil.copyfile(staged, part)
+        os.replace(part, cached)             # whole, so a concurrent build finds it complete
         shutil.move(str(staged), out)
     return out

@@ -157,7 +157,7 @@ def test_li_et_al_startup_model_exchange_equals_co_simulation(fmu):
     assert me[0, 5] == 0.0 and 0.2 < ratio < 0.5
 
 
-@pytest.mark.parametrize("fidelity", [1, 2])
+@pytest.mark.parametrize("fidelity", [0, 1, 2])
 def test_reversal_through_zero_speed_model_exchange_equals_co_simulation(fmu, fidelity):
     """-20 N.m against the screw turning at 100 rad/s, 5 kN pulling back: the screw stops
     and reverses within 1.3 ms; the host must see the events at the band's edges and at zero."""
@@ -167,7 +167,7 @@ def test_reversal_through_zero_speed_model_exchange_equals_co_simulation(fmu, fi
     tq, ld = np.full(n, -20.0), np.full(n, 5000.0)
     cs = co_simulation(fmu, start, tq, ld, h)
     me, counts = model_exchange(fmu, start, tq, ld, h)
-    compare(f"reversal ({'quasi-static' if fidelity == 1 else 'dynamic'})", cs, me, counts)
+    compare(f"reversal ({('kinematic', 'quasi-static', 'dynamic')[fidelity]})", cs, me, counts)
     assert cs[0, 1] == 100.0 and cs[-1, 1] < -1000.0
     assert counts["events"] >= 3      # upper band edge, zero speed, lower band edge
 
