@@ -21,13 +21,15 @@ __all__ = ["build_fmu", "build_native", "build_named", "validate", "BuildError",
 
 
 def build_named(name: str, dest="dist", check: bool = True, start: dict | None = None,
-                native: bool = False, engine: bool = True):
+                native: bool = False, engine: bool = True,
+                targets: tuple[str, ...] | None = None):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
     (``start``: parameter start values other than the preset's, see ``builder.start_values``;
     for the native FMU not the structural ones).
 
     ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
-    levels, :mod:`fmu_build.native`) instead of the Python one.  ``engine``: the Python FMU
+    levels, :mod:`fmu_build.native`) instead of the Python one; ``targets``: its platforms
+    (default: all of :data:`fmu_build.platforms.FMI2_PLATFORMS`).  ``engine``: the Python FMU
     packs the compiled engine (:mod:`fmu_build.packing`); False: the Python model only.
 
     Returns
@@ -41,5 +43,7 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
         raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
                          "(or use --preset)") from None
     if native:
-        return build_native(name, make(), source, dest, check, start)
+        if targets is None:
+            return build_native(name, make(), source, dest, check, start)
+        return build_native(name, make(), source, dest, check, start, targets)
     return build_fmu(name, make(), source, dest, check, start, engine=engine)

@@ -2,12 +2,15 @@
 
 ::
 
-    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native] [--engine native|python] [--dest DIR]
-                   [--no-validate]
+    prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native [--platform P ...] [--fmi-version V]]
+                   [--engine native|python] [--dest DIR] [--no-validate]
     prsm-fmu-build --preset NAME --name ID [--native] [--engine native|python] [--dest DIR]
 
 ``--native`` builds ``<name>-native.fmu`` instead: the kinematic, quasi-static and dynamic
-levels in C, no Python needed to run it (:mod:`fmu_build.native`; needs gcc).
+levels in C, no Python needed to run it (:mod:`fmu_build.native`), with binaries for linux64,
+win64 and darwin64 cross-compiled by Zig's C compiler (``pip install ziglang``), or only the
+platforms named by ``--platform``; and ``<name>-native-fmi3.fmu``, the same as FMI 3.0
+(:mod:`fmu_build.fmi3`; ``--fmi-version 2`` or ``3`` builds one of them).
 
 A bad argument is answered with one line naming it and its allowed values, exit status 2,
 before anything is built (:mod:`prsm_fmu.arguments`); a failed build exits with 1.
@@ -21,6 +24,7 @@ from prsm_fmu.arguments import ArgumentParser, one_line, writable_dir
 
 from . import FMUS, BuildError, build_fmu, build_named, build_native
 from .native import structural_start
+from .platforms import FMI2_PLATFORMS
 
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
                "DIR: PRSM2 by default, any of the standard FMUs by name or all with --all, or "
@@ -28,7 +32,9 @@ DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, py
                "is the FMI modelIdentifier, e.g. PRSM2_assembly). Each FMU is checked with "
                "fmpy validate and the project's modelDescription rules unless --no-validate. "
                "With --native: the native C FMU <name>-native.fmu (kinematic, quasi-static and "
-               "dynamic levels, needs gcc; runs without Python). "
+               "dynamic levels; runs without Python), with binaries for linux64 (glibc 2.17 "
+               "and later), win64 and darwin64 (x86_64 and arm64), cross-compiled with Zig's C "
+               "compiler (pip install ziglang), and its FMI 3.0 twin <name>-native-fmi3.fmu. "
                "Also runs as 'python -m fmu_build'.")
 
 
@@ -47,15 +53,37 @@ def build_parser() -> ArgumentParser:
                          "fidelity=dynamic (for hosts that cannot set it); repeatable")
     ap.add_argument("--native", action="store_true",
                     help="build the native C FMU <name>-native.fmu (kinematic, quasi-static and "
-                         "dynamic levels; needs gcc) instead of the Python one")
+                         "dynamic levels; needs ziglang) instead of the Python one")
     ap.add_argument("--engine", choices=("native", "python"), default="native",
                     help="what computes the physics of the Python FMU: native (default) packs "
                          "the compiled engine for this platform (needs gcc to build; the "
                          "Python model runs where it cannot, logged), python the Python "
                          "reference model only")
+    ap.add_argument("--platform", action="append", choices=FMI2_PLATFORMS, metavar="P",
+                    help="with --native: build the binary of this platform only, of "
+                         f"{', '.join(FMI2_PLATFORMS)} (default: all); repeatable")
+    ap.add_argument("--fmi-version", action="append", choices=["2", "3"], metavar="V",
+                    help="with --native: build the FMI V FMU, of 2 (<name>-native.fmu) and 3 "
+                         "(<name>-native-fmi3.fmu); default both; repeatable")
     ap.add_argument("--no-validate", action="store_true",
                     help="skip fmpy validate and the modelDescription checks")
     return ap
+
+
+def _with_fmi3(fmus: list, plats: tuple[str, ...], check: bool, keep_fmi2: bool) -> list:
+    """The FMI 3.0 FMU of each FMI 2.0 native FMU in ``fmus`` (:mod:`fmu_build.fmi3`), after it
+    or (``keep_fmi2`` false) instead of it."""
+    from .fmi3 import build_native_fmi3
+
+    out = []
+    for fmu in fmus:
+        fmu3 = build_native_fmi3(fmu, check=check, targets=plats)
+        if keep_fmi2:
+            out.append(fmu)
+        else:
+            fmu.unlink()
+        out.append(fmu3)
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -77,6 +105,16 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print("prsm-fmu-build: error: argument --start: must be NAME=VALUE", file=sys.stderr)
         return 2
+    if args.platform and not args.native:
+        print("prsm-fmu-build: error: argument --platform: not allowed without --native: "
+              "must be used with --native (the native FMU's binaries)", file=sys.stderr)
+        return 2
+    if args.fmi_version and not args.native:
+        print("prsm-fmu-build: error: argument --fmi-version: not allowed without --native: "
+              "must be used with --native (the native FMU's FMI versions)", file=sys.stderr)
+        return 2
+    plats = tuple(dict.fromkeys(args.platform)) if args.platform else FMI2_PLATFORMS
+    versions = set(args.fmi_version or ["2", "3"])
     problem = structural_start(start) if args.native else ""
     if problem:
         print(f"prsm-fmu-build: error: argument {problem}", file=sys.stderr)
@@ -101,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
                          + ", ".join(n for n in presets.names()
                                      if isinstance(presets.load(n), MechanismParams)))
             if args.native:
-                targets = [build_native(args.name, params, args.preset, args.dest, check, start)]
+                targets = [build_native(args.name, params, args.preset, args.dest, check, start,
+                                        plats)]
             else:
                 targets = [build_fmu(args.name, params, args.preset, args.dest, check, start,
                                      engine=args.engine == "native")]
@@ -112,7 +151,10 @@ def main(argv: list[str] | None = None) -> int:
                          f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
             targets = [build_named(n, args.dest, check, start, native=args.native,
-                                   engine=args.engine == "native") for n in names]
+                                   engine=args.engine == "native", targets=plats)
+                       for n in names]
+        if args.native and "3" in versions:
+            targets = _with_fmi3(targets, plats, check, keep_fmi2="2" in versions)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2
     except (BuildError, ValueError, OSError) as exc:

@@ -153,8 +153,12 @@ def check(xml: bytes) -> list[str]:
             elif unit not in defined:
                 problems.append(f"{name}: unit {unit!r} is not in UnitDefinitions")
     outputs = {str(i) for i, sv in enumerate(svs, start=1) if sv.get("causality") == "output"}
-    for section in ("Outputs", "InitialUnknowns"):
+    # model exchange: the states' derivatives are initial unknowns too (the states here are outputs)
+    derivatives = {str(i) for i, sv in enumerate(svs, start=1)
+                   if _typed(sv).get("derivative") is not None}
+    for section, expected in (("Outputs", outputs), ("InitialUnknowns", outputs | derivatives)):
         listed = {u.get("index") for u in root.iterfind(f"ModelStructure/{section}/Unknown")}
-        if listed != outputs:
-            problems.append(f"ModelStructure/{section} does not list exactly the outputs")
+        if listed != expected:
+            what = "the outputs" if expected == outputs else "the outputs and state derivatives"
+            problems.append(f"ModelStructure/{section} does not list exactly {what}")
     return problems

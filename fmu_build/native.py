@@ -23,9 +23,13 @@ What this module does:
 3. marks the parameters the constants are computed from as structural: causality ``local``,
    variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
    ``parameter``, variability ``fixed`` (settable before ``exitInitializationMode``);
-4. compiles the sources with gcc (``-std=c99 -O2 -fPIC -shared -ffp-contract=off``, libm only)
-   into ``binaries/linux64``, packs the sources into ``sources/`` (listed in
-   ``<SourceFiles>``, with the FMI 2.0 headers fmpy ships) and validates the FMU.
+4. compiles the sources (``-std=c99 -O2 -fPIC -shared -ffp-contract=off``, libm only) with
+   Zig's C compiler for every platform of :mod:`fmu_build.platforms` (``binaries/linux64``
+   for glibc 2.17 and later, ``binaries/win64``, ``binaries/darwin64`` universal x86_64 +
+   arm64), reads each library back and fails naming a missing ``fmi2`` function, a library
+   other than the platform's C runtime or a glibc symbol above 2.17; packs the sources into
+   ``sources/`` (listed in ``<SourceFiles>``, with the FMI 2.0 headers fmpy ships) and
+   validates the FMU.
 """
 
 from __future__ import annotations
@@ -55,22 +59,56 @@ from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _RO
 from prsm_fmu.steppers.band import _GAUSS
 from prsm_fmu.steppers.base import _SQRT_EPS
 
-from . import model_description
+from . import model_description, platforms
 from .builder import BuildError, build_fmu, validate
 from .native_ranges import ranges_header
 
 __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
-           "SOURCES", "COMPILE_FLAGS"]
+           "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
 
 #: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2.c")
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
 HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
+#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
+INCLUDED = ("prsm_fmi2.c",)
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-#: gcc flags of the Linux binary (no fused multiply-add: the Python model's rounding)
-COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
+#: compiler flags of every binary (no fused multiply-add: the Python model's rounding)
+COMPILE_FLAGS = platforms.COMPILE_FLAGS
+
+#: the functions every FMI 2.0 binary exports (FMI 2.0.4 §2.1.2: "common functions")
+FMI2_COMMON = ("fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
+               "fmi2FreeInstance", "fmi2SetupExperiment", "fmi2EnterInitializationMode",
+               "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset", "fmi2GetReal",
+               "fmi2GetInteger", "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal",
+               "fmi2SetInteger", "fmi2SetBoolean", "fmi2SetString", "fmi2GetFMUstate",
+               "fmi2SetFMUstate", "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize",
+               "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
+               "fmi2GetDirectionalDerivative")
+#: the co-simulation functions (FMI 2.0.4 §4.2)
+FMI2_COSIMULATION = ("fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
+                     "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus",
+                     "fmi2GetIntegerStatus", "fmi2GetBooleanStatus", "fmi2GetStringStatus")
+#: the model-exchange functions (FMI 2.0.4 §3.2)
+FMI2_MODEL_EXCHANGE = ("fmi2EnterEventMode", "fmi2NewDiscreteStates",
+                       "fmi2EnterContinuousTimeMode", "fmi2CompletedIntegratorStep",
+                       "fmi2SetTime", "fmi2SetContinuousStates", "fmi2GetDerivatives",
+                       "fmi2GetEventIndicators", "fmi2GetContinuousStates",
+                       "fmi2GetNominalsOfContinuousStates")
+
+
+def fmi2_functions(md: bytes) -> tuple[str, ...]:
+    """The functions a binary of the FMU with modelDescription ``md`` must export: the common
+    ones and those of each interface it declares (``<CoSimulation>``, ``<ModelExchange>``)."""
+    root = ET.fromstring(md)
+    out = FMI2_COMMON
+    if root.find("CoSimulation") is not None:
+        out += FMI2_COSIMULATION
+    if root.find("ModelExchange") is not None:
+        out += FMI2_MODEL_EXCHANGE
+    return out
 
 #: per-stage parameters the contact geometry is computed from: constants of the native FMU
 STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
@@ -109,6 +147,16 @@ _STAGE_OUTPUTS = {"contact_force": "Q_CONTACT_FORCE", "normal_force": "Q_NORMAL_
                   "driven_torque": "Q_DRIVEN_TORQUE", "spline_friction": "Q_SPLINE_FRICTION",
                   "carrier_speed": "Q_CARRIER_SPEED",
                   "carrier_speed_ratio": "Q_CARRIER_SPEED_RATIO"}
+#: variables the native FMU adds for model exchange (per stage): the carrier states' derivatives
+_STAGE_LOCALS = {"carrier_acceleration": "Q_CARRIER_ACCELERATION"}
+#: model exchange: (state, its derivative) in the order of the continuous states (prsm_fmi2_me.c);
+#: "stage[k]." entries repeat per stage
+ME_STATES = (("screw_angle", "screw_speed"), ("screw_speed", "screw_acceleration"),
+             ("stage[k].carrier_speed", "stage[k].carrier_acceleration"),
+             ("input_work", "input_power"), ("output_work", "output_power"),
+             ("friction_work", "friction_power"))
+#: event indicators (prsm_fmi2_me.c): zero screw speed, both friction band edges, rigid contact
+N_EVENT_INDICATORS = 4
 _COUNTERS = {"step_rhs_calls": "C_RHS_CALLS", "step_substeps": "C_SUBSTEPS",
              "step_fidelity": "C_FIDELITY", "contact_status": "C_CONTACT"}
 #: stage fields that only scale a term the native FMU leaves out (pinned to their start value)
@@ -296,6 +344,10 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
             rows.append((v, "K_OUTPUT", len(out_q)))
             out_q.append(q)
             out_stage.append(stage - 1 if m else 0)
+        elif v.causality == "local" and v.type == "Real" and m and field in _STAGE_LOCALS:
+            rows.append((v, "K_OUTPUT", len(out_q)))
+            out_q.append(_STAGE_LOCALS[field])
+            out_stage.append(stage - 1)
         elif v.causality == "output" and v.name in _COUNTERS and v.type in ("Integer", "Enumeration"):
             rows.append((v, "K_COUNTER", len(counters)))
             counters.append(_COUNTERS[v.name])
@@ -349,7 +401,10 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
              f"{identifier.removesuffix('_native')}. Do not edit. */",
              f"#define PRSM_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define PRSM_GUID {_c_string(guid)}",
-             f"#define PRSM_TIME_MATCH {_hex(TIME_MATCH)}",
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
+HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
+#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
+INCLUDED = ("prsm_fmi2.c",)
              f"#define PRSM_N_VARS {len(rows)}",
              f"#define PRSM_MAX_VR {max(v.vr for v, _, _ in rows)}",
              "static const prsm_var PRSM_VARS[PRSM_N_VARS] = {"]
@@ -389,6 +444,62 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
     return "\n".join(lines) + "\n"
 
 
+def with_model_exchange_variables(md: bytes, n_stages: int) -> bytes:
+    """The Python FMU's modelDescription with the variables model exchange adds: per stage
+    ``stage[k].carrier_acceleration`` (local, rad/s2), the derivative of the carrier state."""
+    root = ET.fromstring(md)
+    variables = root.find("ModelVariables")
+    vr = max(int(sv.get("valueReference")) for sv in variables) + 1
+    for k in range(1, n_stages + 1):
+        sv = ET.SubElement(variables, "ScalarVariable", name=f"stage[{k}].carrier_acceleration",
+                           valueReference=str(vr + k - 1),
+                           description=f"stage {k}: angular acceleration of the carriers (the "
+                           "derivative of the carrier speed; model exchange)",
+                           causality="local", variability="continuous", initial="calculated")
+        ET.SubElement(sv, "Real", unit="rad/s2")
+    return ET.tostring(root, encoding="utf-8")
+
+
+def _model_exchange(root: ET.Element, identifier: str) -> None:
+    """Add ``<ModelExchange>``, the states' derivatives and the event indicators to ``root``."""
+    variables = list(root.find("ModelVariables"))
+    index = {sv.get("name"): i + 1 for i, sv in enumerate(variables)}
+    n = sum(1 for name in index if name.endswith(".carrier_acceleration"))
+    pairs = []
+    for state, der in ME_STATES:
+        ks = range(1, n + 1) if state.startswith("stage[k].") else [None]
+        pairs += [(state.replace("[k]", f"[{k}]"), der.replace("[k]", f"[{k}]")) if k else
+                  (state, der) for k in ks]
+    for state, der in pairs:
+        typed = model_description._typed(variables[index[der] - 1])
+        typed.set("derivative", str(index[state]))
+    root.set("numberOfEventIndicators", str(N_EVENT_INDICATORS))
+    me = ET.Element("ModelExchange", modelIdentifier=identifier, needsExecutionTool="false",
+                    completedIntegratorStepNotNeeded="true",
+                    canBeInstantiatedOnlyOncePerProcess="false",
+                    canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
+                    canSerializeFMUstate="true")
+    files = ET.SubElement(me, "SourceFiles")
+    for s in SOURCES:
+        ET.SubElement(files, "File", name=s)
+    root.insert(list(root).index(root.find("CoSimulation")), me)
+    structure = root.find("ModelStructure")
+    # in model exchange the outputs depend on the states and inputs: no "dependencies" claim
+    for u in structure.iterfind("Outputs/Unknown"):
+        u.attrib.pop("dependencies", None)
+        u.attrib.pop("dependenciesKind", None)
+    ders = ET.Element("Derivatives")
+    for _, der in pairs:
+        ET.SubElement(ders, "Unknown", index=str(index[der]))
+    structure.insert(1, ders)
+    initial = structure.find("InitialUnknowns")
+    listed = {int(u.get("index")) for u in initial}
+    for _, der in pairs:
+        if index[der] not in listed:
+            ET.SubElement(initial, "Unknown", index=str(index[der]))
+    initial[:] = sorted(initial, key=lambda u: int(u.get("index")))
+
+
 def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     """The native FMU's modelDescription.xml: the Python FMU's with its own identity, the
     structural parameters as constants and the sources listed (module docstring, step 3)."""
@@ -415,6 +526,7 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     files = ET.SubElement(cs, "SourceFiles")
     for s in SOURCES:
         ET.SubElement(files, "File", name=s)
+    _model_exchange(root, identifier)
     for sv in root.find("ModelVariables"):
         m = _STAGE_NAME.match(sv.get("name"))
         if sv.get("causality") == "parameter" and m and m.group(2) in STRUCTURAL:
@@ -477,7 +589,8 @@ def cached_library(prefix: str, files: dict[str, bytes], sources: tuple[str, ...
 
 
 def build_native(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",
-                 check: bool = True, start: dict | None = None) -> Path:
+                 check: bool = True, start: dict | None = None,
+                 targets: tuple[str, ...] = platforms.FMI2_PLATFORMS) -> Path:
     """Build ``<dest>/<name>-native.fmu`` (module docstring).
 
     Parameters
@@ -496,6 +609,8 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         Parameter start values other than the preset's (``builder.start_values``: e.g.
         ``fidelity = dynamic`` for hosts that cannot set an Enumeration); not the structural
         ones, which the geometry is built from (use a preset with that geometry).
+    targets : tuple of str
+        The platforms built (keys of :data:`fmu_build.platforms.PLATFORMS`): all by default.
 
     Returns
     -------
@@ -505,9 +620,14 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
     Raises
     ------
     BuildError
-        For a structural parameter in ``start``, or what the C cannot build.
+        For a structural parameter in ``start``, what the C cannot build, or a binary unfit
+        for its platform (named).
     """
     params = params.validate()
+    unknown = [t for t in targets if t not in platforms.PLATFORMS]
+    if unknown or not targets:
+        raise BuildError(f"platforms {unknown or targets!r} not allowed: must be one or more of "
+                         f"{', '.join(platforms.PLATFORMS)}")
     problem = structural_start(start)
     if problem:
         raise BuildError(problem)
@@ -518,10 +638,10 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         tmp = Path(tmp)
         py_fmu = build_fmu(name, params, preset, tmp / "python", check=False, start=start)
         with zipfile.ZipFile(py_fmu) as z:
-            md = z.read("modelDescription.xml")
+            md = with_model_exchange_variables(z.read("modelDescription.xml"), params.n_stages)
         src = tmp / "sources"
         src.mkdir()
-        for f in SOURCES + HEADERS:
+        for f in SOURCES + HEADERS + INCLUDED:
             shutil.copy(SOURCE_DIR / f, src / f)
         for f in FMI_HEADERS:
             shutil.copy(_fmi_headers() / f, src / f)
@@ -530,18 +650,20 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         (src / "prsm_params_gen.h").write_text(ranges_header(params), encoding="utf-8")
         stable = re.sub(rb'(guid|generationDateAndTime|generationTool)="[^"]*"', b"", md)
         digest = hashlib.sha256(stable + constants.encode()
-                                + b"".join((SOURCE_DIR / f).read_bytes() for f in SOURCES + HEADERS))
+                                + b"".join((SOURCE_DIR / f).read_bytes()
+                                           for f in SOURCES + HEADERS + INCLUDED))
         guid = str(uuid.uuid5(uuid.NAMESPACE_URL, "prsm-fmu-native:" + digest.hexdigest()))
         (src / "prsm_variables.h").write_text(variables_header(md, params, identifier, guid),
                                               encoding="utf-8")
-        (src / "README.txt").write_text(SOURCES_README.format(id=identifier, sources=" ".join(SOURCES)), encoding="utf-8")
-        lib = tmp / "binaries" / "linux64" / f"{identifier}.so"
-        lib.parent.mkdir(parents=True)
-        compile_library(src, lib)
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
+HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
+#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
+INCLUDED = ("prsm_fmi2.c",)
         fmu = tmp / f"{name}-native.fmu"
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("modelDescription.xml", native_model_description(md, identifier, guid))
-            z.write(lib, f"binaries/linux64/{identifier}.so")
+            z.writestr("modelDescription.xml", native_md)
+            for rel, lib in libs.items():
+                z.write(lib, rel)
             for f in sorted(src.iterdir()):
                 z.write(f, f"sources/{f.name}")
         if check:
@@ -553,13 +675,16 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
     return target
 
 
-SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation, C99, libm only).
+SOURCES_README = """Sources of the native FMU {id} (FMI 2.0 co-simulation and model exchange, C99, libm only;
+prsm_fmi2_me.c includes prsm_fmi2.c).
 
-Compile for another platform, e.g.
+The FMU's binaries/ were built from these with Zig's C compiler (linux64 for glibc 2.17 and
+later, win64, darwin64 for x86_64 and arm64).  Compile for another platform, e.g.
 
-  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off {sources} -o {id}.so -lm
-  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off {sources} -o {id}.dylib
-  Windows  cl /O2 /fp:precise /LD {sources} /Fe{id}.dll
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
+HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
+#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
+INCLUDED = ("prsm_fmi2.c",)
 
 and put the library under binaries/<platform>/ (linux64, darwin64, win64).  Keep fused
 multiply-add off (-ffp-contract=off; MSVC /fp:precise) and no fast-math: the results then equal

@@ -76,7 +76,7 @@ def ensure_fmu(path: str | os.PathLike = "dist/PRSM2.fmu", rebuild_stale: bool =
 
     The FMU's name (``PRSM1``, ``PRSM2``, ``PRSM3``) is the file's stem; the build runs
     ``python -m fmu_build NAME --dest DIR`` with this interpreter (a stem ``PRSM2-native``:
-    ``python -m fmu_build --native PRSM2``, the native C FMU).
+    ``python -m fmu_build --native --fmi-version 2 PRSM2``, the native C FMU).
 
     Raises
     ------
@@ -90,7 +90,7 @@ def ensure_fmu(path: str | os.PathLike = "dist/PRSM2.fmu", rebuild_stale: bool =
     name = p.stem
     extra = []
     if name.endswith("-native"):
-        name, extra = name.removesuffix("-native"), ["--native"]
+        name, extra = name.removesuffix("-native"), ["--native", "--fmi-version", "2"]
     stream = sys.stderr if stream is None else stream
     print(f"building {p} ({why}) with python -m fmu_build {' '.join(extra + [name])} ...",
           file=stream, flush=True)

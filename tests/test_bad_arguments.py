@@ -154,6 +154,11 @@ CASES: list[tuple[str, list[str], str]] = [
     # the native FMU's geometry is built in: a structural start value is refused, named
     ("prsm-fmu-build", ["--native", "--start", "stage[1].screw_lead=0.002", "--dest", OUT],
      "stage[1].screw_lead"),
+    # the native FMU's platforms: FMI 2.0 folder names of the ones built; only with --native
+    ("prsm-fmu-build", ["--native", "--platform", "win32", "--dest", OUT], "--platform"),
+    ("prsm-fmu-build", ["--platform", "win64", "--dest", OUT], "--platform"),
+    ("prsm-fmu-build", ["--native", "--fmi-version", "1", "--dest", OUT], "--fmi-version"),
+    ("prsm-fmu-build", ["--fmi-version", "3", "--dest", OUT], "--fmi-version"),
     # prsm-ema
     ("prsm-ema", [], "COMMAND"),
     ("prsm-ema", ["fly"], "COMMAND"),

@@ -44,7 +44,7 @@ enum {
     Q_INPUT_POWER, Q_OUTPUT_POWER, Q_INPUT_WORK, Q_OUTPUT_WORK, Q_FRICTION_WORK,
     Q_KINETIC_ENERGY, Q_FRICTION_POWER_COULOMB, Q_FRICTION_POWER_VISCOUS,
     Q_FRICTION_POWER_DIFFERENTIAL, Q_FRICTION_POWER_JOINTS, Q_SCREW_FRICTION_TORQUE,
-    Q_OVERALL_EFFICIENCY
+    Q_OVERALL_EFFICIENCY, Q_CARRIER_ACCELERATION
 };
 enum { C_RHS_CALLS, C_SUBSTEPS, C_FIDELITY, C_CONTACT };
 
@@ -105,6 +105,7 @@ typedef struct {
        as called: the FMU is deterministic, so that call cannot succeed (fmi2Terminated) */
     double refused_call[4];
     int has_refused, stuck;
+    int model_exchange;        /* instantiated as fmi2ModelExchange (prsm_fmi2_me.c) */
 } component;
 
 /* ---- logging ----------------------------------------------------------------------------------- */
@@ -394,6 +395,8 @@ static void compute_outputs(component *c) {
                            c->s.par_bool[P_INITIAL_CARRIER_EQUILIBRIUM]);
         x = x0;
         u = c->s.u;
+    } else if (c->model_exchange) {      /* model exchange: the inputs act at once */
+        u = c->s.u;
     }
     prsm_outputs o;
     prsm_outputs_at(m, x, u, &o);
@@ -430,6 +433,15 @@ static void compute_outputs(component *c) {
         case Q_SCREW_FRICTION_TORQUE:
             v = o.motor - load * c_out - m->equivalent_inertia * o.alpha; break;
         case Q_OVERALL_EFFICIENCY: v = x[ie] > 0.0 ? x[ie + 1] / x[ie] : 0.0; break;
+        case Q_CARRIER_ACCELERATION:     /* the carrier state's derivative (prsm_fmi2_me.c) */
+            if (m->dynamic) {
+                double dx[PRSM_NX_MAX] = {0.0};
+                prsm_rhs(m, x, u, dx);
+                v = dx[2 + k];
+            } else {
+                v = m->st[k].zeta * o.alpha;
+            }
+            break;
         default: v = o.kinetic_energy; break;
         }
         c->y[i] = v;
@@ -570,6 +582,7 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         if (v->kind == K_INPUT) c->s.u[v->index] = value[i];
         else c->s.par_real[v->index] = value[i];
     }
+    if (c->model_exchange) c->y_valid = 0;
     return fmi2OK;
 }
 
@@ -642,8 +655,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     if (functions) tmp.cb = *functions;
     snprintf(tmp.name, sizeof tmp.name, "%s", instanceName ? instanceName : "");
     tmp.logging_on = loggingOn ? 1 : 0;
-    if (fmuType != fmi2CoSimulation) {
-        log_msg(&tmp, fmi2Error, "fmi2Instantiate: this FMU supports co-simulation only");
+#ifdef PRSM_MODEL_EXCHANGE
+    tmp.model_exchange = fmuType == fmi2ModelExchange;
+#endif
+    if (fmuType != fmi2CoSimulation && !tmp.model_exchange) {
+        log_msg(&tmp, fmi2Error, "fmi2Instantiate: fmuType %d is not allowed: must be "
+                "fmi2CoSimulation or fmi2ModelExchange", (int)fmuType);
         return NULL;
     }
     if (!fmuGUID || strcmp(fmuGUID, PRSM_GUID)) {
@@ -743,6 +760,10 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
     COMPONENT_OR_ERROR(comp);
     (void)noSetFMUStatePriorToCurrentPoint;
     char reason[900];
+    if (c->model_exchange) {
+        log_msg(c, fmi2Error, "fmi2DoStep: this instance was instantiated for model exchange");
+        return fmi2Error;
+    }
     if (c->s.phase != PH_STEPPING)
         return wrong_phase(c, c->s.phase == PH_TERMINATED ? "fmi2DoStep after fmi2Terminate"
                                                           : "fmi2DoStep before fmi2ExitInitializationMode");
