@@ -376,7 +376,7 @@ def cmd_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     print(f"{n_points} points ({', '.join(study.swept) or 'no swept parameter'}), preset "
           f"{study.preset}, backend {study.backend}, on {where}")
     try:
-        res = run_study(study, args.out, executor="loop" if args.no_dask else "dask",
+        res = run_study(study, os.path.join(args.out, study.name), executor="loop" if args.no_dask else "dask",
                         scheduler=args.scheduler, workers=args.workers, fmu_dir=args.fmu_dir,
                         resume=not args.rerun_all, figures=not args.no_figures,
                         progress=None if args.quiet else sys.stderr)
@@ -556,12 +556,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "sweep", help="run a parameter study (TOML) on the FMU or the model, locally or on Dask",
         description="Run every point of a study (studies/*.toml; docs/sweeps.md) and write "
-                    "OUT/results.csv, OUT/report.md, the figures OUT/*.png and the series "
-                    "OUT/series/*.npz. Points already in OUT/results.csv are skipped. Exit "
+                    "into a folder of its own, OUT/<study name>/: results.csv, report.md, the "
+                    "figures *.png and the series series/*.npz. Points already in its "
+                    "results.csv are skipped; another study's results are never touched. Exit "
                     "status 1 if a point failed (it is recorded with its error).")
     p.add_argument("study", metavar="STUDY", help="study file (TOML)")
-    p.add_argument("--out", type=writable_dir, default=None,
-                   help="output directory; default out/sweeps/<study name>")
+    p.add_argument("--out", type=writable_dir, default=os.path.join("out", "sweeps"),
+                   help="parent directory: the study writes into OUT/<study name>/; "
+                        "default %(default)s")
     p.add_argument("--backend", choices=("fmu", "model"), default=None,
                    help="simulate the FMU (speed prescribed by the master) or the model "
                         "(prsm_fmu.simulate); default: the study's")

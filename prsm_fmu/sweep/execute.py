@@ -14,7 +14,11 @@
     where and how long each point of this run took (not part of the table);
 ``OUT/fmu/PRSM<n>.fmu``
     the FMUs the points ran on (built with ``python -m fmu_build`` in a child process unless
-    ``fmu_dir`` has them).
+    ``fmu_dir`` has them);
+``OUT/study.txt``
+    the name of the study the folder belongs to: a folder that holds another study's results
+    is refused (:func:`claim_out_dir`), so one study never overwrites another's table and
+    figures.  The command line puts each study in a folder of its own, ``OUT/<study name>/``.
 
 Execution
 ---------
@@ -56,7 +60,7 @@ from .table import (append_row, columns, markdown_table, numeric_rows, read_tabl
                     write_table)
 from .trends import TrendResult, evaluate
 
-__all__ = ["run_study", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
+__all__ = ["run_study", "claim_out_dir", "STUDY_MARKER", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
            "EXECUTORS", "Progress", "local_cluster", "LOOPBACK"]
 
 EXECUTORS = ("dask", "loop")
@@ -282,6 +286,37 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
     return results, close
 
 
+#: file in a study's output folder naming the study it belongs to
+STUDY_MARKER = "study.txt"
+
+
+def claim_out_dir(out_dir: str, study: Study) -> None:
+    """Make ``out_dir`` the output folder of ``study``, refusing one that holds another study's.
+
+    The folder's :data:`STUDY_MARKER` names the study that wrote it; a folder without one
+    (new, or from before the marker) is claimed by writing it.
+
+    Raises
+    ------
+    ValueError
+        If the folder belongs to a study of another name (nothing is written then).
+    """
+    marker = os.path.join(out_dir, STUDY_MARKER)
+    try:
+        with open(marker, encoding="utf-8") as fh:
+            owner = fh.readline().strip()
+    except FileNotFoundError:
+        owner = ""
+    if owner and owner != study.name:
+        raise ValueError(f"output folder {out_dir} holds the results of study {owner!r}, not "
+                         f"{study.name!r}: must be a folder of its own (the command line "
+                         "uses OUT/<study name>/)")
+    if not owner:
+        os.makedirs(out_dir, exist_ok=True)
+        with open(marker, "w", encoding="utf-8") as fh:
+            fh.write(study.name + "\n")
+
+
 def run_study(study: Study, out_dir: str | None = None, *, backend: str | None = None,
               executor: str = "dask", scheduler: str | None = None, workers: int | None = None,
               client=None, fmu_dir: str | None = None, resume: bool = True,
@@ -294,7 +329,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     study : Study
         From :func:`~prsm_fmu.sweep.study.load_study`.
     out_dir : str, optional
-        Output directory; default ``out/sweeps/<study name>``.
+        Output directory; default ``out/sweeps/<study name>``.  A folder holding another
+        study's results is refused (:func:`claim_out_dir`).
     backend : {"fmu", "model"}, optional
         Overrides the study's backend.
     executor : {"dask", "loop"}
@@ -331,6 +367,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     t0 = time.perf_counter()
     backend = backend or study.backend
     out_dir = out_dir or os.path.join("out", "sweeps", study.name)
+    claim_out_dir(out_dir, study)
     series_dir = os.path.join(out_dir, "series")
     os.makedirs(series_dir, exist_ok=True)
     table_path = os.path.join(out_dir, "results.csv")
