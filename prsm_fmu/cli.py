@@ -47,6 +47,9 @@ import numpy as np
 from . import presets as _presets
 from .arguments import (ArgumentParser, existing_dir, existing_file, finite_float, float_in,
                         int_in, nonzero_float, one_line, positive_float, writable_dir)
+from .atomic import atomic_path
+from .command import run_command
+from .extras import require
 from .fmu_variables import Variable, fmu_variables
 from .models import FIDELITIES
 from .params import MECHANISM_FIELD_NAMES, MechanismParams
@@ -84,7 +87,7 @@ def write_csv(res: Mapping[str, np.ndarray], path: str) -> None:
     """
     cols = _output_columns(res)
     data = np.column_stack([res[c] for c in cols])
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow([label(c, unit_of(c)) for c in cols])
         for row in data:
@@ -164,7 +167,8 @@ def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -764,6 +768,9 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if unknown:
         parser.error(f"argument --case: unknown case(s) {', '.join(unknown)}: must be one of "
                      f"{', '.join(known)}")
+    # the fmu extra, before anything is built or run: pythonfmu builds the FMU and runs inside
+    # it, fmpy steps it
+    require("fmpy", "pythonfmu", purpose="regress (building and running the FMU)")
     if args.fmu:
         fmu = Path(args.fmu)
         try:
@@ -813,18 +820,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     -------
     int
         Exit code: 0 on success, 2 for bad arguments (a message naming the argument is
-        printed on stderr), 1 if a simulation step fails.
+        printed on stderr), 1 if a simulation step fails or an extra the command needs is not
+        installed (one line naming it), 130 after Ctrl-C (:mod:`prsm_fmu.command`).
     """
     parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        return int(args.func(args, args.parser))
-    except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
-        code = exc.code
-        return code if isinstance(code, int) else (0 if code is None else 2)
-    except StepFailure as exc:
-        print(f"prsm-fmu: error: the simulation failed: {exc}", file=sys.stderr)
-        return 1
+
+    def body() -> int:
+        try:
+            args = parser.parse_args(argv)
+            return int(args.func(args, args.parser))
+        except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
+            code = exc.code
+            return code if isinstance(code, int) else (0 if code is None else 2)
+        except StepFailure as exc:
+            print(f"prsm-fmu: error: the simulation failed: {exc}", file=sys.stderr)
+            return 1
+
+    return run_command("prsm-fmu", body)
 
 
 if __name__ == "__main__":

@@ -16,8 +16,10 @@ bookkeeping, and writes ``DIR/<scene>.csv`` (every output, units in the header),
 than two seconds.
 
 Exit status: 0 every check passed; 1 a check failed, or the co-simulation stopped (a refused
-step: the message names the time, the block and the reason); 2 bad arguments (one line on
-stderr naming the argument and its allowed values, before anything runs).
+step: the message names the time, the block and the reason), or the ``fmu`` extra that
+``--prsm fmu|native`` needs is not installed (one line naming it); 2 bad arguments (one line on
+stderr naming the argument and its allowed values, before anything runs); 130 Ctrl-C (one
+line; the outputs are written whole or not at all).
 """
 
 from __future__ import annotations
@@ -120,7 +122,7 @@ def _plots(run, out: Path) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
-    from fmu_build.builder import BuildError
+    from prsm_fmu.extras import require
 
     from .fmu import FMUError, ensure_fmu
     from .master import CoSimulationError, RetryPolicy, whole_steps
@@ -144,6 +146,15 @@ def _cmd_run(args, ap) -> int:
         check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
         return _refuse(str(exc))
+    if args.prsm == "python":
+        build_errors: tuple[type[Exception], ...] = (FMUError,)
+    else:
+        # the fmu extra, before anything runs: fmpy steps the FMU, pythonfmu builds it (and
+        # the native FMU's builder imports it)
+        require("fmpy", "pythonfmu", purpose=f"running the PRSM as an FMU (--prsm {args.prsm})")
+        from fmu_build.builder import BuildError
+
+        build_errors = (FMUError, BuildError)
     if args.step is not None:
         try:
             whole_steps(scene.t0, scene.t_end, args.step)
@@ -171,9 +182,9 @@ def _cmd_run(args, ap) -> int:
         prog.close()
         print(f"prsm-ema: {exc}", file=sys.stderr)
         return 1
-    except (ValueError, FMUError, BuildError) as exc:
+    except (ValueError, *build_errors) as exc:
         prog.close()
-        if isinstance(exc, (FMUError, BuildError)):
+        if isinstance(exc, build_errors):
             print(f"prsm-ema: {exc}", file=sys.stderr)
             return 1
         ap.error(str(exc))          # the scene and the options do not fit: one line, status 2
@@ -219,15 +230,22 @@ def _cmd_run(args, ap) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``prsm-ema``; returns the exit status (2: a bad argument, one line on
-    stderr; 0 for ``--help``)."""
+    stderr; 0 for ``--help``; 1 also for a missing ``fmu`` extra, one line naming it; 130
+    after Ctrl-C, :mod:`prsm_fmu.command`)."""
+    from prsm_fmu.command import run_command
+
     ap = build_parser()
-    try:
-        args = ap.parse_args(argv)
-        if args.command == "list":
-            return _cmd_list()
-        return _cmd_run(args, ap)
-    except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+
+    def body() -> int:
+        try:
+            args = ap.parse_args(argv)
+            if args.command == "list":
+                return _cmd_list()
+            return _cmd_run(args, ap)
+        except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
+            return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+
+    return run_command("prsm-ema", body)
 
 
 if __name__ == "__main__":

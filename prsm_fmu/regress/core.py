@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import atomic_path
 from .tube import Tolerance, TubeResult, compare
 
 __all__ = ["ROOT", "DEFAULT_DIR", "OUTPUTS", "Case", "Baseline", "CaseResult", "load_cases",
@@ -151,7 +152,7 @@ def write_csv(path: Path, time: np.ndarray, values: dict[str, np.ndarray],
               units: dict[str, str]) -> None:
     """Write a baseline CSV (12 significant digits: rounding 5e-13, far inside every tube)."""
     names = list(values)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["time [s]"] + [f"{n} [{units.get(n, '') or '1'}]" for n in names])
         for i, t in enumerate(time):
@@ -312,5 +313,6 @@ def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None)
     lines += ["## Review", "",
               "Reviewed by: (name, date — what was checked and why the changes are intended)", ""]
     text = "\n".join(lines)
-    (where / "REPORT.md").write_text(text, encoding="utf-8")
+    with atomic_path(where / "REPORT.md") as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
     return text

@@ -53,6 +53,8 @@ from typing import Any, Callable, Sequence, TextIO
 
 import numpy as np
 
+from ..atomic import atomic_path
+from ..extras import require
 from .metrics import standard_metrics
 from .points import FmuFile, PointResult, PointTask, run_point
 from .study import Study
@@ -238,11 +240,7 @@ def local_cluster(workers: int | None = None):
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
                   ship_fmus: bool) -> tuple[Callable, Callable]:
     """(iterator over results as they complete, closer) for the Dask executor."""
-    try:
-        from dask.distributed import Client, as_completed
-    except ImportError:
-        raise RuntimeError("dask.distributed is not installed: pip install 'prsm-fmu[sweep]', "
-                           "or run the points in a plain loop (--no-dask)") from None
+    from dask.distributed import Client, as_completed
 
     own_cluster = own_client = None
     if client is None:
@@ -364,8 +362,14 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or workers < 1):
         raise ValueError(f"workers = {workers!r} is out of range: must be an integer >= 1")
-    t0 = time.perf_counter()
     backend = backend or study.backend
+    # the extras, before anything is written or built
+    if executor == "dask" and client is None:
+        require("dask.distributed",
+                purpose="running the points on Dask (or in a plain loop: --no-dask)")
+    if backend == "fmu":
+        require("fmpy", "pythonfmu", purpose="the FMU backend of a sweep (or --backend model)")
+    t0 = time.perf_counter()
     out_dir = out_dir or os.path.join("out", "sweeps", study.name)
     claim_out_dir(out_dir, study)
     series_dir = os.path.join(out_dir, "series")
@@ -409,7 +413,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
 
     def handle(res: PointResult) -> None:
         if res.status == "ok" and res.series is not None:
-            np.savez_compressed(os.path.join(series_dir, f"{res.id}.npz"), **res.series)
+            with atomic_path(os.path.join(series_dir, f"{res.id}.npz")) as tmp:
+                np.savez_compressed(tmp, **res.series)
         row = row_of(res, header)
         rows_by_id[res.id] = row
         append_row(table_path, header, row)
@@ -538,6 +543,6 @@ def write_report(result: SweepResult) -> str:
     for f in result.figures:
         parts.append(f"![{os.path.basename(f)}]({os.path.basename(f)})\n")
     path = os.path.join(result.out_dir, "report.md")
-    with open(path, "w", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         fh.write("\n".join(parts))
     return path

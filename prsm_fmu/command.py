@@ -1,0 +1,46 @@
+"""How every console script ends when it cannot finish: one line, never a traceback.
+
+:func:`run_command` runs a command's body and turns
+
+* Ctrl-C (``KeyboardInterrupt``) into ``PROG: interrupted`` and exit status 130 (128 + SIGINT,
+  as shells report it); outputs are written whole or not at all (:mod:`prsm_fmu.atomic`), so
+  nothing half-written is left;
+* a missing optional extra (:mod:`prsm_fmu.extras`) into ``PROG: error: ... install the 'fmu'
+  extra ...`` and exit status 1.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Callable
+
+from .extras import missing_extra_message
+
+__all__ = ["run_command", "INTERRUPTED"]
+
+#: exit status after Ctrl-C: 128 + SIGINT (2)
+INTERRUPTED = 130
+
+
+def run_command(prog: str, body: Callable[[], int]) -> int:
+    """Run ``body`` and return its exit status, or 130 after Ctrl-C, 1 for a missing extra.
+
+    Parameters
+    ----------
+    prog : str
+        The console script's name, first word of the message.
+    body : callable
+        The command; returns its exit status.
+    """
+    try:
+        return int(body())
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted (Ctrl-C): stopped; files already written are complete, "
+              "none is half-written", file=sys.stderr)
+        return INTERRUPTED
+    except ImportError as exc:
+        message = missing_extra_message(exc)
+        if message is None:
+            raise
+        print(f"{prog}: error: {message}", file=sys.stderr)
+        return 1

@@ -1,0 +1,158 @@
+"""How the console scripts end when they cannot finish: one line, no traceback, nothing
+half-written.
+
+* A missing optional extra (fmu: pythonfmu, fmpy; sweep: dask[distributed]) is simulated by a
+  folder put first on PYTHONPATH holding a module of that name whose import raises
+  ``ModuleNotFoundError`` — so child processes (the FMU build runs in one) miss it too.  Each
+  command must answer in one line naming the extra, exit status 1, before it writes anything.
+* Ctrl-C: a real SIGINT sent to ``prsm-ema run`` while it computes must end it with one line
+  and exit status 130 (128 + SIGINT), with no output file, whole or partial, in its folder.
+* A writer interrupted half-way leaves the previous file as it was (temp file + rename).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+STUDY = REPO / "studies" / "seed000_friction.toml"     # backend fmu
+
+
+def _hide(tmp_path: Path, *modules: str) -> dict[str, str]:
+    """Environment whose Python cannot import ``modules`` (a stub raising ModuleNotFoundError
+    is found before the installed package)."""
+    stubs = tmp_path / "hidden"
+    stubs.mkdir(exist_ok=True)
+    for m in modules:
+        (stubs / f"{m}.py").write_text(
+            f"raise ModuleNotFoundError(\"No module named '{m}'\", name={m!r})\n",
+            encoding="utf-8")
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(stubs), str(REPO)]
+                                        + [p for p in [env.get("PYTHONPATH")] if p])
+    return env
+
+
+def _run(args: list[str], env: dict[str, str], cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", *args], env=env, cwd=cwd, text=True,
+                          capture_output=True, timeout=300)
+
+
+FMU_EXTRA_CASES = [
+    (["system_models", "run", "--scene", "load_step", "--out", "OUT"], "prsm-ema"),
+    (["system_models", "run", "--scene", "load_step", "--prsm", "native", "--out", "OUT"],
+     "prsm-ema"),
+    (["fmu_build", "--dest", "OUT"], "prsm-fmu-build"),
+    (["prsm_fmu.cli", "regress", "--out", "OUT"], "prsm-fmu"),
+    (["prsm_fmu.cli", "sweep", str(STUDY), "--no-dask", "--out", "OUT"], "prsm-fmu"),
+]
+
+
+@pytest.mark.parametrize("args,prog", FMU_EXTRA_CASES, ids=lambda a: " ".join(a)
+                         if isinstance(a, list) else a)
+def test_without_the_fmu_extra_each_command_names_it_in_one_line(tmp_path, args, prog):
+    env = _hide(tmp_path, "pythonfmu", "fmpy")
+    out = tmp_path / "out"
+    proc = _run([str(out) if a == "OUT" else a for a in args], env, tmp_path)
+    err = proc.stderr.strip()
+    assert proc.returncode == 1, (proc.returncode, err[-2000:])
+    assert "Traceback" not in proc.stderr and len(err.splitlines()) == 1, err
+    assert err.startswith(f"{prog}: error: ") and "'fmu' extra" in err, err
+    assert 'pip install -e ".[fmu]"' in err
+    # refused before anything was written (the sweep's folder is not even made)
+    assert not any(p.is_file() for p in out.rglob("*")) if out.exists() else True
+
+
+def test_without_dask_a_dask_sweep_names_the_sweep_extra_in_one_line(tmp_path):
+    env = _hide(tmp_path, "dask", "distributed")
+    proc = _run(["prsm_fmu.cli", "sweep", str(STUDY), "--backend", "model", "--out",
+                 str(tmp_path / "out")], env, tmp_path)
+    err = proc.stderr.strip()
+    assert proc.returncode == 1, err[-2000:]
+    assert len(err.splitlines()) == 1 and "'sweep' extra" in err and "--no-dask" in err, err
+
+
+def test_the_plain_python_model_runs_without_the_fmu_extra(tmp_path):
+    """``prsm-ema run --prsm python`` needs neither pythonfmu nor fmpy."""
+    env = _hide(tmp_path, "pythonfmu", "fmpy")
+    out = tmp_path / "out"
+    proc = _run(["system_models", "run", "--scene", "load_step", "--prsm", "python",
+                 "--no-plots", "--out", str(out)], env, tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (out / "load_step.csv").is_file() and (out / "load_step_summary.json").is_file()
+
+
+def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path):
+    """SIGINT once the scene runs (its first line printed): one line on stderr, exit 130,
+    no CSV/PNG/JSON and no temporary file left in the output folder."""
+    out = tmp_path / "out"
+    out.mkdir()
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "system_models", "run", "--scene",
+                             "sine_tracking", "--prsm", "python", "--out", str(out)],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stdout.readline()          # "scene sine_tracking: ..." before the run
+        assert first.startswith("scene sine_tracking"), first
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert "interrupted" in err
+    assert list(out.iterdir()) == []
+
+
+def test_run_command_maps_ctrl_c_and_missing_extras(capsys):
+    from prsm_fmu.command import run_command
+
+    def interrupted() -> int:
+        raise KeyboardInterrupt
+
+    def missing() -> int:
+        raise ModuleNotFoundError("No module named 'fmpy'", name="fmpy")
+
+    def other() -> int:
+        raise ModuleNotFoundError("No module named 'nowhere'", name="nowhere")
+
+    assert run_command("prog", interrupted) == 130
+    assert run_command("prog", missing) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("prog: interrupted") and "'fmu' extra" in err[1]
+    with pytest.raises(ModuleNotFoundError):       # not an extra's module: not hidden
+        run_command("prog", other)
+
+
+def test_a_writer_interrupted_half_way_leaves_the_old_file(tmp_path):
+    """system_models.output.write_csv interrupted after the header: the previous CSV is intact
+    and no temporary file is left (the old code truncated it first)."""
+    import numpy as np
+
+    from system_models.master import Result
+    from system_models.output import write_csv
+
+    class Interrupting(Result):
+        def __getitem__(self, name):
+            if name == "b":
+                raise KeyboardInterrupt
+            return super().__getitem__(name)
+
+    path = tmp_path / "run.csv"
+    path.write_text("old,contents\n1,2\n", encoding="utf-8")
+    t = np.linspace(0.0, 1.0, 5)
+    res = Interrupting(t, {"a": t, "b": 2 * t}, {"a": "m", "b": "m"})
+    with pytest.raises(KeyboardInterrupt):
+        write_csv(res, path)
+    assert path.read_text(encoding="utf-8") == "old,contents\n1,2\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv"]
