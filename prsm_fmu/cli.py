@@ -46,10 +46,11 @@ import numpy as np
 
 from . import presets as _presets
 from .arguments import (ArgumentParser, existing_dir, existing_file, finite_float, float_in,
-                        int_in, nonzero_float, one_line, positive_float, writable_dir)
+                        int_in, one_line, positive_float, writable_dir)
 from .atomic import atomic_path
 from .command import run_command
 from .extras import require
+from .configure import MAX_INITIAL_SPEED, TOLERANCE_RANGE
 from .fmu_variables import Variable, fmu_variables
 from .models import FIDELITIES
 from .params import MECHANISM_FIELD_NAMES, MechanismParams
@@ -61,6 +62,10 @@ from .units import DIMENSIONLESS, MILLISECOND, NEWTON, NEWTON_METRE, label, unit
 
 __all__ = ["main", "build_parser", "settling_time", "is_settled", "energy_balance_residual", "unit_of",
            "write_csv", "plot_startup", "startup_table"]
+
+#: argparse type of ``--speed``: the range of the FMU's ``initial_screw_speed`` parameter
+#: (:data:`prsm_fmu.configure.MAX_INITIAL_SPEED`), without 0 (no start-up to standstill)
+SCREW_SPEED = float_in(-MAX_INITIAL_SPEED, MAX_INITIAL_SPEED, nonzero=True, unit="rad/s")
 
 #: steppers accepted by ``--stepper`` (see prsm_fmu.steppers)
 STEPPERS = ("rk4", "explicit_adaptive", "rosenbrock", "radau")
@@ -523,12 +528,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fidelity", choices=FIDELITIES + ("auto",), default="dynamic",
                    help="model level (auto: dynamic while the carriers lag, quasi-static once "
                         "they follow, docs/accuracy.md §4); default %(default)s")
-    p.add_argument("--tolerance", type=float_in(0.0, 1.0, lo_open=True, hi_open=True),
-                   default=1e-8,
+    p.add_argument("--tolerance", type=float_in(*TOLERANCE_RANGE), default=1e-8,
                    help="rtol of the adaptive steppers (atol = 0.01 tolerance) and, with auto, "
                         "the accepted model error [1]; default %(default)g")
-    p.add_argument("--speed", type=nonzero_float, default=100.0,
-                   help="screw speed after the step [rad/s], non-zero; default %(default)g")
+    p.add_argument("--speed", type=SCREW_SPEED, default=100.0,
+                   help="screw speed after the step [rad/s], non-zero, within the FMU's "
+                        f"initial_screw_speed range ±{MAX_INITIAL_SPEED:g}; default %(default)g")
     p.add_argument("--load", type=finite_float, default=5000.0,
                    help="load force on the last nut [N], positive resists extension; "
                         "default %(default)g")
@@ -546,8 +551,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Print the steady state (root finding, no time stepping).")
     p.add_argument("--preset", type=_preset, default="seed000_two_stage",
                    help="preset name; default %(default)s")
-    p.add_argument("--speed", type=nonzero_float, default=100.0,
-                   help="screw speed [rad/s], non-zero; default %(default)g")
+    p.add_argument("--speed", type=SCREW_SPEED, default=100.0,
+                   help=f"screw speed [rad/s], non-zero, within ±{MAX_INITIAL_SPEED:g}; "
+                        "default %(default)g")
     p.add_argument("--load", type=finite_float, default=5000.0,
                    help="load force on the last nut [N], positive resists extension; "
                         "default %(default)g")
@@ -790,6 +796,12 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         problem = _parameter_problem(fmu_vars, name, value)
         if problem:
             parser.error(f"argument --set: {problem}")
+    problem = regress.fmu_mismatch(fmu_vars, where, args.case, outputs=not args.update)
+    if problem:
+        if args.fmu:
+            parser.error(f"argument --fmu: {args.fmu}: {problem}")
+        print(f"prsm-fmu: error: {problem}", file=sys.stderr)
+        return 1
     if args.update:
         print(regress.update(fmu, where, args.case))
         print(f"wrote the baselines and {where / 'REPORT.md'}: review the report, then pack "

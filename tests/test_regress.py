@@ -92,6 +92,37 @@ def test_regress_builds_and_a_rebuilt_fmu_passes(tmp_path, capsys):
     assert not (tmp_path / "report.html").exists()
 
 
+def _renamed_output(src: Path, dest: Path, old: str, new: str) -> Path:
+    """A copy of the FMU ``src`` whose modelDescription calls the variable ``old`` ``new``."""
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dest, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(f'name="{old}"'.encode(), f'name="{new}"'.encode())
+            zout.writestr(item, data)
+    return dest
+
+
+def test_regress_refuses_an_fmu_that_does_not_fit_before_running(tmp_path, capsys):
+    """--fmu of the wrong stage count, or lacking an output the baselines compare: one line
+    naming --fmu and the mismatch, exit status 2, no case run (no verdict row, no report)."""
+    fmus = built_fmus()
+    code = cli.main(["regress", "--fmu", str(fmus["PRSM3"]), "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert code == 2
+    assert len(cap.err.strip().splitlines()) == 1 and "--fmu" in cap.err
+    assert "3-stage" in cap.err and "2-stage" in cap.err, cap.err
+    assert "startup_seed000" not in cap.out and not (tmp_path / "report.html").exists()
+
+    odd = _renamed_output(fmus["PRSM2"], tmp_path / "PRSM2_odd.fmu", "friction_power",
+                          "friction_power_W")
+    code = cli.main(["regress", "--fmu", str(odd), "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert code == 2
+    assert len(cap.err.strip().splitlines()) == 1 and "no output friction_power" in cap.err
+    assert "startup_seed000" not in cap.out and not (tmp_path / "report.html").exists()
+
+
 def test_fmu_carries_the_baselines():
     fmus = built_fmus()
     with zipfile.ZipFile(fmus["PRSM2"]) as z:

@@ -23,7 +23,7 @@ import tomllib
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -168,6 +168,63 @@ def read_baselines(where=DEFAULT_DIR, cases: list[Case] | None = None) -> dict[s
         except FileNotFoundError:
             pass
     return out
+
+
+# ---- does an FMU fit the cases ----------------------------------------------------------------
+def _stage_count(names) -> int:
+    """Stages k = 1, 2, ... with a ``stage[k].contact_force`` among ``names``."""
+    k = 0
+    while f"stage[{k + 1}].contact_force" in names:
+        k += 1
+    return k
+
+
+def fmu_mismatch(variables: Mapping[str, Any], where=DEFAULT_DIR,
+                 cases: list[str] | None = None, outputs: bool = True) -> str:
+    """Why an FMU cannot run the cases (one line), or "" if it can.
+
+    Checked before anything runs, against what the cases need: the PRSM's stage count of every
+    baseline (its ``prsm.stage[k].*`` columns) must be the FMU's, every ``prsm.NAME`` column
+    must be an output ``NAME`` of the FMU, and every parameter a case or its scene sets must be
+    a parameter of the FMU.
+
+    Parameters
+    ----------
+    variables : mapping
+        The FMU's variables, name -> :class:`prsm_fmu.fmu_variables.Variable`.
+    where : path, optional
+        Baselines directory or FMU holding them.
+    cases : list of str, optional
+        The cases to run; default every case.
+    outputs : bool
+        Also check the outputs (False for ``--update``, which may add or drop outputs on
+        purpose; the stage count and the parameters are checked always).
+    """
+    from system_models.scenes import load_scene
+
+    n_fmu = _stage_count(variables)
+    chosen = [c for c in load_cases(where) if cases is None or c.name in cases]
+    bases = read_baselines(where, chosen)
+    for c in chosen:
+        b = bases.get(c.name)
+        if b is None:
+            continue
+        prsm = [n.removeprefix("prsm.") for n in b.values if n.startswith("prsm.")]
+        n_case = _stage_count(prsm)
+        if n_case != n_fmu:
+            return (f"the FMU is a {n_fmu}-stage PRSM but case {c.name} is a {n_case}-stage "
+                    f"one: must be a {n_case}-stage FMU (PRSM{n_case}.fmu)")
+        missing = [n for n in prsm if getattr(variables.get(n), "causality", "") != "output"]
+        if missing and outputs:
+            return (f"the FMU has no output {', '.join(missing)} that case {c.name} compares: "
+                    "must be an FMU built from this version (python -m fmu_build)")
+        params = {**load_scene(c.scene).prsm.get("parameters", {}), **c.parameters}
+        missing = [n for n in params if getattr(variables.get(n), "causality", "")
+                   != "parameter"]
+        if missing:
+            return (f"the FMU has no parameter {', '.join(missing)} that case {c.name} sets: "
+                    "must be an FMU built from this version (python -m fmu_build)")
+    return ""
 
 
 # ---- building and simulating ------------------------------------------------------------------
