@@ -180,7 +180,12 @@ def _cmd_run(args, ap) -> int:
                         retry=retry, progress=prog, loop=args.loop)
     except CoSimulationError as exc:
         prog.close()
-        print(f"prsm-ema: {exc}", file=sys.stderr)
+        from .step_hint import step_limit_hint
+
+        hint = step_limit_hint(scene, args.step or scene.step, args.order or scene.order,
+                               scene.extrapolation if args.extrapolation is None
+                               else args.extrapolation)
+        print(f"prsm-ema: {exc}" + (f" {hint}" if hint else ""), file=sys.stderr)
         return 1
     except (ValueError, *build_errors) as exc:
         prog.close()

@@ -156,3 +156,29 @@ def test_a_writer_interrupted_half_way_leaves_the_old_file(tmp_path):
         write_csv(res, path)
     assert path.read_text(encoding="utf-8") == "old,contents\n1,2\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv"]
+
+
+def test_a_run_stopped_by_a_too_large_step_names_the_stability_limit(tmp_path, capsys):
+    """load_step (Gauss–Seidel, extrapolation 1, the default 2e5 N/m, 1e3 N.s/m load) at
+    h = 1 ms, 10x its own step: the drive trips; the message must name the step as the likely
+    cause with the limit the coupling analysis predicts for that loop, and its suggested step
+    must run the scene through (every check passing)."""
+    import re
+
+    from system_models.cli import main
+    from system_models.coupling_analysis import predicted_stable_step
+
+    out = tmp_path / "out"
+    code = main(["run", "--scene", "load_step", "--prsm", "python", "--step", "1e-3",
+                 "--no-plots", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and len(err.splitlines()) == 1, err
+    assert "refused the step" in err and "likely cause: the communication step h = 0.001 s" \
+        in err, err
+    limit = float(re.search(r"stability limit (\S+) s", err).group(1))
+    assert limit == pytest.approx(predicted_stable_step("gauss-seidel", 1, 2e5, 1e3), rel=5e-3)
+    assert limit < 1e-3
+    suggested = float(re.search(r"--step (\S+)$", err).group(1))
+    assert suggested <= limit
+    assert main(["run", "--scene", "load_step", "--prsm", "python", "--step", f"{suggested!r}",
+                 "--no-plots", "--out", str(out)]) == 0
