@@ -46,6 +46,7 @@ from xml.dom.minidom import parseString
 
 import prsm_fmu
 from prsm_fmu.mechanics import Mechanism
+from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
@@ -164,6 +165,9 @@ def constants_header(params: MechanismParams) -> str:
 #define PRSM_CONSTANTS_H
 
 #define PRSM_N_STAGES {params.n_stages}
+
+/* |screw speed| [rad/s] at or below which no power flows (prsm_fmu.models.base.STANDSTILL_SPEED) */
+#define PRSM_STANDSTILL_SPEED {_hex(STANDSTILL_SPEED)}
 
 /* per stage, flank "+" then "-": slip Jacobians a (x, y, z) and b (x, y), contact point (x, y),
    axial normal n_z and [P x n]_z (prsm_fmu.mechanics._Flank.consts) */

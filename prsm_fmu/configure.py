@@ -13,7 +13,7 @@ from typing import Any, Mapping
 from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
-from .params import MechanismParams
+from .params import MAX_SCREW_SPEED, MechanismParams
 from .simulate import DEFAULT_STEPPER, tuned_stepper_options
 from .steppers import STEPPER_NAMES, make_stepper
 
@@ -73,9 +73,8 @@ TOLERANCE_RANGE = (1e-12, 0.1)
 #: one doStep"); fewer than 10 internal steps cannot take the adaptive steppers through their
 #: starting step and one rejection; ``substeps`` (fixed steps) must not exceed it either
 MAX_SUBSTEPS_RANGE = (10, 100_000)
-#: |initial_screw_speed| [rad/s] at most: 10^4 rad/s (95,000 rpm) is 20x beyond any PRSM
-#: (critical speeds of the seeds' screws are a few thousand rpm)
-MAX_INITIAL_SPEED = 1e4
+#: |initial_screw_speed| [rad/s] at most: :data:`prsm_fmu.params.MAX_SCREW_SPEED`
+MAX_INITIAL_SPEED = MAX_SCREW_SPEED
 #: |initial_screw_angle| [rad] at most: beyond 10^6 rad a step's angle increment of 1 µrad
 #: loses its last digits to the magnitude of the angle (10^6 * 2.2e-16 = 2e-10 rad)
 MAX_INITIAL_ANGLE = 1e6

@@ -30,6 +30,9 @@ MAX_MU_DIFFERENTIAL = 1e-3
 #: at 0.1 m/s of slip, the order of the largest normal force a thread carries; a lubricant film
 #: that resists more than that is no film (seed 003: 0.001 N·s/m; its own load table needs ~580)
 MAX_MU_VISCOUS = 1e5
+#: the largest screw speed the FMUs accept as a start value [rad/s]: 10^4 rad/s (95,000 rpm) is
+#: 20x beyond any PRSM (critical speeds of the seeds' screws are a few thousand rpm)
+MAX_SCREW_SPEED = 1e4
 
 #: most engaged thread turns per roller [-]: a roller 1 m long (the length bound) at 1 mm pitch
 MAX_THREADS_PER_ROLLER = 1000

@@ -67,7 +67,9 @@ class Case:
         """The tube of ``output``: overrides of ``[case.X.outputs."name"]`` first."""
         o = self.outputs.get(output, {})
         frac = float(o.get("abs_frac", self.abs_frac))
-        scale = float(np.max(np.abs(baseline))) if baseline.size else 0.0
+        # NaN: the efficiency where no power flows (undefined, not a value to scale by)
+        finite = np.abs(baseline[np.isfinite(baseline)])
+        scale = float(np.max(finite)) if finite.size else 0.0
         a = frac * scale if scale > 0.0 else frac
         return Tolerance(abs=a, rel=float(o.get("rel", self.rel)), dt=float(o.get("dt", self.dt)))
 
