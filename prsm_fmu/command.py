@@ -16,7 +16,7 @@ from typing import Callable
 
 from .extras import missing_extra_message
 
-__all__ = ["run_command", "INTERRUPTED"]
+__all__ = ["run_command", "child_failure", "INTERRUPTED"]
 
 #: exit status after Ctrl-C: 128 + SIGINT (2)
 INTERRUPTED = 130
@@ -44,3 +44,22 @@ def run_command(prog: str, body: Callable[[], int]) -> int:
             raise
         print(f"{prog}: error: {message}", file=sys.stderr)
         return 1
+
+
+def child_failure(what: str, returncode: int, stderr: str, stdout: str = "") -> str:
+    """One line for a child process that failed: ``what`` (the command), its exit status and
+    the last line it wrote on stderr (the child's own one-line error; a traceback's last line
+    names the exception), or on stdout if stderr is empty.
+
+    Parameters
+    ----------
+    what : str
+        What was run, e.g. ``"python -m fmu_build PRSM2"``.
+    returncode : int
+        Its exit status.
+    stderr, stdout : str
+        What it wrote.
+    """
+    lines = [ln.strip() for ln in (stderr or stdout or "").splitlines() if ln.strip()]
+    return f"{what} failed (exit status {returncode}): {lines[-1] if lines else 'no output'}"
+

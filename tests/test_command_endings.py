@@ -182,3 +182,21 @@ def test_a_run_stopped_by_a_too_large_step_names_the_stability_limit(tmp_path, c
     assert suggested <= limit
     assert main(["run", "--scene", "load_step", "--prsm", "python", "--step", f"{suggested!r}",
                  "--no-plots", "--out", str(out)]) == 0
+
+
+def test_a_failed_fmu_build_in_a_child_is_reported_in_one_line(tmp_path, monkeypatch):
+    """regress and sweep build their FMUs in a child process; its failure (here: the child
+    cannot import pythonfmu, hidden from it by PYTHONPATH) comes back as one line with the
+    child's exit status and its own one-line error, not its whole output squeezed together."""
+    pytest.importorskip("pythonfmu")
+    from prsm_fmu.regress.core import build_fmu
+    from prsm_fmu.sweep.execute import ensure_fmus
+
+    monkeypatch.setenv("PYTHONPATH", _hide(tmp_path, "pythonfmu")["PYTHONPATH"])
+    for build in (lambda: build_fmu(tmp_path / "a"),
+                  lambda: ensure_fmus([2], str(tmp_path / "b"))):
+        with pytest.raises(RuntimeError) as info:
+            build()
+        text = str(info.value)
+        assert "\n" not in text and "Traceback" not in text, text
+        assert "exit status 1" in text and "'fmu' extra" in text, text

@@ -28,6 +28,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..atomic import atomic_path
+from ..command import child_failure
 from .tube import Tolerance, TubeResult, compare
 
 __all__ = ["ROOT", "DEFAULT_DIR", "OUTPUTS", "Case", "Baseline", "CaseResult", "load_cases",
@@ -231,7 +232,13 @@ def fmu_mismatch(variables: Mapping[str, Any], where=DEFAULT_DIR,
 
 # ---- building and simulating ------------------------------------------------------------------
 def build_fmu(dest: Path, name: str = "PRSM2") -> Path:
-    """Build ``dest/<name>.fmu`` with ``python -m fmu_build`` in a child process."""
+    """Build ``dest/<name>.fmu`` with ``python -m fmu_build`` in a child process.
+
+    Raises
+    ------
+    RuntimeError
+        If the build fails: one line with the child's exit status and its last line of error.
+    """
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ)
@@ -241,7 +248,8 @@ def build_fmu(dest: Path, name: str = "PRSM2") -> Path:
                           capture_output=True, text=True, env=env, timeout=600)
     fmu = dest / f"{name}.fmu"
     if proc.returncode != 0 or not fmu.is_file():
-        raise RuntimeError(f"python -m fmu_build {name} failed:\n{proc.stdout}{proc.stderr}")
+        raise RuntimeError(child_failure(f"python -m fmu_build {name}", proc.returncode,
+                                         proc.stderr, proc.stdout))
     return fmu
 
 

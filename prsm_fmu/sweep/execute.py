@@ -54,6 +54,7 @@ from typing import Any, Callable, Sequence, TextIO
 import numpy as np
 
 from ..atomic import atomic_path
+from ..command import child_failure
 from ..extras import require
 from .metrics import standard_metrics
 from .points import FmuFile, PointResult, PointTask, run_point
@@ -123,7 +124,7 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
     ValueError
         For a stage count without a standard FMU (1 to 3).
     RuntimeError
-        If the build fails (with its output).
+        If the build fails (one line: the child's exit status and its last line of error).
     """
     paths: dict[int, str] = {}
     missing = []
@@ -148,8 +149,8 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
         proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600,
                               check=False)
         if proc.returncode != 0:
-            raise RuntimeError(f"building the FMUs failed ({' '.join(cmd)}):\n{proc.stdout}"
-                               f"\n{proc.stderr}")
+            raise RuntimeError(child_failure(f"building the FMUs ({' '.join(cmd[1:])})",
+                                             proc.returncode, proc.stderr, proc.stdout))
         for n in missing:
             paths[n] = os.path.join(dest, f"PRSM{n}.fmu")
     return paths
