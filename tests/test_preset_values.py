@@ -126,3 +126,34 @@ def test_friction_torque_article_friction():
     assert p.mu_viscous == 0.001                # µ_1 [N·s/m] per engaged thread
     assert p.mu_differential == 1e-6            # µ_3 [m]
     assert (p.mu_spline, p.mu_nut_screw) == (0.0, 0.0)     # one stage: no spline, no bearing
+
+
+# ---- Li et al. (2021) and the assembly article: the values tests/test_presets.py leaves out -------
+# (their masses, inertias and radii are checked there; here the rest, each from its paper or the
+# preset docstring's stated assumption)
+
+def test_li2021_remaining_values():
+    p = presets.load("seed000_two_stage")
+    # §3.2's smallest pair as the base case, µ_NS = 0 (§2.2 ignores the thrust bearings)
+    assert (p.mu_screw_roller, p.mu_spline, p.mu_nut_screw) == (0.1, 0.2, 0.0)
+    s1, s2 = p.stages
+    _check(s1, {"screw_mass": 0.051,       # unused (screw 1 does not translate): the assembly
+                                           # article's m_S1
+                "spline_radius": 0.0, "bearing_radius": 0.0, "carriers": 2,
+                "threads_per_roller": 1})
+    _check(s2, {"bearing_radius": 0.0, "carriers": 2, "threads_per_roller": 1})
+
+
+def test_assembly_article_remaining_values():
+    p = presets.load("seed002_two_stage")
+    s1, s2 = p.stages
+    # its geometry table = Li et al. (2021) §3.1's: r_S 9.75 / 16.5 mm, r_R 3.25 / 5.5 mm,
+    # r_N 16.25 / 27.5 mm, L_S = 10 mm (5 starts × 2 mm), 7 rollers; β = 45° from Li et al.
+    for s, (r_s, r_r, r_n) in ((s1, (0.00975, 0.00325, 0.01625)),
+                               (s2, (0.0165, 0.0055, 0.0275))):
+        _check(s, {"screw_radius": r_s, "roller_radius": r_r, "nut_radius": r_n,
+                   "screw_lead": 0.010, "screw_starts": 5, "n_rollers": 7,
+                   "flank_angle": math.pi / 4, "carriers": 2, "threads_per_roller": 1})
+    # thrust bearing nut 1 – screw 2 at the nut 1 pitch radius 16.25 mm (assumed); none after 2
+    _check(s1, {"bearing_radius": 0.01625, "spline_radius": 0.0})
+    _check(s2, {"bearing_radius": 0.0})
