@@ -45,6 +45,7 @@ from pathlib import Path
 from xml.dom.minidom import parseString
 
 import prsm_fmu
+from prsm_fmu.atomic import atomic_path
 from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import MechanismParams
@@ -521,7 +522,8 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
             if problems:
                 raise BuildError(f"{fmu.name} is not valid:\n  " + "\n  ".join(problems))
         target = dest / fmu.name
-        shutil.move(str(fmu), target)
+        with atomic_path(target) as part:          # whole or not at all (Ctrl-C, full disk)
+            shutil.copyfile(fmu, part)
     return target
 
 

@@ -200,3 +200,15 @@ def test_a_failed_fmu_build_in_a_child_is_reported_in_one_line(tmp_path, monkeyp
         text = str(info.value)
         assert "\n" not in text and "Traceback" not in text, text
         assert "exit status 1" in text and "'fmu' extra" in text, text
+
+
+def test_atomic_outputs_get_the_mode_a_plain_open_gives(tmp_path):
+    """The temporary file is made private by mkstemp; the renamed output must have the mode
+    open() gives a new file (0666 less the umask), as before."""
+    from prsm_fmu.atomic import atomic_path
+
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x", encoding="utf-8")
+    with atomic_path(tmp_path / "atomic.txt") as part:
+        Path(part).write_text("x", encoding="utf-8")
+    assert (tmp_path / "atomic.txt").stat().st_mode == plain.stat().st_mode
