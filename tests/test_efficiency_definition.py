@@ -124,3 +124,26 @@ def test_python_and_native_fmu_give_nan_at_the_same_steps_of_a_reversal():
     assert 0 < sum(undefined) < len(undefined), sum(undefined)
     assert all(a == b for a, b, u in zip(e_py, e_nat, undefined) if not u)
     print(f"{sum(undefined)} of {len(undefined)} steps without power through the PRSM")
+
+
+@pytest.mark.parametrize("native_fmu", [False, True], ids=["pythonfmu", "native"])
+def test_libcosim_steps_an_fmu_at_standstill_and_reads_the_nan(native_fmu):
+    """A third-party host (libcosim) accepts the NaN output: at rest with no torque and no load
+    every step succeeds and the efficiency it observes is NaN, the speed 0."""
+    pytest.importorskip("libcosimpy")
+    from test_fmu import built_fmus
+    from test_fmu_hosts import LIBCOSIM, child
+
+    if native_fmu:
+        if sys.platform != "linux":
+            pytest.skip("the native FMU is built here for Linux only")
+        from test_native_fmu import built_native
+        fmu = built_native()["PRSM2"]
+    else:
+        fmu = built_fmus()["PRSM2"]
+    status, data, err = child(LIBCOSIM.format(fmu=str(fmu), h_ns=1_000_000, u=(0.0, 0.0),
+                                              start={}, steps=3,
+                                              outputs=("screw_speed", "efficiency")))
+    assert status == 0 and data, err[-2000:]
+    assert all(data["ok"]) and data["state"] != "ERROR", data
+    assert all(w == 0.0 and math.isnan(e) for w, e in data["rows"]), data["rows"]
