@@ -212,3 +212,42 @@ def test_atomic_outputs_get_the_mode_a_plain_open_gives(tmp_path):
     with atomic_path(tmp_path / "atomic.txt") as part:
         Path(part).write_text("x", encoding="utf-8")
     assert (tmp_path / "atomic.txt").stat().st_mode == plain.stat().st_mode
+
+
+def test_ctrl_c_ends_a_dask_sweep_with_one_line_and_keeps_the_finished_points(tmp_path):
+    """A terminal's Ctrl-C reaches the whole process group (the Dask workers too): SIGINT to
+    the group once the first point is written ends the study with one line, status 130, no
+    worker traceback; the points written so far are complete (the table reads, every series
+    loads)."""
+    pytest.importorskip("dask.distributed")
+    import numpy as np
+
+    from prsm_fmu.sweep.table import read_table
+
+    out = tmp_path / "out"
+    series = out / "seed003_load" / "series"
+    proc = subprocess.Popen([sys.executable, "-m", "prsm_fmu.cli", "sweep",
+                             str(REPO / "studies" / "seed003_load.toml"), "--workers", "1",
+                             "--quiet", "--out", str(out)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and not (series.is_dir()
+                                                    and any(series.glob("*.npz"))):
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-3000:]
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err[-3000:]
+    header, rows = read_table(str(out / "seed003_load" / "results.csv"))
+    assert header and all(r["status"] == "ok" for r in rows)
+    for f in series.glob("*.npz"):
+        with np.load(f) as z:
+            assert "time" in z.files
+    assert not list(out.rglob("*.part*"))
+    print(f"interrupted after {len(rows)} of 8 points")

@@ -43,10 +43,13 @@ recorded as failed with the scheduler's message.
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence, TextIO
@@ -234,8 +237,25 @@ def local_cluster(workers: int | None = None):
     from dask.distributed import LocalCluster
 
     n = workers or os.cpu_count() or 1
-    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOOPBACK,
-                        dashboard_address=f"{LOOPBACK}:0")
+    # Ctrl-C reaches the whole process group; only this process is to handle it, by closing
+    # the cluster (prsm_fmu.command: one line), not every worker with a traceback.  The worker
+    # processes start with SIGINT ignored (a Python child keeps an ignored SIGINT through its
+    # imports) and their preload ignores it for good; the price: a Ctrl-C while the cluster
+    # starts (a few seconds) is not seen.
+    on_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if on_main else None
+    try:
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOOPBACK,
+                            dashboard_address=f"{LOOPBACK}:0",
+                            preload=["prsm_fmu.sweep.worker_setup"])
+    finally:
+        if on_main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _quiet_logs() -> None:
+    """Run on each worker before an interrupted study closes its cluster: no shutdown logs."""
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
@@ -276,7 +296,16 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
                                   f"{type(exc).__name__}: {exc}")
             fut.release()
 
-    def close():
+    def close(quiet: bool = False):
+        if quiet:
+            # the points still running are cancelled: their workers and nannies would log
+            # it as warnings and errors on stderr
+            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            if own_cluster is not None:
+                try:
+                    client.run(_quiet_logs)
+                except Exception:  # noqa: BLE001 - a worker already gone: nothing to quieten
+                    pass
         if own_client is not None:
             own_client.close()
         if own_cluster is not None:
@@ -436,8 +465,10 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             try:
                 for res in results():
                     handle(res)
-            finally:
-                close()
+            except BaseException:           # Ctrl-C or an error: close without the workers'
+                close(quiet=True)           # shutdown warnings (one line, prsm_fmu.command)
+                raise
+            close()
     bar.close()
 
     ordered = [rows_by_id[i] for i in ids if i in rows_by_id]
