@@ -11,12 +11,15 @@
 
 from __future__ import annotations
 
+import signal
 import sys
-from typing import Callable
+import threading
+from contextlib import contextmanager
+from typing import Callable, Iterator
 
 from .extras import missing_extra_message
 
-__all__ = ["run_command", "child_failure", "INTERRUPTED"]
+__all__ = ["run_command", "child_failure", "deferred_interrupt", "INTERRUPTED"]
 
 #: exit status after Ctrl-C: 128 + SIGINT (2)
 INTERRUPTED = 130
@@ -62,4 +65,37 @@ def child_failure(what: str, returncode: int, stderr: str, stdout: str = "") -> 
     """
     lines = [ln.strip() for ln in (stderr or stdout or "").splitlines() if ln.strip()]
     return f"{what} failed (exit status {returncode}): {lines[-1] if lines else 'no output'}"
+
+
+@contextmanager
+def deferred_interrupt() -> Iterator[Callable[[], None]]:
+    """Hold Ctrl-C back to safe points: yields ``check()``, which raises KeyboardInterrupt if
+    SIGINT came since the block began.
+
+    For code that calls into an FMU: a KeyboardInterrupt raised inside the FMU's own Python
+    (pythonfmu) is a fatal error of the FMU, not an interruption; with this the signal is
+    only noted, and ``check()`` between two steps raises it.  Outside the main thread (no
+    signal handler can be set there) ``check()`` never raises.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: None
+        return
+    caught: list[int] = []
+
+    def note(signum, frame) -> None:
+        caught.append(signum)
+
+    previous = signal.signal(signal.SIGINT, note)
+
+    def check() -> None:
+        if caught:
+            caught.clear()
+            raise KeyboardInterrupt
+
+    try:
+        yield check
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
 

@@ -122,6 +122,7 @@ def _plots(run, out: Path) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
+    from prsm_fmu.command import deferred_interrupt
     from prsm_fmu.extras import require
 
     from .fmu import FMUError, ensure_fmu
@@ -174,10 +175,20 @@ def _cmd_run(args, ap) -> int:
     print(f"scene {scene.name}: {scene.description}")
     prog = Progress(t_start=scene.t0)
     try:
-        run = run_scene(scene, prsm="python" if args.prsm == "python" else "fmu",
-                        fmu_path=fmu_path, fidelity=args.fidelity,
-                        step=args.step, order=args.order, extrapolation=args.extrapolation,
-                        retry=retry, progress=prog, loop=args.loop)
+        # Ctrl-C is held back to the master's steps: raised inside an FMU's own Python it would
+        # be the FMU's fatal error, not an interruption (prsm_fmu.command.deferred_interrupt)
+        with deferred_interrupt() as check:
+            def progress(t: float, t_end: float) -> None:
+                check()
+                prog(t, t_end)
+
+            run = run_scene(scene, prsm="python" if args.prsm == "python" else "fmu",
+                            fmu_path=fmu_path, fidelity=args.fidelity,
+                            step=args.step, order=args.order, extrapolation=args.extrapolation,
+                            retry=retry, progress=progress, loop=args.loop)
+    except KeyboardInterrupt:
+        prog.close()                    # end the bar's line; prsm_fmu.command says the rest
+        raise
     except CoSimulationError as exc:
         prog.close()
         from .step_hint import step_limit_hint

@@ -89,14 +89,21 @@ def test_the_plain_python_model_runs_without_the_fmu_extra(tmp_path):
     assert (out / "load_step.csv").is_file() and (out / "load_step_summary.json").is_file()
 
 
-def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path):
+@pytest.mark.parametrize("prsm", ["python", "fmu"])
+def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path, prsm):
     """SIGINT once the scene runs (its first line printed): one line on stderr, exit 130,
-    no CSV/PNG/JSON and no temporary file left in the output folder."""
+    no CSV/PNG/JSON and no temporary file left in the output folder.  With the pythonfmu FMU
+    the interrupt must not land inside the FMU's Python (a fatal FMU error, exit 1)."""
     out = tmp_path / "out"
     out.mkdir()
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    fmu = []
+    if prsm == "fmu":
+        pytest.importorskip("pythonfmu")
+        from test_fmu import built_fmus
+        fmu = ["--fmu", str(built_fmus()["PRSM2"])]
     proc = subprocess.Popen([sys.executable, "-m", "system_models", "run", "--scene",
-                             "sine_tracking", "--prsm", "python", "--out", str(out)],
+                             "sine_tracking", "--prsm", prsm, *fmu, "--out", str(out)],
                             cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
@@ -109,8 +116,9 @@ def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 130, err[-2000:]
-    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
-    assert "interrupted" in err
+    errors = [ln for ln in err.strip().splitlines() if not ln.startswith("[")]   # not the bar
+    assert "Traceback" not in err and len(errors) == 1, err
+    assert errors[0].startswith("prsm-ema: interrupted")
     assert list(out.iterdir()) == []
 
 
@@ -251,3 +259,27 @@ def test_ctrl_c_ends_a_dask_sweep_with_one_line_and_keeps_the_finished_points(tm
             assert "time" in z.files
     assert not list(out.rglob("*.part*"))
     print(f"interrupted after {len(rows)} of 8 points")
+
+
+def test_ctrl_c_stops_regress_instead_of_failing_the_case_and_going_on():
+    """regress runs the pythonfmu FMU in this process: a Ctrl-C that lands inside the FMU's
+    Python was its fatal error, recorded as a failing case, and the next case ran.  Now the
+    interrupt is held to the next macro step and ends the check (SIGINT sent to this process
+    0.5 s into the longest case, sine_tracking: 10 000 steps)."""
+    pytest.importorskip("pythonfmu")
+    import threading
+
+    from test_fmu import built_fmus
+
+    from prsm_fmu.regress import core
+
+    fmu = built_fmus()["PRSM2"]
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    t0 = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            core.check(fmu, cases=["sine_tracking", "load_step"])
+    finally:
+        timer.cancel()
+    assert time.monotonic() - t0 < 30.0

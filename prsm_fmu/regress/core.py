@@ -28,7 +28,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..atomic import atomic_path
-from ..command import child_failure
+from ..command import child_failure, deferred_interrupt
 from .tube import Tolerance, TubeResult, compare
 
 __all__ = ["ROOT", "DEFAULT_DIR", "OUTPUTS", "Case", "Baseline", "CaseResult", "load_cases",
@@ -254,11 +254,12 @@ def build_fmu(dest: Path, name: str = "PRSM2") -> Path:
 
 
 def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
-                  parameters: dict[str, Any] | None = None, prsm: str = "fmu"):
+                  parameters: dict[str, Any] | None = None, prsm: str = "fmu", progress=None):
     """Run the case's scene on the FMU (fmpy); returns the master's Result.
 
     ``tolerance`` sets the FMU's ``tolerance`` parameter (None: the scene's, i.e. the FMU's
-    default); ``parameters`` adds FMU start values (e.g. a changed ``mu_screw_roller``).
+    default); ``parameters`` adds FMU start values (e.g. a changed ``mu_screw_roller``);
+    ``progress(t, t_end)`` is called after every macro step.
     """
     from system_models.run import run_scene
     from system_models.scenes import load_scene
@@ -268,7 +269,8 @@ def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
     if tolerance is not None:
         par["tolerance"] = tolerance
     sc = replace(sc, prsm={**sc.prsm, "parameters": par})
-    return run_scene(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity).result
+    return run_scene(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity,
+                     progress=progress).result
 
 
 def case_outputs(case: Case, result) -> list[str]:
@@ -306,17 +308,21 @@ def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
                          f"{', '.join(c.name for c in all_cases)}")
     bases = read_baselines(where, chosen)
     out = []
-    for c in chosen:
-        if c.name not in bases:
-            out.append(CaseResult(c, [], {}, {}, error="no baseline (run prsm-fmu regress "
-                                                       "--update)"))
-            continue
-        try:
-            res = simulate_case(c, fmu, parameters=parameters)
-        except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
-            out.append(CaseResult(c, [], {}, {}, error=f"the run failed: {exc}"))
-            continue
-        out.append(check_case(c, bases[c.name], res))
+    # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
+    # FMU's fatal error, recorded as a failing case, and the next case would run)
+    with deferred_interrupt() as interrupted:
+        for c in chosen:
+            if c.name not in bases:
+                out.append(CaseResult(c, [], {}, {}, error="no baseline (run prsm-fmu "
+                                                           "regress --update)"))
+                continue
+            try:
+                res = simulate_case(c, fmu, parameters=parameters,
+                                    progress=lambda t, t_end: interrupted())
+            except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
+                out.append(CaseResult(c, [], {}, {}, error=f"the run failed: {exc}"))
+                continue
+            out.append(check_case(c, bases[c.name], res))
     return out
 
 
@@ -347,8 +353,12 @@ def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None)
              "Changes against the previous baselines, measured with each case's tube "
              "(tolerances.toml); |Δ|/max|y| is the largest difference over the run divided by "
              "the output's largest magnitude.", ""]
+    with deferred_interrupt() as interrupted:      # as in check()
+        runs = {c.name: simulate_case(c, fmu, tolerance=tight,
+                                      progress=lambda t, t_end: interrupted())
+                for c in chosen}
     for c in chosen:
-        res = simulate_case(c, fmu, tolerance=tight)
+        res = runs[c.name]
         names = case_outputs(c, res)
         write_csv(where / f"{c.name}.csv", res.time, {n: res[n] for n in names},
                   {n: res.units.get(n, "") for n in names})

@@ -57,7 +57,7 @@ from typing import Any, Callable, Sequence, TextIO
 import numpy as np
 
 from ..atomic import atomic_path
-from ..command import child_failure
+from ..command import child_failure, deferred_interrupt
 from ..extras import require
 from .metrics import standard_metrics
 from .points import FmuFile, PointResult, PointTask, run_point
@@ -456,8 +456,12 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
 
     if tasks:
         if executor == "loop":
-            for t in tasks:
-                handle(run_point(t))
+            # Ctrl-C between two points, not inside an FMU's Python (there it would fail the
+            # point and the next one would run)
+            with deferred_interrupt() as interrupted:
+                for t in tasks:
+                    interrupted()
+                    handle(run_point(t))
         else:
             ship = (scheduler is not None and client is None) if ship_fmus is None \
                 else bool(ship_fmus)
