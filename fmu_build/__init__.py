@@ -12,9 +12,22 @@ FMU carries: the runtime modules, the compiled engine, the start values) and
 
 from __future__ import annotations
 
-from .builder import DEFAULT_EXPERIMENT, BuildError, build_fmu, validate
+import importlib
+
 from .mechanisms import FMUS, three_stage
-from .native import build_native
+
+#: name -> submodule, imported on first use (PEP 562): the builder imports pythonfmu, so that
+#: ``import fmu_build`` (and ``prsm-fmu-build --help``) works without the ``fmu`` extra and a
+#: build without it is refused in one line (:mod:`prsm_fmu.extras`)
+_LAZY = {"DEFAULT_EXPERIMENT": ".builder", "BuildError": ".builder", "build_fmu": ".builder",
+         "validate": ".builder", "build_native": ".native"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["build_fmu", "build_native", "build_named", "validate", "BuildError", "FMUS",
            "three_stage", "DEFAULT_EXPERIMENT"]
@@ -43,7 +56,9 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
         raise ValueError(f"unknown FMU {name!r}: must be one of {', '.join(FMUS)} "
                          "(or use --preset)") from None
     if native:
+        from .native import build_native
         if targets is None:
             return build_native(name, make(), source, dest, check, start)
         return build_native(name, make(), source, dest, check, start, targets)
+    from .builder import build_fmu
     return build_fmu(name, make(), source, dest, check, start, engine=engine)

@@ -21,9 +21,10 @@ from __future__ import annotations
 import sys
 
 from prsm_fmu.arguments import ArgumentParser, one_line, writable_dir
+from prsm_fmu.command import run_command
+from prsm_fmu.extras import require
 
-from . import FMUS, BuildError, build_fmu, build_named, build_native
-from .native import structural_start
+from .mechanisms import FMUS
 from .platforms import FMI2_PLATFORMS
 
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
@@ -92,13 +93,25 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        0 if every FMU was built, 1 if a build failed, 2 for bad arguments.
+        0 if every FMU was built, 1 if a build failed or the ``fmu`` extra is not installed
+        (one line naming it), 2 for bad arguments, 130 after Ctrl-C.
     """
+    return run_command("prsm-fmu-build", lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     ap = build_parser()
     try:
         args = ap.parse_args(argv)
     except SystemExit as exc:           # --help (0) or a bad argument (2, one line printed)
         return exc.code if isinstance(exc.code, int) else 2
+    # the extra, before anything is built: pythonfmu builds the Python FMU (and the builder
+    # the native one shares imports it), fmpy validates them and gives the native FMU its
+    # FMI headers
+    require("pythonfmu", "fmpy", purpose="building an FMU")
+    from . import BuildError, build_fmu, build_named, build_native
+    from .native import structural_start
+
     check = not args.no_validate
     try:
         start = dict(item.split("=", 1) for item in args.start)

@@ -29,6 +29,7 @@ import zipfile
 from pathlib import Path
 
 import prsm_fmu
+from prsm_fmu.atomic import atomic_path
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.configure import ENUMERATIONS
 from prsm_fmu.slave import ENUM_PARAMETERS, parameter_defaults, type_definitions
@@ -198,5 +199,6 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
             if problems:
                 raise BuildError(f"{name}.fmu is not valid:\n  " + "\n  ".join(problems))
         target = dest / f"{name}.fmu"
-        shutil.move(str(built), target)
+        with atomic_path(target) as part:          # whole or not at all (Ctrl-C, full disk)
+            shutil.copyfile(built, part)
     return target

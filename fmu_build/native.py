@@ -50,8 +50,10 @@ from pathlib import Path
 from xml.dom.minidom import parseString
 
 import prsm_fmu
+from prsm_fmu.atomic import atomic_path
 from prsm_fmu.slave import TIME_MATCH
 from prsm_fmu.mechanics import Mechanism
+from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                              MechanismParams)
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
@@ -224,6 +226,9 @@ def constants_header(params: MechanismParams) -> str:
 #define PRSM_CONSTANTS_H
 
 #define PRSM_N_STAGES {params.n_stages}
+
+/* |screw speed| [rad/s] at or below which no power flows (prsm_fmu.models.base.STANDSTILL_SPEED) */
+#define PRSM_STANDSTILL_SPEED {_hex(STANDSTILL_SPEED)}
 
 /* per stage, flank "+" then "-": slip Jacobians a (x, y, z) and b (x, y), contact point (x, y),
    axial normal n_z and [P x n]_z (prsm_fmu.mechanics._Flank.consts) */
@@ -671,7 +676,8 @@ INCLUDED = ("prsm_fmi2.c",)
             if problems:
                 raise BuildError(f"{fmu.name} is not valid:\n  " + "\n  ".join(problems))
         target = dest / fmu.name
-        shutil.move(str(fmu), target)
+        with atomic_path(target) as part:          # whole or not at all (Ctrl-C, full disk)
+            shutil.copyfile(fmu, part)
     return target
 
 

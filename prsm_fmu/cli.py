@@ -47,7 +47,11 @@ import numpy as np
 from . import presets as _presets
 from .arguments import (ArgumentParser, existing_dir, existing_file, finite_float, float_in,
                         int_in, nonzero_float, one_line, positive_float, writable_dir)
+from .atomic import atomic_path
+from .command import run_command
 from .engine import ENGINE_ENV, ENGINES
+from .extras import require
+from .configure import MAX_INITIAL_SPEED, TOLERANCE_RANGE
 from .fmu_variables import Variable, fmu_variables
 from .models import FIDELITIES
 from .params import MECHANISM_FIELD_NAMES, MechanismParams
@@ -59,6 +63,10 @@ from .units import DIMENSIONLESS, MILLISECOND, NEWTON, NEWTON_METRE, label, unit
 
 __all__ = ["main", "build_parser", "settling_time", "is_settled", "energy_balance_residual", "unit_of",
            "write_csv", "plot_startup", "startup_table"]
+
+#: argparse type of ``--speed``: the range of the FMU's ``initial_screw_speed`` parameter
+#: (:data:`prsm_fmu.configure.MAX_INITIAL_SPEED`), without 0 (no start-up to standstill)
+SCREW_SPEED = float_in(-MAX_INITIAL_SPEED, MAX_INITIAL_SPEED, nonzero=True, unit="rad/s")
 
 #: steppers accepted by ``--stepper`` (see prsm_fmu.steppers)
 STEPPERS = ("rk4", "explicit_adaptive", "rosenbrock", "radau")
@@ -85,7 +93,7 @@ def write_csv(res: Mapping[str, np.ndarray], path: str) -> None:
     """
     cols = _output_columns(res)
     data = np.column_stack([res[c] for c in cols])
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow([label(c, unit_of(c)) for c in cols])
         for row in data:
@@ -165,7 +173,8 @@ def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -377,7 +386,7 @@ def cmd_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     print(f"{n_points} points ({', '.join(study.swept) or 'no swept parameter'}), preset "
           f"{study.preset}, backend {study.backend}, on {where}")
     try:
-        res = run_study(study, args.out, executor="loop" if args.no_dask else "dask",
+        res = run_study(study, os.path.join(args.out, study.name), executor="loop" if args.no_dask else "dask",
                         scheduler=args.scheduler, workers=args.workers, fmu_dir=args.fmu_dir,
                         resume=not args.rerun_all, figures=not args.no_figures,
                         progress=None if args.quiet else sys.stderr)
@@ -522,12 +531,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fidelity", choices=FIDELITIES + ("auto",), default="dynamic",
                    help="model level (auto: dynamic while the carriers lag, quasi-static once "
                         "they follow, docs/accuracy.md §4); default %(default)s")
-    p.add_argument("--tolerance", type=float_in(0.0, 1.0, lo_open=True, hi_open=True),
-                   default=1e-8,
+    p.add_argument("--tolerance", type=float_in(*TOLERANCE_RANGE), default=1e-8,
                    help="rtol of the adaptive steppers (atol = 0.01 tolerance) and, with auto, "
                         "the accepted model error [1]; default %(default)g")
-    p.add_argument("--speed", type=nonzero_float, default=100.0,
-                   help="screw speed after the step [rad/s], non-zero; default %(default)g")
+    p.add_argument("--speed", type=SCREW_SPEED, default=100.0,
+                   help="screw speed after the step [rad/s], non-zero, within the FMU's "
+                        f"initial_screw_speed range ±{MAX_INITIAL_SPEED:g}; default %(default)g")
     p.add_argument("--load", type=finite_float, default=5000.0,
                    help="load force on the last nut [N], positive resists extension; "
                         "default %(default)g")
@@ -545,8 +554,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Print the steady state (root finding, no time stepping).")
     p.add_argument("--preset", type=_preset, default="li2021_two_stage",
                    help="preset name; default %(default)s")
-    p.add_argument("--speed", type=nonzero_float, default=100.0,
-                   help="screw speed [rad/s], non-zero; default %(default)g")
+    p.add_argument("--speed", type=SCREW_SPEED, default=100.0,
+                   help=f"screw speed [rad/s], non-zero, within ±{MAX_INITIAL_SPEED:g}; "
+                        "default %(default)g")
     p.add_argument("--load", type=finite_float, default=5000.0,
                    help="load force on the last nut [N], positive resists extension; "
                         "default %(default)g")
@@ -559,12 +569,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "sweep", help="run a parameter study (TOML) on the FMU or the model, locally or on Dask",
         description="Run every point of a study (studies/*.toml; docs/sweeps.md) and write "
-                    "OUT/results.csv, OUT/report.md, the figures OUT/*.png and the series "
-                    "OUT/series/*.npz. Points already in OUT/results.csv are skipped. Exit "
+                    "into a folder of its own, OUT/<study name>/: results.csv, report.md, the "
+                    "figures *.png and the series series/*.npz. Points already in its "
+                    "results.csv are skipped; another study's results are never touched. Exit "
                     "status 1 if a point failed (it is recorded with its error).")
     p.add_argument("study", metavar="STUDY", help="study file (TOML)")
-    p.add_argument("--out", type=writable_dir, default=None,
-                   help="output directory; default out/sweeps/<study name>")
+    p.add_argument("--out", type=writable_dir, default=os.path.join("out", "sweeps"),
+                   help="parent directory: the study writes into OUT/<study name>/; "
+                        "default %(default)s")
     p.add_argument("--backend", choices=("fmu", "model"), default=None,
                    help="simulate the FMU (speed prescribed by the master) or the model "
                         "(prsm_fmu.simulate); default: the study's")
@@ -765,6 +777,9 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if unknown:
         parser.error(f"argument --case: unknown case(s) {', '.join(unknown)}: must be one of "
                      f"{', '.join(known)}")
+    # the fmu extra, before anything is built or run: pythonfmu builds the FMU and runs inside
+    # it, fmpy steps it
+    require("fmpy", "pythonfmu", purpose="regress (building and running the FMU)")
     if args.fmu:
         fmu = Path(args.fmu)
         try:
@@ -784,6 +799,12 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         problem = _parameter_problem(fmu_vars, name, value)
         if problem:
             parser.error(f"argument --set: {problem}")
+    problem = regress.fmu_mismatch(fmu_vars, where, args.case, outputs=not args.update)
+    if problem:
+        if args.fmu:
+            parser.error(f"argument --fmu: {args.fmu}: {problem}")
+        print(f"prsm-fmu: error: {problem}", file=sys.stderr)
+        return 1
     if args.update:
         print(regress.update(fmu, where, args.case))
         print(f"wrote the baselines and {where / 'REPORT.md'}: review the report, then pack "
@@ -814,20 +835,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     -------
     int
         Exit code: 0 on success, 2 for bad arguments (a message naming the argument is
-        printed on stderr), 1 if a simulation step fails.
+        printed on stderr), 1 if a simulation step fails or an extra the command needs is not
+        installed (one line naming it), 130 after Ctrl-C (:mod:`prsm_fmu.command`).
     """
     parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        if args.engine is not None:
-            os.environ[ENGINE_ENV] = args.engine
-        return int(args.func(args, args.parser))
-    except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
-        code = exc.code
-        return code if isinstance(code, int) else (0 if code is None else 2)
-    except StepFailure as exc:
-        print(f"prsm-fmu: error: the simulation failed: {exc}", file=sys.stderr)
-        return 1
+
+    def body() -> int:
+        try:
+            args = parser.parse_args(argv)
+            if args.engine is not None:
+                os.environ[ENGINE_ENV] = args.engine
+            return int(args.func(args, args.parser))
+        except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
+            code = exc.code
+            return code if isinstance(code, int) else (0 if code is None else 2)
+        except StepFailure as exc:
+            print(f"prsm-fmu: error: the simulation failed: {exc}", file=sys.stderr)
+            return 1
+
+    return run_command("prsm-fmu", body)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from .param_ranges import (MECHANISM_RANGES, STAGE_RANGES, bearing_rule, max_rollers,
+from .param_ranges import (MECHANISM_RANGES, SOLVER_RANGES, STAGE_RANGES, bearing_rule, max_rollers,
                            spline_rule)
 
 #: relative tolerance of the geometric consistency checks (radii, leads)
@@ -31,6 +31,9 @@ GEOMETRY_RTOL = 1e-6
 MAX_MU_DIFFERENTIAL = MECHANISM_RANGES["mu_differential"].hi
 MAX_MU_VISCOUS = MECHANISM_RANGES["mu_viscous"].hi
 MAX_THREADS_PER_ROLLER = STAGE_RANGES["threads_per_roller"].hi
+#: the largest screw speed the FMUs accept as a start value [rad/s] (the table's bound of
+#: ``initial_screw_speed``: 10^4 rad/s, 95,000 rpm, 20x beyond any PRSM)
+MAX_SCREW_SPEED = SOLVER_RANGES["initial_screw_speed"].hi
 
 
 def _check_positive(name: str, value: float) -> None:

@@ -68,6 +68,7 @@ from .param_ranges import input_violation, state_violation
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
 from .engine import ENGINE_ENV, fallback_reason, is_engine, library_name, platform_folder
+from .models.base import undefined_allowed
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
 
@@ -233,7 +234,9 @@ OUTPUTS_STAGE: dict[str, tuple] = {
 #: outputs after the per-stage ones: name -> (unit, description, min)
 OUTPUTS_TAIL: dict[str, tuple] = {
     "efficiency": ("1", "instantaneous efficiency: output power / input power when driving, "
-                   "input / output power when back-driven, 0 otherwise", None),
+                   "input / output power when back-driven; NaN where no power passes through "
+                   "(standstill |screw_speed| <= 8.9e-12 rad/s, or both sides delivering or "
+                   "both absorbing power)", None),
     "friction_power": ("W", "power lost to friction", None),
     "friction_power_coulomb": ("W", "part of friction_power lost to Coulomb sliding at the "
                                "screw-roller contacts", None),
@@ -763,7 +766,8 @@ class PRSMSlave(Fmi2Slave):
         if all(map(math.isfinite, u0)) and model.contact_diagnosis(list(x0), u0) is None:
             bad = [v for v in model.rhs(self._t, list(x0), u0) if not math.isfinite(v)] or [
                 name for name, v in model.outputs(self._t, list(x0), u0).items()
-                if isinstance(v, float) and not math.isfinite(v)]
+                if isinstance(v, float) and not math.isfinite(v)
+                and not undefined_allowed(name, v)]
             if bad:
                 raise ValueError("the parameters give non-finite values at the start (e.g. "
                                  f"{bad[0]!r}): a mass, inertia or radius is out of any "

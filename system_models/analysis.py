@@ -35,6 +35,7 @@ from typing import Any, Callable
 import numpy as np
 
 from prsm_fmu.kinematics import rod_displacement
+from prsm_fmu.models.base import undefined_allowed
 
 from .master import Result
 
@@ -416,9 +417,12 @@ def evaluate(res: Result, checks: list[dict[str, Any]], context: dict[str, Any])
     """Run the scene's checks.  ``context``: ``reference`` (the profile), ``params`` (the PRSM's
     MechanismParams as simulated).  Every run is also checked for non-finite outputs."""
     out = []
-    bad = [n for n in res.names() if not np.all(np.isfinite(res[n]))]
+    # NaN is allowed where an output is undefined: the efficiency where no power flows
+    bad = [n for n in res.names()
+           if not all(math.isfinite(v) or undefined_allowed(n, v) for v in map(float, res[n]))]
     out.append(CheckResult("finite", "all outputs", not bad, {"non_finite": float(len(bad))}, {},
-                           "every output finite" if not bad else f"non-finite: {', '.join(bad[:5])}"))
+                           "every output finite (the efficiency NaN where no power flows)"
+                           if not bad else f"non-finite: {', '.join(bad[:5])}"))
     for c in checks:
         validate_check(c)
         out.append(CHECKS[c["kind"]](res, c, context))

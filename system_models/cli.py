@@ -16,8 +16,10 @@ bookkeeping, and writes ``DIR/<scene>.csv`` (every output, units in the header),
 than two seconds.
 
 Exit status: 0 every check passed; 1 a check failed, or the co-simulation stopped (a refused
-step: the message names the time, the block and the reason); 2 bad arguments (one line on
-stderr naming the argument and its allowed values, before anything runs).
+step: the message names the time, the block and the reason), or the ``fmu`` extra that
+``--prsm fmu|native`` needs is not installed (one line naming it); 2 bad arguments (one line on
+stderr naming the argument and its allowed values, before anything runs); 130 Ctrl-C (one
+line; the outputs are written whole or not at all).
 """
 
 from __future__ import annotations
@@ -126,7 +128,8 @@ def _plots(run, out: Path) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
-    from fmu_build.builder import BuildError
+    from prsm_fmu.command import deferred_interrupt
+    from prsm_fmu.extras import require
 
     from .fmu import FMUError, ensure_fmu
     from .master import CoSimulationError, RetryPolicy, whole_steps
@@ -150,6 +153,15 @@ def _cmd_run(args, ap) -> int:
         check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
         return _refuse(str(exc))
+    if args.prsm == "python":
+        build_errors: tuple[type[Exception], ...] = (FMUError,)
+    else:
+        # the fmu extra, before anything runs: fmpy steps the FMU, pythonfmu builds it (and
+        # the native FMU's builder imports it)
+        require("fmpy", "pythonfmu", purpose=f"running the PRSM as an FMU (--prsm {args.prsm})")
+        from fmu_build.builder import BuildError
+
+        build_errors = (FMUError, BuildError)
     if args.step is not None:
         try:
             whole_steps(scene.t0, scene.t_end, args.step)
@@ -169,17 +181,32 @@ def _cmd_run(args, ap) -> int:
     print(f"scene {scene.name}: {scene.description}")
     prog = Progress(t_start=scene.t0)
     try:
-        run = run_scene(scene, prsm="python" if args.prsm == "python" else "fmu",
-                        fmu_path=fmu_path, fidelity=args.fidelity,
-                        step=args.step, order=args.order, extrapolation=args.extrapolation,
-                        retry=retry, progress=prog, loop=args.loop)
+        # Ctrl-C is held back to the master's steps: raised inside an FMU's own Python it would
+        # be the FMU's fatal error, not an interruption (prsm_fmu.command.deferred_interrupt)
+        with deferred_interrupt() as check:
+            def progress(t: float, t_end: float) -> None:
+                check()
+                prog(t, t_end)
+
+            run = run_scene(scene, prsm="python" if args.prsm == "python" else "fmu",
+                            fmu_path=fmu_path, fidelity=args.fidelity,
+                            step=args.step, order=args.order, extrapolation=args.extrapolation,
+                            retry=retry, progress=progress, loop=args.loop)
+    except KeyboardInterrupt:
+        prog.close()                    # end the bar's line; prsm_fmu.command says the rest
+        raise
     except CoSimulationError as exc:
         prog.close()
-        print(f"prsm-ema: {exc}", file=sys.stderr)
+        from .step_hint import step_limit_hint
+
+        hint = step_limit_hint(scene, args.step or scene.step, args.order or scene.order,
+                               scene.extrapolation if args.extrapolation is None
+                               else args.extrapolation)
+        print(f"prsm-ema: {exc}" + (f" {hint}" if hint else ""), file=sys.stderr)
         return 1
-    except (ValueError, FMUError, BuildError) as exc:
+    except (ValueError, *build_errors) as exc:
         prog.close()
-        if isinstance(exc, (FMUError, BuildError)):
+        if isinstance(exc, build_errors):
             print(f"prsm-ema: {exc}", file=sys.stderr)
             return 1
         ap.error(str(exc))          # the scene and the options do not fit: one line, status 2
@@ -225,17 +252,24 @@ def _cmd_run(args, ap) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``prsm-ema``; returns the exit status (2: a bad argument, one line on
-    stderr; 0 for ``--help``)."""
+    stderr; 0 for ``--help``; 1 also for a missing ``fmu`` extra, one line naming it; 130
+    after Ctrl-C, :mod:`prsm_fmu.command`)."""
+    from prsm_fmu.command import run_command
+
     ap = build_parser()
-    try:
-        args = ap.parse_args(argv)
-        if args.engine is not None:
-            os.environ[ENGINE_ENV] = args.engine
-        if args.command == "list":
-            return _cmd_list()
-        return _cmd_run(args, ap)
-    except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+
+    def body() -> int:
+        try:
+            args = ap.parse_args(argv)
+            if args.engine is not None:
+                os.environ[ENGINE_ENV] = args.engine
+            if args.command == "list":
+                return _cmd_list()
+            return _cmd_run(args, ap)
+        except SystemExit as exc:          # argparse: --help (0) or a bad argument (2)
+            return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+
+    return run_command("prsm-ema", body)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from prsm_fmu.atomic import atomic_path
 from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, MICROMETRE, MILLIMETRE,
                             MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
                             RADIAN_PER_SECOND, SECOND, VOLT, label)
@@ -46,7 +47,7 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     Values with 15 significant digits (enough to compare runs to 1e-10 from the file)."""
     cols = ordered_columns(res, first)
     path = Path(path)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow([label("time", SECOND)]
                    + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
@@ -69,7 +70,9 @@ def write_summary(path: str | Path, summary: dict[str, Any]) -> Path:
             return clean(o.item())
         return o
     path = Path(path)
-    path.write_text(json.dumps(clean(summary), indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(json.dumps(clean(summary), indent=2, ensure_ascii=False) + "\n",
+                             encoding="utf-8")
     return path
 
 
@@ -94,7 +97,8 @@ def figure_writer(out_dir: str | Path, scene: str):
     def save(fig, name: str) -> None:
         p = out / f"{scene}_{name}.png"
         fig.tight_layout()
-        fig.savefig(p, dpi=110)
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=110)
         plt.close(fig)
         files.append(p)
 

@@ -194,6 +194,12 @@ CASES: list[tuple[str, list[str], str]] = [
     # before a build)
     ("prsm-ema", ["run", "--scene", "position_step", "--prsm", "native", "--fidelity", "auto",
                   "--out", OUT], "--prsm native: fidelity 'auto'"),
+    # startup and steady: the screw speed and the tolerance within the FMU's parameter ranges
+    # (initial_screw_speed, tolerance; test_startup_bounds_are_the_fmus below)
+    ("prsm-fmu", ["startup", "--speed", "1e7", "--out", OUT], "--speed"),
+    ("prsm-fmu", ["startup", "--speed=-2e4", "--out", OUT], "--speed"),
+    ("prsm-fmu", ["steady", "--speed", "1e5"], "--speed"),
+    ("prsm-fmu", ["startup", "--tolerance", "1e-13", "--out", OUT], "--tolerance"),
 ]
 
 #: lines run through the installed console scripts as well (every script, a few each)
@@ -300,3 +306,39 @@ def test_the_console_scripts_answer_the_same_way(tmp_path, files):
     assert tried == len(SUBPROCESS)
     assert {CASES[i][0] for i in SUBPROCESS} == {"prsm-fmu", "prsm-fmu-build", "prsm-ema"}
     assert not failures, "\n".join(failures)
+
+
+def test_startup_bounds_are_the_fmus(tmp_path):
+    """``startup --speed`` and ``--tolerance`` are refused exactly outside the ranges the FMU
+    declares for initial_screw_speed and tolerance (read from a built FMU's modelDescription,
+    not from the code): just outside each bound is refused naming the bound; the bound itself
+    parses."""
+    pytest.importorskip("pythonfmu")
+    from test_fmu import built_fmus
+
+    from prsm_fmu.cli import build_parser
+    from prsm_fmu.fmu_variables import fmu_variables
+
+    v = fmu_variables(built_fmus()["PRSM2"])
+    speed, tol = v["initial_screw_speed"], v["tolerance"]
+    parser = build_parser()
+    for option, value, ok in [("--speed", speed.max, True), ("--speed", speed.min, True),
+                              ("--speed", speed.max * (1 + 1e-9), False),
+                              ("--speed", speed.min * (1 + 1e-9), False),
+                              ("--tolerance", tol.min, True), ("--tolerance", tol.max, True),
+                              ("--tolerance", tol.min * (1 - 1e-9), False),
+                              ("--tolerance", tol.max * (1 + 1e-9), False)]:
+        argv = ["startup", f"{option}={value!r}", "--out", str(tmp_path / "o")]
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            try:
+                parser.parse_args(argv)
+                code = 0
+            except SystemExit as exc:
+                code = exc.code
+        assert (code == 0) == ok, (argv, err.getvalue())
+        if not ok:
+            lo = speed.min if option == "--speed" else tol.min
+            hi = speed.max if option == "--speed" else tol.max
+            assert f"[{lo:g}, {hi:g}]" in err.getvalue(), err.getvalue()
+

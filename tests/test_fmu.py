@@ -473,8 +473,8 @@ def test_state_round_trip_repeats_the_steps_bit_for_bit(fidelity):
     finally:
         a.free()
         b.free()
-    assert again == first
-    assert elsewhere == first
+    assert bits(again) == bits(first)
+    assert bits(elsewhere) == bits(first)
     assert [r.hex() for r in map(float, (x for row in elsewhere for x in row[:-1]))] == \
         [r.hex() for r in map(float, (x for row in first for x in row[:-1]))]
 
@@ -568,6 +568,14 @@ def test_every_corrupt_or_foreign_state_is_refused_and_nothing_is_restored():
 # ---- bad input: refused, logged, state unchanged ----------------------------------------------
 
 
+def bits(rows: list) -> list:
+    """Rows (or one row) of values compared by their bits: the efficiency is NaN where no
+    power passes through the PRSM, and NaN != NaN."""
+    def one(x):
+        return x.hex() if isinstance(x, float) else (bits(x) if isinstance(x, list) else x)
+    return [one(x) for x in rows]
+
+
 def _refused_unchanged(host: Host, t: float, h: float, fragment: str) -> None:
     before = host.state_bytes()
     outputs = host.get_real(host.outputs)
@@ -575,7 +583,7 @@ def _refused_unchanged(host: Host, t: float, h: float, fragment: str) -> None:
     assert host.step(t, h) == DISCARD
     assert any(fragment in m for s, m in host.messages[n:]), host.messages[n:]
     assert host.state_bytes() == before
-    assert host.get_real(host.outputs) == outputs
+    assert bits(host.get_real(host.outputs)) == bits(outputs)
 
 
 @pytest.mark.parametrize("torque,load", [(math.nan, 3000.0), (10.0, math.inf),
@@ -589,8 +597,8 @@ def test_non_finite_inputs_are_refused_and_the_state_is_unchanged(torque, load):
         host.set({"screw_torque": torque, "load_force": load})
         _refused_unchanged(host, 30 * H, H, "every input must be finite")
         # the master corrects the inputs and retries: as if the bad call never happened
-        assert run_fmu(host, 10, host.outputs, 30, host.loop) == \
-            run_fmu(twin, 10, twin.outputs, 30, twin.loop)
+        assert bits(run_fmu(host, 10, host.outputs, 30, host.loop)) == \
+            bits(run_fmu(twin, 10, twin.outputs, 30, twin.loop))
     finally:
         host.free()
         twin.free()

@@ -107,3 +107,22 @@ def test_overall_efficiency_higher_for_shorter_ramps_only_without_a_strong_visco
     fit = [r["efficiency@overall"] for r in line(accel_table, FIT_MU1, "accel_time")]
     assert strictly(seed, rising=False)
     assert strictly(fit, rising=True)
+
+
+def test_the_paper_lead_study_differs_from_the_load_study_only_in_the_lead():
+    """studies/friction_load_lead2mm.toml (docs/sweeps.md §4, "The lead"): the load study's grid
+    and scenario on the preset with the paper's 2 mm lead: 4 starts × 0.5 mm pitch = 2 mm,
+    lead angle atan(0.002 / (2π × 0.010)) = atan(0.031831) = 1.8232°."""
+    import math
+
+    from prsm_fmu.sweep.study import apply_overrides, resolve_preset
+
+    base = load_study(STUDIES / "friction_load.toml")
+    lead2 = load_study(STUDIES / "friction_load_lead2mm.toml")
+    assert lead2.scenario == base.scenario and lead2.preset == base.preset
+    assert [p.values for p in lead2.points()] == [p.values for p in base.points()]
+    (stage,) = apply_overrides(resolve_preset(lead2.preset), lead2.parameters).stages
+    assert stage.screw_starts == 4
+    assert stage.screw_lead == pytest.approx(0.002, rel=1e-12)
+    assert math.degrees(math.atan(stage.screw_lead / (2 * math.pi * stage.screw_radius))) \
+        == pytest.approx(1.8232, abs=1e-4)

@@ -82,6 +82,45 @@ def test_tube_value_and_time_tolerance():
     assert not r.passed and "covers" in r.reason
 
 
+def test_tube_with_undefined_samples():
+    """The efficiency is NaN where no power flows: a baseline NaN is not compared (a run
+    value there passes), a run NaN where the baseline is defined fails, and NaN samples of
+    the baseline do not spoil the tube's scale (Case.tolerance) or its neighbours' edges."""
+    t = np.linspace(0.0, 1.0, 101)
+    y = np.where((t > 0.3) & (t < 0.4), np.nan, 0.5 + 0.1 * t)
+    case = core.Case("c", "scene", None, abs_frac=1e-2, rel=0.0, dt=0.0)
+    tol = case.tolerance("prsm.efficiency", y)
+    # abs = 1e-2 × max|y| over the defined samples = 1e-2 × (0.5 + 0.1 × 1.0) = 6e-3
+    assert tol.abs == pytest.approx(6e-3, rel=1e-12)
+    same, *_ = compare("e", t, y, t, y.copy(), tol)
+    assert same.passed
+    # the run's times differ from the baseline's by the CSV's rounding (1e-13 s here): a NaN
+    # sample must not spread to its neighbours through the interpolation
+    shifted, *_ = compare("e", t, y, t + 1e-13, y.copy(), tol)
+    assert shifted.passed, shifted.reason
+    filled = np.where(np.isnan(y), 0.9, y)                 # defined where the baseline is not
+    r, *_ = compare("e", t, y, t, filled, tol)
+    assert r.passed
+    lost = y.copy()
+    lost[70] = np.nan                                      # undefined where the baseline is not
+    r, *_ = compare("e", t, y, t, lost, tol)
+    assert not r.passed and r.first_out == pytest.approx(0.7) and r.n_out == 1
+    off = y + 1e-2 * (t > 0.8)                             # 1e-2 > 6e-3 after 0.8 s
+    r, *_ = compare("e", t, y, t, off, tol)
+    assert not r.passed and r.first_out == pytest.approx(0.81, abs=1e-9)
+    # time tolerance: the NaN samples take the edges of defined neighbours within dt
+    r, *_ = compare("e", t, y, t, filled, Tolerance(abs=6e-3, rel=0.0, dt=0.02))
+    assert not r.passed                                    # 0.9 is far from 0.53..0.54
+    # ... and a run undefined one sample (0.01 s) beyond the baseline's undefined span passes
+    # with dt = 0.02 s (the span shifted in time), fails with dt = 0
+    late = y.copy()
+    late[40] = np.nan                                      # the baseline's NaN ends at 0.39 s
+    r, *_ = compare("e", t, y, t, late, Tolerance(abs=6e-3, rel=0.0, dt=0.02))
+    assert r.passed
+    r, *_ = compare("e", t, y, t, late, Tolerance(abs=6e-3, rel=0.0, dt=0.0))
+    assert not r.passed and r.first_out == pytest.approx(0.4)
+
+
 def test_regress_builds_and_a_rebuilt_fmu_passes(tmp_path, capsys):
     """The command itself: FMU built in a child process, every case inside its tubes."""
     code = cli.main(["regress", "--out", str(tmp_path)])
@@ -90,6 +129,37 @@ def test_regress_builds_and_a_rebuilt_fmu_passes(tmp_path, capsys):
     assert "PASS: 7 cases" in out
     assert (tmp_path / "fmu" / "PRSM2.fmu").is_file()
     assert not (tmp_path / "report.html").exists()
+
+
+def _renamed_output(src: Path, dest: Path, old: str, new: str) -> Path:
+    """A copy of the FMU ``src`` whose modelDescription calls the variable ``old`` ``new``."""
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dest, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(f'name="{old}"'.encode(), f'name="{new}"'.encode())
+            zout.writestr(item, data)
+    return dest
+
+
+def test_regress_refuses_an_fmu_that_does_not_fit_before_running(tmp_path, capsys):
+    """--fmu of the wrong stage count, or lacking an output the baselines compare: one line
+    naming --fmu and the mismatch, exit status 2, no case run (no verdict row, no report)."""
+    fmus = built_fmus()
+    code = cli.main(["regress", "--fmu", str(fmus["PRSM3"]), "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert code == 2
+    assert len(cap.err.strip().splitlines()) == 1 and "--fmu" in cap.err
+    assert "3-stage" in cap.err and "2-stage" in cap.err, cap.err
+    assert "startup_li2021" not in cap.out and not (tmp_path / "report.html").exists()
+
+    odd = _renamed_output(fmus["PRSM2"], tmp_path / "PRSM2_odd.fmu", "friction_power",
+                          "friction_power_W")
+    code = cli.main(["regress", "--fmu", str(odd), "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert code == 2
+    assert len(cap.err.strip().splitlines()) == 1 and "no output friction_power" in cap.err
+    assert "startup_li2021" not in cap.out and not (tmp_path / "report.html").exists()
 
 
 def test_fmu_carries_the_baselines():

@@ -408,9 +408,35 @@ expect = "rises"
     text = capsys.readouterr().out
     assert code == 0
     assert "2 of 2 points ok" in text and "agrees" in text and "f_S2 grows with µ_SS" in text
-    assert (out / "results.csv").is_file() and (out / "steady.png").is_file()
+    # the study's own folder under --out, named after it (the study file says name = "small")
+    assert (out / "small" / "results.csv").is_file() and (out / "small" / "steady.png").is_file()
     assert main(["sweep", str(path), "--out", str(out), "--workers", "2", "--no-dask"]) == 2
     assert main(["sweep", str(tmp_path / "missing.toml")]) == 2
+
+
+def test_a_second_study_under_the_same_out_leaves_the_first_ones_results(tmp_path, capsys):
+    """Two studies run with the same --out: each gets its own folder, the first one's table
+    is byte for byte what it was; run_study into the other's folder is refused, untouched."""
+    from prsm_fmu.cli import main
+
+    first = _write_study(tmp_path / "a.toml", "mu_spline = [0.2]", backend="model")
+    second = _write_study(tmp_path / "b.toml", "mu_spline = [0.3]", backend="model")
+    second.write_text(second.read_text(encoding="utf-8").replace('name = "small"',
+                                                                 'name = "other"'),
+                      encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["sweep", str(first), "--out", str(out), "--no-dask", "--quiet",
+                 "--no-figures"]) == 0
+    table = (out / "small" / "results.csv").read_bytes()
+    assert main(["sweep", str(second), "--out", str(out), "--no-dask", "--quiet",
+                 "--no-figures"]) == 0
+    capsys.readouterr()
+    assert (out / "small" / "results.csv").read_bytes() == table
+    assert (out / "other" / "results.csv").is_file()
+    with pytest.raises(ValueError, match="holds the results of study 'small'"):
+        run_study(load_study(second), str(out / "small"), executor="loop", progress=None,
+                  figures=False)
+    assert (out / "small" / "results.csv").read_bytes() == table
 
 
 # ---------------------------------------------------------------------------------------------

@@ -658,10 +658,13 @@ void prsm_initial_state(const prsm_model *m, double x[PRSM_NX_MAX], double screw
 }
 
 /* ---- models/base.Model.outputs --------------------------------------------------------------- */
-static double efficiency(double p_in, double p_out) {
+/* NaN where no power passes through (standstill |omega| <= PRSM_STANDSTILL_SPEED, both sides
+   delivering or both absorbing): prsm_fmu.models.base.efficiency, its threshold generated */
+static double efficiency(double p_in, double p_out, double omega) {
+    if (!(fabs(omega) > PRSM_STANDSTILL_SPEED)) return NAN;
     if (p_in > 0.0 && p_out >= 0.0) return p_out / p_in;
-    if (p_in < 0.0 && p_out < 0.0) return p_in / p_out;
-    return 0.0;
+    if (p_out < 0.0 && p_in <= 0.0) return p_in / p_out + 0.0;
+    return NAN;
 }
 
 void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[2], prsm_outputs *y) {
@@ -707,7 +710,7 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
     y->alpha = alpha;
     y->motor = motor;
     y->loss = loss;
-    y->efficiency = efficiency(p_in, p_out);
+    y->efficiency = efficiency(p_in, p_out, omega);
     y->friction_power = p_fric + loss * omega;
     y->p_coulomb = p_coulomb;
     y->p_viscous = p_viscous;

@@ -217,7 +217,7 @@ class AdaptiveModel(DynamicModel):
             if kind is None:
                 continue
             diff = abs(yd[name] - yq[name])
-            if diff == 0.0:
+            if not diff > 0.0:          # equal, or NaN: the efficiency where no power flows
                 continue
             if kind == "carrier":
                 k = int(name[6:name.index("]")]) - 1

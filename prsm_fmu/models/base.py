@@ -20,10 +20,11 @@ friction power).  Sign conventions: docs/architecture.md §4.
 from __future__ import annotations
 
 import math
+import sys
 from abc import ABC
 
 from ..mechanics import Mechanism
-from ..params import MechanismParams
+from ..params import MAX_SCREW_SPEED, MechanismParams
 
 DRIVES = ("torque", "speed")
 
@@ -204,7 +205,7 @@ class Model(ABC):
             y[spline] = sol.spline_friction[k]
             y[carrier] = wps[k]
             y[ratio] = wps[k] / omega if omega != 0.0 else 0.0
-        y["efficiency"] = efficiency(p_in, p_out)
+        y["efficiency"] = efficiency(p_in, p_out, omega)
         y["friction_power"] = sol.friction_power + loss * omega
         terms = sol.friction_power_terms
         if loss:
@@ -247,18 +248,43 @@ class Model(ABC):
         return self.mechanism.fastest_time_constant(omega, wp, load)
 
 
-def efficiency(p_in: float, p_out: float) -> float:
-    """Instantaneous efficiency [-] from motor power and load power [W].
+#: |screw speed| [rad/s] at or below which no power flows (:func:`efficiency`):
+#: 4 eps · MAX_SCREW_SPEED = 4 × 2.22e-16 × 1e4 rad/s = 8.9e-12 rad/s.  A speed is a sum of
+#: rounded terms (ω + α h per step, the start value) each rounded to eps/2 of a speed up to
+#: MAX_SCREW_SPEED, so a speed this small cannot be told from the rounding of the speeds a run
+#: can have; the powers M·ω and F·c·ω are then rounding noise and their ratio is 0/0 (a loop
+#: holding position reads ω = −2e-17 rad/s and would give η = 1.0)
+STANDSTILL_SPEED = 4.0 * sys.float_info.epsilon * MAX_SCREW_SPEED
 
-    Forward drive (motor delivers power, load absorbs it): P_out / P_in, which is Li et al. (2021)
-    Eq. 28 η = F_N Σ L / (2π M_S1).  Back-driving (load delivers power, motor absorbs it):
-    P_in / P_out.  Otherwise (standstill, or both sides delivering or absorbing): 0.
+
+#: outputs that are NaN where they are not defined (:func:`efficiency` where no power flows);
+#: every other output is finite, and the checks for finite outputs allow NaN in these only
+MAY_BE_UNDEFINED = frozenset({"efficiency"})
+
+
+def undefined_allowed(name: str, value: float) -> bool:
+    """Whether ``value`` of output ``name`` (``prsm.efficiency`` or ``efficiency``) is the NaN
+    of an undefined output (:data:`MAY_BE_UNDEFINED`) rather than a failure."""
+    return math.isnan(value) and name.rpartition(".")[2] in MAY_BE_UNDEFINED
+
+
+def efficiency(p_in: float, p_out: float, speed: float) -> float:
+    """Instantaneous efficiency [-] from motor power and load power [W] at screw speed [rad/s].
+
+    Forward drive (motor delivers power, load absorbs it or none): P_out / P_in, which is seed
+    000 Eq. 28 η = F_N Σ L / (2π M_S1).  Back-driving (load delivers power, motor absorbs it or
+    none): P_in / P_out.  NaN where no power passes through the mechanism from one side to the
+    other, so that there is nothing to rate: at standstill (|speed| ≤ :data:`STANDSTILL_SPEED`,
+    or both powers exactly 0), and where both sides deliver power (all of it is lost in
+    friction or stored) or both absorb it (stored kinetic energy is released into both).
     """
+    if not abs(speed) > STANDSTILL_SPEED:
+        return math.nan
     if p_in > 0.0 and p_out >= 0.0:
         return p_out / p_in
-    if p_in < 0.0 and p_out < 0.0:
-        return p_in / p_out
-    return 0.0
+    if p_out < 0.0 and p_in <= 0.0:
+        return p_in / p_out + 0.0           # + 0.0: no −0.0 when the motor absorbs nothing
+    return math.nan
 
 
 def overall_efficiency(input_work: float, output_work: float) -> float:
@@ -273,8 +299,7 @@ def overall_efficiency(input_work: float, output_work: float) -> float:
     Returns
     -------
     float
-        W_out / W_in when the motor has put work in (W_in > 0), else 0 (no work in: nothing
-        to rate, as :func:`efficiency` at standstill).
+        W_out / W_in when the motor has put work in (W_in > 0), else 0 (no work in).
     """
     return output_work / input_work if input_work > 0.0 else 0.0
 

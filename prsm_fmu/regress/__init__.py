@@ -10,10 +10,11 @@ Modules: :mod:`.tube` (the tube, numpy only), :mod:`.core` (cases, CSV, runs, up
 :mod:`.report` (PNG and HTML).  Nothing here is used by the FMU's slave.
 """
 
-from .core import (DEFAULT_DIR, Case, CaseResult, build_fmu, check, check_case, load_cases,
-                   read_baselines, simulate_case, update)
+from .core import (DEFAULT_DIR, Case, CaseResult, build_fmu, check, check_case, fmu_mismatch,
+                   load_cases, read_baselines, simulate_case, update)
 from .tube import Tolerance, TubeResult, compare, tube
 
 __all__ = ["DEFAULT_DIR", "Case", "CaseResult", "build_fmu", "check", "check_case",
+           "fmu_mismatch",
            "load_cases", "read_baselines", "simulate_case", "update", "Tolerance",
            "TubeResult", "compare", "tube"]

@@ -23,10 +23,12 @@ import tomllib
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
+from ..atomic import atomic_path
+from ..command import child_failure, deferred_interrupt
 from .tube import Tolerance, TubeResult, compare
 
 __all__ = ["ROOT", "DEFAULT_DIR", "OUTPUTS", "Case", "Baseline", "CaseResult", "load_cases",
@@ -66,7 +68,9 @@ class Case:
         """The tube of ``output``: overrides of ``[case.X.outputs."name"]`` first."""
         o = self.outputs.get(output, {})
         frac = float(o.get("abs_frac", self.abs_frac))
-        scale = float(np.max(np.abs(baseline))) if baseline.size else 0.0
+        # NaN: the efficiency where no power flows (undefined, not a value to scale by)
+        finite = np.abs(baseline[np.isfinite(baseline)])
+        scale = float(np.max(finite)) if finite.size else 0.0
         a = frac * scale if scale > 0.0 else frac
         return Tolerance(abs=a, rel=float(o.get("rel", self.rel)), dt=float(o.get("dt", self.dt)))
 
@@ -151,7 +155,7 @@ def write_csv(path: Path, time: np.ndarray, values: dict[str, np.ndarray],
               units: dict[str, str]) -> None:
     """Write a baseline CSV (12 significant digits: rounding 5e-13, far inside every tube)."""
     names = list(values)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["time [s]"] + [f"{n} [{units.get(n, '') or '1'}]" for n in names])
         for i, t in enumerate(time):
@@ -169,9 +173,72 @@ def read_baselines(where=DEFAULT_DIR, cases: list[Case] | None = None) -> dict[s
     return out
 
 
+# ---- does an FMU fit the cases ----------------------------------------------------------------
+def _stage_count(names) -> int:
+    """Stages k = 1, 2, ... with a ``stage[k].contact_force`` among ``names``."""
+    k = 0
+    while f"stage[{k + 1}].contact_force" in names:
+        k += 1
+    return k
+
+
+def fmu_mismatch(variables: Mapping[str, Any], where=DEFAULT_DIR,
+                 cases: list[str] | None = None, outputs: bool = True) -> str:
+    """Why an FMU cannot run the cases (one line), or "" if it can.
+
+    Checked before anything runs, against what the cases need: the PRSM's stage count of every
+    baseline (its ``prsm.stage[k].*`` columns) must be the FMU's, every ``prsm.NAME`` column
+    must be an output ``NAME`` of the FMU, and every parameter a case or its scene sets must be
+    a parameter of the FMU.
+
+    Parameters
+    ----------
+    variables : mapping
+        The FMU's variables, name -> :class:`prsm_fmu.fmu_variables.Variable`.
+    where : path, optional
+        Baselines directory or FMU holding them.
+    cases : list of str, optional
+        The cases to run; default every case.
+    outputs : bool
+        Also check the outputs (False for ``--update``, which may add or drop outputs on
+        purpose; the stage count and the parameters are checked always).
+    """
+    from system_models.scenes import load_scene
+
+    n_fmu = _stage_count(variables)
+    chosen = [c for c in load_cases(where) if cases is None or c.name in cases]
+    bases = read_baselines(where, chosen)
+    for c in chosen:
+        b = bases.get(c.name)
+        if b is None:
+            continue
+        prsm = [n.removeprefix("prsm.") for n in b.values if n.startswith("prsm.")]
+        n_case = _stage_count(prsm)
+        if n_case != n_fmu:
+            return (f"the FMU is a {n_fmu}-stage PRSM but case {c.name} is a {n_case}-stage "
+                    f"one: must be a {n_case}-stage FMU (PRSM{n_case}.fmu)")
+        missing = [n for n in prsm if getattr(variables.get(n), "causality", "") != "output"]
+        if missing and outputs:
+            return (f"the FMU has no output {', '.join(missing)} that case {c.name} compares: "
+                    "must be an FMU built from this version (python -m fmu_build)")
+        params = {**load_scene(c.scene).prsm.get("parameters", {}), **c.parameters}
+        missing = [n for n in params if getattr(variables.get(n), "causality", "")
+                   != "parameter"]
+        if missing:
+            return (f"the FMU has no parameter {', '.join(missing)} that case {c.name} sets: "
+                    "must be an FMU built from this version (python -m fmu_build)")
+    return ""
+
+
 # ---- building and simulating ------------------------------------------------------------------
 def build_fmu(dest: Path, name: str = "PRSM2") -> Path:
-    """Build ``dest/<name>.fmu`` with ``python -m fmu_build`` in a child process."""
+    """Build ``dest/<name>.fmu`` with ``python -m fmu_build`` in a child process.
+
+    Raises
+    ------
+    RuntimeError
+        If the build fails: one line with the child's exit status and its last line of error.
+    """
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ)
@@ -181,16 +248,18 @@ def build_fmu(dest: Path, name: str = "PRSM2") -> Path:
                           capture_output=True, text=True, env=env, timeout=600)
     fmu = dest / f"{name}.fmu"
     if proc.returncode != 0 or not fmu.is_file():
-        raise RuntimeError(f"python -m fmu_build {name} failed:\n{proc.stdout}{proc.stderr}")
+        raise RuntimeError(child_failure(f"python -m fmu_build {name}", proc.returncode,
+                                         proc.stderr, proc.stdout))
     return fmu
 
 
 def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
-                  parameters: dict[str, Any] | None = None, prsm: str = "fmu"):
+                  parameters: dict[str, Any] | None = None, prsm: str = "fmu", progress=None):
     """Run the case's scene on the FMU (fmpy); returns the master's Result.
 
     ``tolerance`` sets the FMU's ``tolerance`` parameter (None: the scene's, i.e. the FMU's
-    default); ``parameters`` adds FMU start values (e.g. a changed ``mu_screw_roller``).
+    default); ``parameters`` adds FMU start values (e.g. a changed ``mu_screw_roller``);
+    ``progress(t, t_end)`` is called after every macro step.
     """
     from system_models.run import run_scene
     from system_models.scenes import load_scene
@@ -200,7 +269,8 @@ def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
     if tolerance is not None:
         par["tolerance"] = tolerance
     sc = replace(sc, prsm={**sc.prsm, "parameters": par})
-    return run_scene(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity).result
+    return run_scene(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity,
+                     progress=progress).result
 
 
 def case_outputs(case: Case, result) -> list[str]:
@@ -238,17 +308,21 @@ def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
                          f"{', '.join(c.name for c in all_cases)}")
     bases = read_baselines(where, chosen)
     out = []
-    for c in chosen:
-        if c.name not in bases:
-            out.append(CaseResult(c, [], {}, {}, error="no baseline (run prsm-fmu regress "
-                                                       "--update)"))
-            continue
-        try:
-            res = simulate_case(c, fmu, parameters=parameters)
-        except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
-            out.append(CaseResult(c, [], {}, {}, error=f"the run failed: {exc}"))
-            continue
-        out.append(check_case(c, bases[c.name], res))
+    # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
+    # FMU's fatal error, recorded as a failing case, and the next case would run)
+    with deferred_interrupt() as interrupted:
+        for c in chosen:
+            if c.name not in bases:
+                out.append(CaseResult(c, [], {}, {}, error="no baseline (run prsm-fmu "
+                                                           "regress --update)"))
+                continue
+            try:
+                res = simulate_case(c, fmu, parameters=parameters,
+                                    progress=lambda t, t_end: interrupted())
+            except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
+                out.append(CaseResult(c, [], {}, {}, error=f"the run failed: {exc}"))
+                continue
+            out.append(check_case(c, bases[c.name], res))
     return out
 
 
@@ -279,8 +353,12 @@ def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None)
              "Changes against the previous baselines, measured with each case's tube "
              "(tolerances.toml); |Δ|/max|y| is the largest difference over the run divided by "
              "the output's largest magnitude.", ""]
+    with deferred_interrupt() as interrupted:      # as in check()
+        runs = {c.name: simulate_case(c, fmu, tolerance=tight,
+                                      progress=lambda t, t_end: interrupted())
+                for c in chosen}
     for c in chosen:
-        res = simulate_case(c, fmu, tolerance=tight)
+        res = runs[c.name]
         names = case_outputs(c, res)
         write_csv(where / f"{c.name}.csv", res.time, {n: res[n] for n in names},
                   {n: res.units.get(n, "") for n in names})
@@ -312,5 +390,6 @@ def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None)
     lines += ["## Review", "",
               "Reviewed by: (name, date — what was checked and why the changes are intended)", ""]
     text = "\n".join(lines)
-    (where / "REPORT.md").write_text(text, encoding="utf-8")
+    with atomic_path(where / "REPORT.md") as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
     return text

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_path
 from .core import CaseResult
 
 __all__ = ["write_report", "verdict_table"]
@@ -52,7 +53,8 @@ def plot_output(cr: CaseResult, name: str, path: Path) -> None:
     ad.set_ylabel(f"difference [{unit}]")
     ad.legend(loc="best", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90)
     plt.close(fig)
 
 
@@ -105,6 +107,7 @@ def write_report(results: list[CaseResult], out: Path, title: str = "") -> Path:
                 body.append(f"<h3>{html.escape(r.name)}</h3>"
                             f"<p>{html.escape(r.reason)}</p><img src='{png}'>")
     path = out / "report.html"
-    path.write_text("<!doctype html><meta charset='utf-8'><title>regression report</title>\n"
-                    + "\n".join(body) + "\n", encoding="utf-8")
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text("<!doctype html><meta charset='utf-8'><title>regression report"
+                             "</title>\n" + "\n".join(body) + "\n", encoding="utf-8")
     return path

@@ -6,6 +6,12 @@ by at most Δt in time (an event, a friction reversal, one communication step la
 inside it.  A run passes an output when every one of its samples, interpolated linearly onto the
 baseline's times, lies inside the tube.
 
+Undefined values: an output may be NaN where it is not defined (the efficiency where no power
+flows, docs/model.md).  A baseline NaN gives no tube edge (the time tolerance still spreads its
+defined neighbours' edges over it); where the tube has no edge the run is not compared, and
+where it has one the run must have a finite value inside it — a NaN there fails unless the
+baseline too is undefined within ±dt.
+
 This needs numpy only, so anyone who unpacks an FMU can run it on the baselines in its
 ``extra/`` folder (docs/regression.md says why this is used rather than pyfunnel).
 """
@@ -65,18 +71,37 @@ def tube(time: np.ndarray, y: np.ndarray, tol: Tolerance) -> tuple[np.ndarray, n
         idx = np.arange(t.size)
         span = int(max(np.max(idx - first), np.max(last - idx)))
         for k in range(1, span + 1):
-            # neighbour k samples later (i + k ≤ last[i]) and earlier (i − k ≥ first[i])
+            # neighbour k samples later (i + k ≤ last[i]) and earlier (i − k ≥ first[i]);
+            # fmin/fmax: a NaN (undefined) sample adds no edge
             j = idx + k
             ok = (j < t.size) & (j <= last)
             jj = np.where(ok, j, idx)
-            lo = np.where(ok, np.minimum(lo, lo0[jj]), lo)
-            hi = np.where(ok, np.maximum(hi, hi0[jj]), hi)
+            lo = np.where(ok, np.fmin(lo, lo0[jj]), lo)
+            hi = np.where(ok, np.fmax(hi, hi0[jj]), hi)
             j = idx - k
             ok = (j >= 0) & (j >= first)
             jj = np.where(ok, j, idx)
-            lo = np.where(ok, np.minimum(lo, lo0[jj]), lo)
-            hi = np.where(ok, np.maximum(hi, hi0[jj]), hi)
+            lo = np.where(ok, np.fmin(lo, lo0[jj]), lo)
+            hi = np.where(ok, np.fmax(hi, hi0[jj]), hi)
     return lo, hi
+
+
+def _interp_undefined(tb: np.ndarray, tr: np.ndarray, yr: np.ndarray) -> np.ndarray:
+    """The run on the baseline's times: linear between its defined samples, NaN where the run
+    sample nearest in time is NaN (a NaN neighbour does not spoil the interpolation when the
+    times differ by the CSV's rounding)."""
+    undefined = np.isnan(yr)
+    if undefined.all():
+        return np.full(tb.shape, np.nan)
+    yi = np.interp(tb, tr[~undefined], yr[~undefined])
+    if undefined.any():
+        if tr.size == 1:
+            nearest = np.zeros(tb.shape, int)
+        else:
+            j = np.clip(np.searchsorted(tr, tb), 1, tr.size - 1)
+            nearest = np.where(np.abs(tr[j - 1] - tb) <= np.abs(tr[j] - tb), j - 1, j)
+        yi[undefined[nearest]] = np.nan
+    return yi
 
 
 def compare(name: str, t_base: np.ndarray, y_base: np.ndarray, t_run: np.ndarray,
@@ -97,16 +122,25 @@ def compare(name: str, t_base: np.ndarray, y_base: np.ndarray, t_run: np.ndarray
                            f"the run covers {tr[0] if tr.size else float('nan'):g} … {end:g} s, "
                            f"the baseline {tb[0]:g} … {tb[-1]:g} s"), np.full_like(yb, np.nan),
                 lo, hi)
-    yi = np.interp(tb, tr, yr)
-    if not np.all(np.isfinite(yi)):
-        bad = int(np.argmax(~np.isfinite(yi)))
+    yi = _interp_undefined(tb, tr, yr)
+    rated = np.isfinite(lo) & np.isfinite(hi)      # the tube has edges there
+    # a NaN of the run is allowed where the baseline is undefined within ±dt
+    _, near_undefined = tube(tb, np.isnan(yb).astype(float), Tolerance(0.0, 0.0, tol.dt))
+    lost = rated & ~np.isfinite(yi) & ~(near_undefined > 0.0)
+    rated &= np.isfinite(yi)
+    if lost.any():
+        bad = int(np.argmax(lost))
         return (TubeResult(name, False, float("inf"), float(tb[bad]), float(yi[bad]),
-                           float(yb[bad]), float("inf"), int(np.sum(~np.isfinite(yi))),
-                           float(tb[bad]), "non-finite value"), yi, lo, hi)
-    excess = np.maximum(yi - hi, lo - yi)          # > 0 outside
+                           float(yb[bad]), float("inf"), int(np.sum(lost)),
+                           float(tb[bad]), "non-finite value where the baseline has one"),
+                yi, lo, hi)
+    with np.errstate(invalid="ignore"):
+        excess = np.where(rated, np.maximum(yi - hi, lo - yi), 0.0)     # > 0 outside
+        both = rated & np.isfinite(yb)
+        diff = float(np.max(np.abs(yi[both] - yb[both]))) if both.any() else 0.0
     out = excess > 0.0
     i = int(np.argmax(excess))
     return (TubeResult(name, not bool(out.any()), float(max(excess[i], 0.0)), float(tb[i]),
-                       float(yi[i]), float(yb[i]), float(np.max(np.abs(yi - yb))),
+                       float(yi[i]), float(yb[i]), diff,
                        int(out.sum()), float(tb[int(np.argmax(out))]) if out.any() else
                        float("nan")), yi, lo, hi)

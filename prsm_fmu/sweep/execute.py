@@ -14,7 +14,11 @@
     where and how long each point of this run took (not part of the table);
 ``OUT/fmu/PRSM<n>.fmu``
     the FMUs the points ran on (built with ``python -m fmu_build`` in a child process unless
-    ``fmu_dir`` has them).
+    ``fmu_dir`` has them);
+``OUT/study.txt``
+    the name of the study the folder belongs to: a folder that holds another study's results
+    is refused (:func:`claim_out_dir`), so one study never overwrites another's table and
+    figures.  The command line puts each study in a folder of its own, ``OUT/<study name>/``.
 
 Execution
 ---------
@@ -39,16 +43,22 @@ recorded as failed with the scheduler's message.
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence, TextIO
 
 import numpy as np
 
+from ..atomic import atomic_path
+from ..command import child_failure, deferred_interrupt
+from ..extras import require
 from .metrics import standard_metrics
 from .points import FmuFile, PointResult, PointTask, run_point
 from .study import Study
@@ -56,7 +66,7 @@ from .table import (append_row, columns, markdown_table, numeric_rows, read_tabl
                     write_table)
 from .trends import TrendResult, evaluate
 
-__all__ = ["run_study", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
+__all__ = ["run_study", "claim_out_dir", "STUDY_MARKER", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
            "EXECUTORS", "Progress", "local_cluster", "LOOPBACK"]
 
 EXECUTORS = ("dask", "loop")
@@ -117,7 +127,7 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
     ValueError
         For a stage count without a standard FMU (1 to 3).
     RuntimeError
-        If the build fails (with its output).
+        If the build fails (one line: the child's exit status and its last line of error).
     """
     paths: dict[int, str] = {}
     missing = []
@@ -142,8 +152,8 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
         proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600,
                               check=False)
         if proc.returncode != 0:
-            raise RuntimeError(f"building the FMUs failed ({' '.join(cmd)}):\n{proc.stdout}"
-                               f"\n{proc.stderr}")
+            raise RuntimeError(child_failure(f"building the FMUs ({' '.join(cmd[1:])})",
+                                             proc.returncode, proc.stderr, proc.stdout))
         for n in missing:
             paths[n] = os.path.join(dest, f"PRSM{n}.fmu")
     return paths
@@ -227,18 +237,31 @@ def local_cluster(workers: int | None = None):
     from dask.distributed import LocalCluster
 
     n = workers or os.cpu_count() or 1
-    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOOPBACK,
-                        dashboard_address=f"{LOOPBACK}:0")
+    # Ctrl-C reaches the whole process group; only this process is to handle it, by closing
+    # the cluster (prsm_fmu.command: one line), not every worker with a traceback.  The worker
+    # processes start with SIGINT ignored (a Python child keeps an ignored SIGINT through its
+    # imports) and their preload ignores it for good; the price: a Ctrl-C while the cluster
+    # starts (a few seconds) is not seen.
+    on_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if on_main else None
+    try:
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOOPBACK,
+                            dashboard_address=f"{LOOPBACK}:0",
+                            preload=["prsm_fmu.sweep.worker_setup"])
+    finally:
+        if on_main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _quiet_logs() -> None:
+    """Run on each worker before an interrupted study closes its cluster: no shutdown logs."""
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
                   ship_fmus: bool) -> tuple[Callable, Callable]:
     """(iterator over results as they complete, closer) for the Dask executor."""
-    try:
-        from dask.distributed import Client, as_completed
-    except ImportError:
-        raise RuntimeError("dask.distributed is not installed: pip install 'prsm-fmu[sweep]', "
-                           "or run the points in a plain loop (--no-dask)") from None
+    from dask.distributed import Client, as_completed
 
     own_cluster = own_client = None
     if client is None:
@@ -273,13 +296,53 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
                                   f"{type(exc).__name__}: {exc}")
             fut.release()
 
-    def close():
+    def close(quiet: bool = False):
+        if quiet:
+            # the points still running are cancelled: their workers and nannies would log
+            # it as warnings and errors on stderr
+            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            if own_cluster is not None:
+                try:
+                    client.run(_quiet_logs)
+                except Exception:  # noqa: BLE001 - a worker already gone: nothing to quieten
+                    pass
         if own_client is not None:
             own_client.close()
         if own_cluster is not None:
             own_cluster.close()
 
     return results, close
+
+
+#: file in a study's output folder naming the study it belongs to
+STUDY_MARKER = "study.txt"
+
+
+def claim_out_dir(out_dir: str, study: Study) -> None:
+    """Make ``out_dir`` the output folder of ``study``, refusing one that holds another study's.
+
+    The folder's :data:`STUDY_MARKER` names the study that wrote it; a folder without one
+    (new, or from before the marker) is claimed by writing it.
+
+    Raises
+    ------
+    ValueError
+        If the folder belongs to a study of another name (nothing is written then).
+    """
+    marker = os.path.join(out_dir, STUDY_MARKER)
+    try:
+        with open(marker, encoding="utf-8") as fh:
+            owner = fh.readline().strip()
+    except FileNotFoundError:
+        owner = ""
+    if owner and owner != study.name:
+        raise ValueError(f"output folder {out_dir} holds the results of study {owner!r}, not "
+                         f"{study.name!r}: must be a folder of its own (the command line "
+                         "uses OUT/<study name>/)")
+    if not owner:
+        os.makedirs(out_dir, exist_ok=True)
+        with open(marker, "w", encoding="utf-8") as fh:
+            fh.write(study.name + "\n")
 
 
 def run_study(study: Study, out_dir: str | None = None, *, backend: str | None = None,
@@ -294,7 +357,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     study : Study
         From :func:`~prsm_fmu.sweep.study.load_study`.
     out_dir : str, optional
-        Output directory; default ``out/sweeps/<study name>``.
+        Output directory; default ``out/sweeps/<study name>``.  A folder holding another
+        study's results is refused (:func:`claim_out_dir`).
     backend : {"fmu", "model"}, optional
         Overrides the study's backend.
     executor : {"dask", "loop"}
@@ -328,9 +392,16 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or workers < 1):
         raise ValueError(f"workers = {workers!r} is out of range: must be an integer >= 1")
-    t0 = time.perf_counter()
     backend = backend or study.backend
+    # the extras, before anything is written or built
+    if executor == "dask" and client is None:
+        require("dask.distributed",
+                purpose="running the points on Dask (or in a plain loop: --no-dask)")
+    if backend == "fmu":
+        require("fmpy", "pythonfmu", purpose="the FMU backend of a sweep (or --backend model)")
+    t0 = time.perf_counter()
     out_dir = out_dir or os.path.join("out", "sweeps", study.name)
+    claim_out_dir(out_dir, study)
     series_dir = os.path.join(out_dir, "series")
     os.makedirs(series_dir, exist_ok=True)
     table_path = os.path.join(out_dir, "results.csv")
@@ -372,7 +443,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
 
     def handle(res: PointResult) -> None:
         if res.status == "ok" and res.series is not None:
-            np.savez_compressed(os.path.join(series_dir, f"{res.id}.npz"), **res.series)
+            with atomic_path(os.path.join(series_dir, f"{res.id}.npz")) as tmp:
+                np.savez_compressed(tmp, **res.series)
         row = row_of(res, header)
         rows_by_id[res.id] = row
         append_row(table_path, header, row)
@@ -384,8 +456,12 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
 
     if tasks:
         if executor == "loop":
-            for t in tasks:
-                handle(run_point(t))
+            # Ctrl-C between two points, not inside an FMU's Python (there it would fail the
+            # point and the next one would run)
+            with deferred_interrupt() as interrupted:
+                for t in tasks:
+                    interrupted()
+                    handle(run_point(t))
         else:
             ship = (scheduler is not None and client is None) if ship_fmus is None \
                 else bool(ship_fmus)
@@ -393,8 +469,10 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             try:
                 for res in results():
                     handle(res)
-            finally:
-                close()
+            except BaseException:           # Ctrl-C or an error: close without the workers'
+                close(quiet=True)           # shutdown warnings (one line, prsm_fmu.command)
+                raise
+            close()
     bar.close()
 
     ordered = [rows_by_id[i] for i in ids if i in rows_by_id]
@@ -501,6 +579,6 @@ def write_report(result: SweepResult) -> str:
     for f in result.figures:
         parts.append(f"![{os.path.basename(f)}]({os.path.basename(f)})\n")
     path = os.path.join(result.out_dir, "report.md")
-    with open(path, "w", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         fh.write("\n".join(parts))
     return path

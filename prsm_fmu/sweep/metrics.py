@@ -96,7 +96,8 @@ def derive_series(res: Mapping[str, np.ndarray], n_stages: int) -> dict[str, np.
     with np.errstate(divide="ignore", invalid="ignore"):
         out["friction_torque"] = np.where(moving, out["friction_power"] / np.where(moving, w, 1.0),
                                           np.nan)
-    # the efficiency is undefined at standstill (the models report 0 there)
+    # the efficiency is undefined where no power passes through (the models report NaN
+    # there); below STANDSTILL of the largest speed it is not rated either
     out["efficiency"] = np.where(moving, out["efficiency"], np.nan)
     for k in range(1, n_stages + 1):
         for s in STAGE_SIGNALS:

@@ -18,6 +18,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..atomic import atomic_path
+
 from ..units import (DIMENSIONLESS, METRE, METRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
                      NEWTON_SECOND_PER_METRE, RADIAN_PER_SECOND, SECOND, WATT, label, unit_of)
 
@@ -152,7 +154,8 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -223,5 +226,6 @@ def plot_steady(rows: Sequence[Mapping[str, Any]], x: str, metrics: Sequence[str
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)

@@ -20,6 +20,8 @@ import math
 import os
 from typing import Any, Iterable, Mapping, Sequence
 
+from ..atomic import atomic_path
+
 __all__ = ["columns", "format_value", "write_table", "append_row", "read_table", "row_of",
            "markdown_table"]
 
@@ -65,13 +67,11 @@ def row_of(result, header: Sequence[str]) -> list[str]:
 
 def write_table(path: str, header: Sequence[str], rows: Iterable[Sequence[str]]) -> None:
     """Write the whole table (atomically: a temporary file renamed over ``path``)."""
-    tmp = f"{path}.tmp"
-    with open(tmp, "w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for r in rows:
             w.writerow(r)
-    os.replace(tmp, path)
 
 
 def append_row(path: str, header: Sequence[str], row: Sequence[str]) -> None:
