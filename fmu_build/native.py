@@ -406,10 +406,8 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
              f"{identifier.removesuffix('_native')}. Do not edit. */",
              f"#define PRSM_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define PRSM_GUID {_c_string(guid)}",
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
-HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
-#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
-INCLUDED = ("prsm_fmi2.c",)
+             f"#define PRSM_TIME_MATCH {_hex(TIME_MATCH)}",
+             f"#define PRSM_N_EVENT_INDICATORS {N_EVENT_INDICATORS}",
              f"#define PRSM_N_VARS {len(rows)}",
              f"#define PRSM_MAX_VR {max(v.vr for v, _, _ in rows)}",
              "static const prsm_var PRSM_VARS[PRSM_N_VARS] = {"]
@@ -660,10 +658,13 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         guid = str(uuid.uuid5(uuid.NAMESPACE_URL, "prsm-fmu-native:" + digest.hexdigest()))
         (src / "prsm_variables.h").write_text(variables_header(md, params, identifier, guid),
                                               encoding="utf-8")
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
-HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
-#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
-INCLUDED = ("prsm_fmi2.c",)
+        (src / "README.txt").write_text(SOURCES_README.format(id=identifier, sources=" ".join(SOURCES)), encoding="utf-8")
+        native_md = native_model_description(md, identifier, guid)
+        libs = {}
+        for plat in targets:
+            rel = f"binaries/{plat}/{identifier}{platforms.PLATFORMS[plat].suffix}"
+            libs[rel] = platforms.compile_for(plat, src, SOURCES, tmp / rel,
+                                              fmi2_functions(native_md))
         fmu = tmp / f"{name}-native.fmu"
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", native_md)
@@ -687,10 +688,9 @@ prsm_fmi2_me.c includes prsm_fmi2.c).
 The FMU's binaries/ were built from these with Zig's C compiler (linux64 for glibc 2.17 and
 later, win64, darwin64 for x86_64 and arm64).  Compile for another platform, e.g.
 
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
-HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h")
-#: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
-INCLUDED = ("prsm_fmi2.c",)
+  Linux    gcc -std=c99 -O2 -fPIC -shared -ffp-contract=off {sources} -o {id}.so -lm
+  macOS    clang -std=c99 -O2 -fPIC -shared -ffp-contract=off {sources} -o {id}.dylib
+  Windows  cl /O2 /fp:precise /LD {sources} /Fe{id}.dll
 
 and put the library under binaries/<platform>/ (linux64, darwin64, win64).  Keep fused
 multiply-add off (-ffp-contract=off; MSVC /fp:precise) and no fast-math: the results then equal
