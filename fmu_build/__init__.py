@@ -19,7 +19,7 @@ from .mechanisms import FMUS, three_stage
 #: name -> submodule, imported on first use (PEP 562): the builder imports pythonfmu, so that
 #: ``import fmu_build`` (and ``prsm-fmu-build --help``) works without the ``fmu`` extra and a
 #: build without it is refused in one line (:mod:`prsm_fmu.extras`)
-_LAZY = {"DEFAULT_EXPERIMENT": ".builder", "BuildError": ".builder", "build_fmu": ".builder",
+_LAZY = {"DEFAULT_EXPERIMENT": ".builder", "BuildError": ".errors", "build_fmu": ".builder",
          "validate": ".builder", "build_native": ".native"}
 
 

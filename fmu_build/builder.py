@@ -34,14 +34,11 @@ from prsm_fmu.params import MechanismParams
 from prsm_fmu.configure import ENUMERATIONS
 from prsm_fmu.slave import ENUM_PARAMETERS, parameter_defaults, type_definitions
 
+from .errors import BuildError
 from . import extra, model_description, packing
 
 #: the default experiment of every FMU: start [s], stop [s], communication step [s]
 DEFAULT_EXPERIMENT = (0.0, 0.1, 1e-3)
-
-
-class BuildError(RuntimeError):
-    """The FMU could not be built or its modelDescription is not valid."""
 
 
 def start_values(params: MechanismParams, start: dict | None = None) -> dict:

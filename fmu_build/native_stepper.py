@@ -102,6 +102,7 @@ def load_library(path: str) -> ctypes.CDLL:
     dll.prsm_api_set_memory.argtypes = [vp, ctypes.c_char_p]
     dll.prsm_api_free.argtypes = [vp]
     dll.prsm_api_set_band.argtypes = [vp, ctypes.c_int]
+    dll.prsm_api_undo_advance.argtypes = [vp]
     _loaded[path] = dll
     return dll
 
@@ -237,6 +238,11 @@ class NativeStepper(Stepper):
             raise ValueError(f"{self.name}: memory must be (bytes of length "
                              f"{self._memory_size},) from get_memory")
         self._lib.prsm_api_set_memory(self._handle, m[0])
+
+    def undo_advance(self) -> None:
+        """Put the memory back as it was before the last advance (its result refused by the
+        caller); the state is the caller's own and needs no undoing."""
+        self._lib.prsm_api_undo_advance(self._handle)
 
     def reset(self) -> None:
         """Forget the memory."""

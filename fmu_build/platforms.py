@@ -39,7 +39,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from . import binary_check
-from .builder import BuildError
+from .errors import BuildError
 
 __all__ = ["Platform", "PLATFORMS", "FMI2_PLATFORMS", "PYTHONFMU_PLATFORMS", "compile_for",
            "check_library", "zig_available", "universal_macho", "COMPILE_FLAGS"]

@@ -931,7 +931,10 @@ class PRSMSlave(Fmi2Slave):
                                 "state")
         why = state_violation(x)
         if why is not None:          # the outputs of that state could overflow: docs/fmu.md
-            stepper.set_memory(memory)
+            if memory is not None:
+                stepper.set_memory(memory)
+            else:                    # the engine kept no copy: it takes its advance back
+                stepper.undo_advance()
             return self._refuse(f"the step would end out of the state's bounds: {why}")
         self._x = x
         self._t = current_time + h

@@ -281,7 +281,7 @@ def test_a_call_of_the_wrong_type_or_not_allowed_is_an_error_naming_the_variable
 
 
 @pytest.mark.parametrize("start,word", [({"fidelity": "auto"}, "fidelity"),
-                                        ({"stepper": "closed_form"}, "stepper"),
+                                        ({"stepper": "exponential"}, "stepper"),
                                         ({"stage[2].nut_mass": -1.0}, "stage[2].nut_mass")])
 def test_initialization_refuses_what_the_fmi2_fmu_refuses(fmu3, start, word):
     messages = []

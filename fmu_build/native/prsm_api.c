@@ -10,6 +10,7 @@
 typedef struct {
     prsm_model model;
     prsm_memory memory;
+    prsm_memory before;        /* the memory before the last prsm_api_advance_many */
 } prsm_handle;
 
 /* Number of doubles and ints prsm_api_new reads. */
@@ -116,6 +117,7 @@ int prsm_api_advance_many(void *handle, double t0, const double *x, const double
     double xi[PRSM_NX_MAX] = {0.0}, xo[PRSM_NX_MAX] = {0.0};
     memcpy(xi, x, sizeof(double) * (size_t)nx);
     stats[0] = stats[1] = stats[2] = 0;
+    h->before = h->memory;
     for (int i = 0; i < n_steps; i++) {
         prsm_stats st;
         int rc = prsm_advance(&h->model, &h->memory, t0 + i * step, xi, u, step, xo, &st, msg, len);
@@ -127,6 +129,13 @@ int prsm_api_advance_many(void *handle, double t0, const double *x, const double
         memcpy(xi, xo, sizeof xi);
     }
     return 0;
+}
+
+/* Put the memory back as it was before the last prsm_api_advance_many: a caller that refuses
+ * the step's result (e.g. a state beyond its bounds) takes the whole advance back. */
+void prsm_api_undo_advance(void *handle) {
+    prsm_handle *h = (prsm_handle *)handle;
+    h->memory = h->before;
 }
 
 /* The model's right-hand side at x with inputs u (Model.rhs). */
