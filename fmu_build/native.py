@@ -47,6 +47,7 @@ from xml.dom.minidom import parseString
 import prsm_fmu
 from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.params import MechanismParams
+from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
 
@@ -193,6 +194,12 @@ static const double PRSM_ROS_M[4] = {{{", ".join(_hex(v) for v in _ROS_M)}}};
 static const double PRSM_ROS_E[4] = {{{", ".join(_hex(v) for v in _ROS_E)}}};
 static const double PRSM_ROS_WQ[4] = {{{", ".join(_hex(v) for v in _ROS_WQ)}}};
 static const double PRSM_ROS_EQ[4] = {{{", ".join(_hex(v) for v in _ROS_EQ)}}};
+
+/* kink landing (prsm_fmu.steppers.control): the landing band per v_eps, the resolution of the
+   friction law, the cuts of one internal step */
+#define PRSM_KINK_BAND {_hex(KINK_BAND)}
+#define PRSM_APPROACH {_hex(APPROACH)}
+#define PRSM_MAX_KINK_CUTS {MAX_KINK_CUTS}
 
 #endif
 """

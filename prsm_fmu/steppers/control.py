@@ -8,10 +8,94 @@ from typing import Any, Sequence
 
 from .base import Stepper, _INF, _check_count, _check_tol, _model_mask, _model_scale
 
-__all__ = ["AdaptiveBase"]
+__all__ = ["AdaptiveBase", "KINK_BAND", "APPROACH", "MAX_KINK_CUTS", "kink_fraction"]
 
 #: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
 _TIME_MATCH = 4e-16
+
+#: a sliding speed within this fraction of the friction band's speed v_ε (the smallest positive
+#: kink speed) of a kink counts as on it: a step that starts there is not cut for that kink (it
+#: leaves it), one that ends there has landed on it.  The law's curvature jump acts over that
+#: distance only, so what a step within it misses is below (1e-3)² of the law's curvature term
+KINK_BAND = 1e-3
+
+#: the friction law's resolution: between its kinks, Coulomb's s/|s| has k-th derivatives of
+#: order 1/|s|^k, so a step may change a sliding speed |s| by at most this fraction of
+#: max(|s|, v_ε), |s| the smaller of its ends (approaching zero speed: at most halving it)
+APPROACH = 1.0
+
+#: secant cuts of one internal step towards a kink before the step is taken as it is (the
+#: secant on the sliding velocities converges in one or two where they are smooth in time)
+MAX_KINK_CUTS = 4
+
+
+def kink_fraction(v0: Sequence[tuple], v1: Sequence[tuple], kinks: Sequence[tuple],
+                  band: float) -> float | None:
+    """Where a step should end so that it neither crosses a kink of a friction law nor changes a
+    sliding speed faster than the law resolves: the fraction of the step in (0, 1), or None.
+
+    Along the step the sliding velocities are taken linear in time, s(θ) = s0 + θ (s1 − s0)
+    (secant through the step's ends).  Kinks: the roots θ of |s(θ)| = k for each kink speed
+    k > 0 of the law, and of s(θ) = 0 for the kink 0 of a one-component law, that lie more than
+    the landing band (:data:`KINK_BAND` · v_ε, as distance travelled) from both ends.
+    Resolution: where |s| changes by more than :data:`APPROACH` · max(v_ε, r) — r = |s0| when
+    it grows, |s0|/(1 + APPROACH) when it falls (at most halving it on the way to zero) — the
+    fraction that keeps the change within that.
+
+    Parameters
+    ----------
+    v0, v1 : sequence of tuple of float
+        Sliding velocities [m/s] at the step's start and at the trial end, one tuple per law.
+    kinks : sequence of tuple of float
+        Per law, its kink speeds [m/s] (0 for a sign change of a one-component law).
+    band : float
+        v_ε [m/s], the friction band's speed (> 0).
+
+    Returns
+    -------
+    float or None
+        The smallest such fraction, or None if the step may stand.
+    """
+    tol = KINK_BAND * band
+    best = 2.0
+    for s0, s1, ks in zip(v0, v1, kinks):
+        if len(s0) == 1:
+            a0, a1 = s0[0], s1[0]
+            d = a1 - a0
+            dn = abs(d)
+            if not dn > tol:
+                continue
+            r0, r1 = abs(a0), abs(a1)
+            for k in ks:
+                for root in ((k - a0) / d, (-k - a0) / d) if k else (-a0 / d,):
+                    if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
+                            and root < best:
+                        best = root
+        else:
+            dv = [q - p for p, q in zip(s0, s1)]
+            aa = sum([e * e for e in dv])
+            dn = math.sqrt(aa)
+            if not dn > tol:
+                continue
+            rr0 = sum([p * p for p in s0])
+            r0, r1 = math.sqrt(rr0), math.sqrt(sum([q * q for q in s1]))
+            b = sum([p * e for p, e in zip(s0, dv)])
+            for k in ks:
+                if not k:
+                    continue
+                disc = b * b - aa * (rr0 - k * k)
+                if disc < 0.0:
+                    continue
+                sq = math.sqrt(disc)
+                for root in ((-b - sq) / aa, (-b + sq) / aa):
+                    if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
+                            and root < best:
+                        best = root
+        change = abs(r1 - r0)
+        limit = APPROACH * max(band, r0 / (1.0 + APPROACH) if r1 < r0 else r0)
+        if change > limit and limit / change < best:
+            best = limit / change
+    return best if best < 1.0 else None
 
 
 def _finite_floats(v: Any, n: int | None) -> bool:
@@ -63,6 +147,17 @@ class AdaptiveBase(Stepper):
         self._atol_w = [self.atol * s if m else _INF for s, m in zip(self.state_scale, self.error_mask)]
         self._n_err = sum(self.error_mask)
         self._h_prop: float | None = None
+
+        # the friction law's kinks (docs/accuracy.md, "Landing on the friction law's kinks"):
+        # the model's sliding speeds and their kink speeds, if it reports them
+        speeds = getattr(model, "sliding_velocities", None)
+        kinks = tuple(getattr(model, "kink_speeds", ()) or ()) if callable(speeds) else ()
+        positive = [abs(k) for ks in kinks for k in ks if k != 0.0]
+        #: the model's sliding velocities (None: no kink landing), their kink speeds [m/s] and
+        #: the friction band's speed v_ε [m/s]
+        self._speeds = speeds if kinks and positive else None
+        self._kinks = kinks
+        self._band = min(positive) if positive else 0.0
 
     # --- memory ---------------------------------------------------------------------
 
