@@ -48,6 +48,7 @@ import prsm_fmu
 from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
+from prsm_fmu.steppers.options import TOLERANCE_FACTOR
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
 
@@ -200,6 +201,9 @@ static const double PRSM_ROS_EQ[4] = {{{", ".join(_hex(v) for v in _ROS_EQ)}}};
 #define PRSM_KINK_BAND {_hex(KINK_BAND)}
 #define PRSM_APPROACH {_hex(APPROACH)}
 #define PRSM_MAX_KINK_CUTS {MAX_KINK_CUTS}
+
+/* ROS34PW2's factor on the FMU's tolerances (prsm_fmu.steppers.options.TOLERANCE_FACTOR) */
+#define PRSM_ROS_TOLERANCE_FACTOR {_hex(TOLERANCE_FACTOR.get("rosenbrock", 1.0))}
 
 #endif
 """

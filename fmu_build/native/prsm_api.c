@@ -68,8 +68,11 @@ void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
  * FMU's (tolerance and 1e-2 tolerance). */
 void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
     prsm_handle *h = (prsm_handle *)handle;
-    h->model.rtol = h->model.ros.rtol = rtol;
-    h->model.atol = h->model.ros.atol = atol;
+    h->model.rtol = rtol;
+    h->model.atol = atol;
+    /* ROS34PW2's tolerances as prsm_model_init sets them from the FMU's */
+    h->model.ros.rtol = h->model.ros.fixed_substeps ? rtol : rtol * PRSM_ROS_TOLERANCE_FACTOR;
+    h->model.ros.atol = h->model.ros.fixed_substeps ? atol : atol * PRSM_ROS_TOLERANCE_FACTOR;
 }
 
 int prsm_api_n_states(void *handle) { return ((prsm_handle *)handle)->model.nx; }

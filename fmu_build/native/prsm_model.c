@@ -600,8 +600,9 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     for (int k = 0; k < r->nd; k++) r->dyn[k] = 1 + k;
     r->quad[0] = 0;
     for (int k = 1; k < 4; k++) r->quad[k] = 1 + NS + k;
-    r->rtol = m->rtol;
-    r->atol = m->atol;
+    /* steppers.options.TOLERANCE_FACTOR when adaptive (tuned_stepper_options) */
+    r->rtol = cfg->substeps ? m->rtol : m->rtol * PRSM_ROS_TOLERANCE_FACTOR;
+    r->atol = cfg->substeps ? m->atol : m->atol * PRSM_ROS_TOLERANCE_FACTOR;
     r->h_min = m->h_min;
     r->safety = m->safety;
     r->fac_min = m->fac_min;

@@ -275,12 +275,17 @@ class SwitchingStepper(Stepper):
             if "fixed_substeps" in options:          # fixed steps: no step-size tuning
                 common["fixed_substeps"] = options["fixed_substeps"]
                 tuned = {}
-            k = TOLERANCE_FACTOR["exponential"]
-            stiff = {key: v * k if key in ("rtol", "atol") else v for key, v in common.items()}
+            def scaled(stepper: str) -> dict:
+                # the tolerances as tuned_stepper_options scales them
+                k = TOLERANCE_FACTOR.get(stepper, 1.0)
+                return {key: v * k if key in ("rtol", "atol") else v for key, v in common.items()}
+
             self.dynamic_steppers = {
-                "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic, **common),
-                "exponential": make_stepper("exponential", model.dynamic, **stiff),
-                "rosenbrock": make_stepper("rosenbrock", model.dynamic, **tuned, **common)}
+                "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic,
+                                                  **scaled("explicit_adaptive")),
+                "exponential": make_stepper("exponential", model.dynamic, **scaled("exponential")),
+                "rosenbrock": make_stepper("rosenbrock", model.dynamic, **tuned,
+                                           **scaled("rosenbrock"))}
         else:
             name = "rosenbrock" if name in ("closed_form", "closed_form_explicit") else name
             self.dynamic_steppers = {name: make_stepper(name, model.dynamic, **options)}
