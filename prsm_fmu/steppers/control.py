@@ -1,5 +1,15 @@
-"""Shared machinery of the adaptive steppers: tolerances, error weights, the first-step norms
-and the elementary step-size controller (memory: the proposal for the next internal step)."""
+"""Shared machinery of the adaptive steppers: tolerances, error weights, the first-step norms,
+the elementary step-size controller (memory: the proposal for the next internal step) and the
+landing on the friction law's kinks.
+
+Kink landing: a model may report ``sliding_velocities(x)`` (one tuple of components [m/s] per
+regularised friction law) and ``kink_speeds`` (per law the sliding speeds [m/s] where the law is
+only C¹: v_ε, and 0 for a one-component law).  After each trial step the adaptive steppers ask
+:func:`kink_fraction` whether the step crosses a kink or changes a sliding speed faster than
+the law resolves, and if so retry it cut to that fraction (counted as a rejection; at most
+:data:`MAX_KINK_CUTS` per internal step); after a landing the next step resumes the size the cut
+shortened.  No embedded error estimate then spans a kink (docs/accuracy.md, "Landing on the
+friction law's kinks")."""
 
 from __future__ import annotations
 
@@ -8,7 +18,7 @@ from typing import Any, Sequence
 
 from .base import Stepper, _INF, _check_count, _check_tol, _model_mask, _model_scale
 
-__all__ = ["AdaptiveBase", "KINK_BAND", "APPROACH", "MAX_KINK_CUTS", "kink_fraction"]
+__all__ = ["AdaptiveBase", "KinkLanding", "KINK_BAND", "APPROACH", "MAX_KINK_CUTS", "kink_fraction"]
 
 #: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
 _TIME_MATCH = 4e-16
@@ -96,6 +106,69 @@ def kink_fraction(v0: Sequence[tuple], v1: Sequence[tuple], kinks: Sequence[tupl
         if change > limit and limit / change < best:
             best = limit / change
     return best if best < 1.0 else None
+
+
+class KinkLanding:
+    """One advance's landing on the kinks of a model's friction laws (module docstring).
+
+    Holds the sliding velocities at the current accepted point, the cuts of the internal step
+    being tried and the step size [s] the first cut shortened.
+
+    Parameters
+    ----------
+    speeds : callable
+        The model's ``sliding_velocities(x)``.
+    kinks : tuple of tuple of float
+        The model's ``kink_speeds`` [m/s].
+    band : float
+        v_ε [m/s].
+    h_min : float
+        Smallest internal step [s]: no cut below it.
+    """
+
+    __slots__ = ("speeds", "kinks", "band", "h_min", "v0", "v_new", "cuts", "h_uncut")
+
+    def __init__(self, speeds: Any, kinks: tuple, band: float, h_min: float) -> None:
+        self.speeds, self.kinks, self.band, self.h_min = speeds, kinks, band, h_min
+        self.v0 = self.v_new = None
+        self.cuts = 0
+        self.h_uncut = 0.0
+
+    def cut(self, y: Sequence[float], y_new: Sequence[float], h_step: float,
+            stats: Any) -> float | None:
+        """The size [s] to retry a trial step from ``y`` to ``y_new`` of size ``h_step`` with,
+        if it must end on a kink (:func:`kink_fraction`: no error estimate holds across one),
+        counted in ``stats.rejected``; else None, as well once :data:`MAX_KINK_CUTS` cuts were
+        made or below ``h_min``."""
+        self.v_new = None
+        if self.cuts >= MAX_KINK_CUTS:
+            return None
+        if self.v0 is None:
+            self.v0 = self.speeds(y)
+        self.v_new = self.speeds(y_new)
+        s = kink_fraction(self.v0, self.v_new, self.kinks, self.band)
+        if s is None or h_step * s < self.h_min:
+            return None
+        if not self.cuts:
+            self.h_uncut = h_step
+        self.cuts += 1
+        stats.rejected += 1
+        return h_step * s
+
+    def accepted(self, h_new: float, fac: float) -> float:
+        """The next step's size [s] after an accepted one whose controller proposed ``h_new``
+        with factor ``fac``: after a landing the size the cut shortened (the controller chose it
+        on the smooth side), unless the controller asks for less."""
+        if self.cuts:
+            if fac >= 1.0:
+                h_new = max(h_new, self.h_uncut)
+            self.cuts = 0
+        self.v0 = self.v_new
+        return h_new
+
+    def rejected(self) -> None:
+        """A trial failed its error test: no return to the uncut size after it."""
+        self.h_uncut = 0.0
 
 
 def _finite_floats(v: Any, n: int | None) -> bool:
@@ -233,6 +306,13 @@ class AdaptiveBase(Stepper):
         d0 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(x, w)]) / self._n_err)
         d1 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(f0, w)]) / self._n_err)
         return w, d0, d1
+
+    def _landing(self) -> KinkLanding | None:
+        """A fresh :class:`KinkLanding` for an adaptive advance, None if the model reports no
+        sliding velocities (or landing is off)."""
+        if self._speeds is None:
+            return None
+        return KinkLanding(self._speeds, self._kinks, self._band, self.h_min)
 
     def _factor(self, err: float) -> float:
         """Step-size ratio proposed by the elementary controller for error norm ``err``."""

@@ -7,7 +7,7 @@ import math
 from typing import Any, Callable
 
 from .base import StepStats, _INF, _bad_text, _is_finite_sum
-from .control import MAX_KINK_CUTS, AdaptiveBase, kink_fraction
+from .control import AdaptiveBase
 from .tableaux import _BS_A, _BS_B, _BS_C, _BS_E, _DP_A, _DP_B, _DP_C, _DP_E
 
 __all__ = ["ExplicitAdaptive"]
@@ -308,14 +308,11 @@ class ExplicitAdaptive(AdaptiveBase):
         max_sub = self.max_substeps
         h_min = self.h_min
         reason = ""
-        kinks = self._speeds is not None
-        v0 = None  # sliding velocities at the current accepted point (kink landing)
-        cuts = 0  # secant cuts of this internal step towards a kink
-        h_uncut = 0.0  # the step [s] that the first cut shortened
+        landing = self._landing()  # kink landing
         while True:
             rem = h - tau
             # a step cut to end on a kink has exactly the cut size, never stretched to t + h
-            last = not cuts and hs * 1.05 >= rem
+            last = not (landing and landing.cuts) and hs * 1.05 >= rem
             h_step = rem if last else hs
             attempts += 1
             if attempts > max_sub:
@@ -337,34 +334,18 @@ class ExplicitAdaptive(AdaptiveBase):
                     reason = _bad_text(bad)
                 elif not err <= 1.0:
                     reason = f"error norm {err:.3g} > 1"
-            v_new = None  # sliding velocities at the trial's end
-            if kinks and y_new is not None and not bad and cuts < MAX_KINK_CUTS:
-                if v0 is None:
-                    v0 = self._speeds(y)
-                v_new = self._speeds(y_new)
-                s_cut = kink_fraction(v0, v_new, self._kinks, self._band)
-                if s_cut is not None and h_step * s_cut >= h_min:
-                    # the step would cross a kink of the friction law, where no error
-                    # estimate holds: end it on the kink instead (secant on the speeds)
-                    if not cuts:
-                        h_uncut = h_step
-                    cuts += 1
-                    stats.rejected += 1
-                    hs = h_step * s_cut
-                    continue
+            h_cut = landing.cut(y, y_new, h_step, stats) if landing and not bad and y_new else None
+            if h_cut is not None:  # it would cross a kink: ends on it instead (KinkLanding)
+                hs = h_cut
+                continue
             if err <= 1.0:
                 stats.substeps += 1
                 fac = self._factor(err)
                 if just_rejected and fac > 1.0:
                     fac = 1.0
                 h_new = h_step * fac
-                if cuts:
-                    # landed on a kink: go on with the step the cut shortened (the controller
-                    # chose it on the smooth side) unless the controller asks for less
-                    if fac >= 1.0:
-                        h_new = max(h_new, h_uncut)
-                    cuts = 0
-                v0 = v_new
+                if landing:
+                    h_new = landing.accepted(h_new, fac)
                 y = y_new
                 k1 = k_new
                 stats.error_estimate = err
@@ -380,7 +361,8 @@ class ExplicitAdaptive(AdaptiveBase):
             else:
                 stats.rejected += 1
                 just_rejected = True
-                h_uncut = 0.0  # a cut step that fails its error test: no return to the uncut
+                if landing:
+                    landing.rejected()
                 hs = h_step * self._factor(err)
                 if hs < h_min:
                     raise self._fail(

@@ -8,7 +8,7 @@ from operator import mul
 from typing import Any, Callable, Sequence
 
 from .base import StepStats, _INF, _analytic_jacobian, _block_jacobian, _bad_text, _is_finite_sum, _model_quadrature
-from .control import MAX_KINK_CUTS, AdaptiveBase, kink_fraction, _finite_floats
+from .control import AdaptiveBase, _finite_floats
 from .linalg import getter
 from .phi import prepare
 
@@ -301,10 +301,7 @@ class ExponentialRosenbrock(AdaptiveBase):
         h_mem = None
         reason = ""
         i_fixed = 0
-        kinks = fixed is None and self._speeds is not None
-        v0 = None  # sliding velocities at the current accepted point (kink landing)
-        cuts = 0  # secant cuts of this internal step towards a kink
-        h_uncut = 0.0  # the step [s] that the first cut shortened
+        landing = None if fixed is not None else self._landing()  # kink landing
         while True:
             if fixed is not None:
                 ti = t + i_fixed * hs
@@ -314,7 +311,7 @@ class ExponentialRosenbrock(AdaptiveBase):
                 ti = t + tau
                 rem = h - tau
                 # a step cut to end on a kink has exactly the cut size, never stretched to t + h
-                last = not cuts and hs * 1.05 >= rem
+                last = not (landing and landing.cuts) and hs * 1.05 >= rem
                 h_step = rem if last else hs
                 attempts += 1
                 if attempts > self.max_substeps:
@@ -365,21 +362,10 @@ class ExponentialRosenbrock(AdaptiveBase):
                     return y, stats
                 i_fixed += 1
                 continue
-            v_new = None  # sliding velocities at the trial's end
-            if kinks and y_new is not None and not bad and cuts < MAX_KINK_CUTS:
-                if v0 is None:
-                    v0 = self._speeds(y)
-                v_new = self._speeds(y_new)
-                s_cut = kink_fraction(v0, v_new, self._kinks, self._band)
-                if s_cut is not None and h_step * s_cut >= self.h_min:
-                    # the step would cross a kink of the friction law, where no error
-                    # estimate holds: end it on the kink instead (secant on the speeds)
-                    if not cuts:
-                        h_uncut = h_step
-                    cuts += 1
-                    stats.rejected += 1
-                    hs = h_step * s_cut
-                    continue
+            h_cut = landing.cut(y, y_new, h_step, stats) if landing and not bad and y_new else None
+            if h_cut is not None:  # it would cross a kink: ends on it instead (KinkLanding)
+                hs = h_cut
+                continue
             if err <= 1.0:
                 stats.substeps += 1
                 stats.error_estimate = err
@@ -387,13 +373,8 @@ class ExponentialRosenbrock(AdaptiveBase):
                 if just_rejected and fac > 1.0:
                     fac = 1.0
                 h_new = h_step * fac
-                if cuts:
-                    # landed on a kink: go on with the step the cut shortened (the controller
-                    # chose it on the smooth side) unless the controller asks for less
-                    if fac >= 1.0:
-                        h_new = max(h_new, h_uncut)
-                    cuts = 0
-                v0 = v_new
+                if landing:
+                    h_new = landing.accepted(h_new, fac)
                 # for a step shortened to land on t + h, the untruncated size unless the
                 # controller asks to shrink
                 h_next = max(h_new, hs) if last and h_new >= h_step else h_new
@@ -426,7 +407,8 @@ class ExponentialRosenbrock(AdaptiveBase):
             else:
                 stats.rejected += 1
                 just_rejected = True
-                h_uncut = 0.0  # a cut step that fails its error test: no return to the uncut
+                if landing:
+                    landing.rejected()
                 hs = h_step * self._factor(err)
                 if hs < self.h_min:
                     raise self._fail(
