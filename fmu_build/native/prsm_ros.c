@@ -370,29 +370,29 @@ static int kink_fraction(const prsm_ros *r, const double *v0, const double *v1, 
             if (!(dn > tol)) continue;
             r0 = fabs(a0);
             r1 = fabs(a1);
-            /* kinks 0 and v_eps: the roots -a0/d, then (v_eps - a0)/d and (-v_eps - a0)/d */
-            double roots[3] = {-a0 / d, (band - a0) / d, (-band - a0) / d};
-            for (int i = 0; i < 3; i++) {
-                double root = roots[i];
-                if (0.0 < root && root < 1.0 && root * dn > tol && (1.0 - root) * dn > tol
-                    && root < best)
-                    best = root;
+            if (a0 * a1 <= 0.0 || r0 <= band || r1 <= band) {
+                /* kinks 0 and v_eps: the roots -a0/d, then (v_eps - a0)/d and (-v_eps - a0)/d */
+                double roots[3] = {-a0 / d, (band - a0) / d, (-band - a0) / d};
+                for (int i = 0; i < 3; i++) {
+                    double root = roots[i];
+                    if (0.0 < root && root < 1.0 && root * dn > tol && (1.0 - root) * dn > tol
+                        && root < best)
+                        best = root;
+                }
             }
         } else {
-            double dv[PRSM_SLIP_DIM];
-            for (int i = 0; i < PRSM_SLIP_DIM; i++) dv[i] = s1[i] - s0[i];
-            double aa = 0.0, rr0 = 0.0, rr1 = 0.0, b = 0.0;
-            for (int i = 0; i < PRSM_SLIP_DIM; i++) aa += dv[i] * dv[i];
+            double x0 = s0[0], y0 = s0[1], z0 = s0[2];
+            double dx = s1[0] - x0, dy = s1[1] - y0, dz = s1[2] - z0;
+            double aa = dx * dx + dy * dy + dz * dz;
             double dn = sqrt(aa);
             if (!(dn > tol)) continue;
-            for (int i = 0; i < PRSM_SLIP_DIM; i++) rr0 += s0[i] * s0[i];
-            for (int i = 0; i < PRSM_SLIP_DIM; i++) rr1 += s1[i] * s1[i];
+            double rr0 = x0 * x0 + y0 * y0 + z0 * z0;
             r0 = sqrt(rr0);
-            r1 = sqrt(rr1);
-            for (int i = 0; i < PRSM_SLIP_DIM; i++) b += s0[i] * dv[i];
-            /* the kink v_eps: |s0 + theta dv| = v_eps */
+            r1 = sqrt(s1[0] * s1[0] + s1[1] * s1[1] + s1[2] * s1[2]);
+            double b = x0 * dx + y0 * dy + z0 * dz;
+            /* the kink v_eps: |s0 + theta dv| = v_eps, where |s| may reach it */
             double disc = b * b - aa * (rr0 - band * band);
-            if (!(disc < 0.0)) {
+            if (r0 + r1 - dn <= 2.0 * band && !(disc < 0.0)) {
                 double sq = sqrt(disc);
                 double roots[2] = {(-b - sq) / aa, (-b + sq) / aa};
                 for (int i = 0; i < 2; i++) {

@@ -76,31 +76,37 @@ def kink_fraction(v0: Sequence[tuple], v1: Sequence[tuple], kinks: Sequence[tupl
             if not dn > tol:
                 continue
             r0, r1 = abs(a0), abs(a1)
-            for k in ks:
-                for root in ((k - a0) / d, (-k - a0) / d) if k else (-a0 / d,):
-                    if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
-                            and root < best:
-                        best = root
+            if a0 * a1 <= 0.0 or r0 <= band or r1 <= band:
+                # the segment reaches 0 or the band: its roots (else there are none in it)
+                for k in ks:
+                    for root in ((k - a0) / d, (-k - a0) / d) if k else (-a0 / d,):
+                        if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
+                                and root < best:
+                            best = root
         else:
-            dv = [q - p for p, q in zip(s0, s1)]
-            aa = sum([e * e for e in dv])
+            x0, y0, z0 = s0
+            dx, dy, dz = s1[0] - x0, s1[1] - y0, s1[2] - z0
+            aa = dx * dx + dy * dy + dz * dz
             dn = math.sqrt(aa)
             if not dn > tol:
                 continue
-            rr0 = sum([p * p for p in s0])
-            r0, r1 = math.sqrt(rr0), math.sqrt(sum([q * q for q in s1]))
-            b = sum([p * e for p, e in zip(s0, dv)])
-            for k in ks:
-                if not k:
-                    continue
-                disc = b * b - aa * (rr0 - k * k)
-                if disc < 0.0:
-                    continue
-                sq = math.sqrt(disc)
-                for root in ((-b - sq) / aa, (-b + sq) / aa):
-                    if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
-                            and root < best:
-                        best = root
+            rr0 = x0 * x0 + y0 * y0 + z0 * z0
+            r0 = math.sqrt(rr0)
+            r1 = math.sqrt(s1[0] * s1[0] + s1[1] * s1[1] + s1[2] * s1[2])
+            if r0 + r1 - dn <= 2.0 * band:
+                # |s| may reach the band on the way (it stays above (r0 + r1 − dn)/2)
+                b = x0 * dx + y0 * dy + z0 * dz
+                for k in ks:
+                    if not k:
+                        continue
+                    disc = b * b - aa * (rr0 - k * k)
+                    if disc < 0.0:
+                        continue
+                    sq = math.sqrt(disc)
+                    for root in ((-b - sq) / aa, (-b + sq) / aa):
+                        if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
+                                and root < best:
+                            best = root
         change = abs(r1 - r0)
         limit = APPROACH * max(band, r0 / (1.0 + APPROACH) if r1 < r0 else r0)
         if change > limit and limit / change < best:
