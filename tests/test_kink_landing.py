@@ -151,3 +151,25 @@ def test_dynamic_level_reports_threads_spline_and_kinks_of_li_et_al():
     # axial speed the screw's lead gives the contact point, L_1/2π, up to the flank's sign
     for s in three[:2]:
         assert abs(s[2]) == pytest.approx(100.0 * lead_1 / (2.0 * math.pi), rel=1e-12)
+
+
+# ---- the dynamic level's default stepper through the speed reversal --------------------------
+
+def test_dynamic_default_stepper_meets_its_tolerance_through_the_speed_reversal():
+    """The actuator loop's speed reversal (system_models/scenes/speed_reversal.toml) cut to
+    40 ms, through zero screw speed at 31.2 ms, with the PRSM's dynamic level and its default
+    stepper (the FMU's ``fidelity = dynamic``), against Radau at rtol 1e-10 restarted each
+    communication step (an independent solver; at 1e-10 it is within 5e-12 of its 1e-12 run on
+    the whole scene, docs/figures/wp_speed_reversal.csv).  Before the steppers landed on the
+    friction law's kinks this gave 8.8e-4 at tolerance 1e-4 (at 31.2 ms) and 4.0e-6 at 1e-6."""
+    from benchmark_modules import load_benchmark
+
+    wp = load_benchmark("work_precision")
+    run = wp.make_loop_runner("speed_reversal", 0.04)
+    outs = wp.loop_outputs("speed_reversal")
+    ref = run(wp.Config("dynamic", "radau", "rtol", 1e-10), time_it=False)
+    for tol in (1e-4, 1e-6):
+        res = run(wp.Config("dynamic", "default", "rtol", tol), time_it=False)
+        error = max(wp.output_errors(res.outputs, ref.outputs, outs).values())
+        print(f"tolerance {tol:g}: error {error:.3e}, {res.rhs_calls} rhs calls")
+        assert error <= tol
