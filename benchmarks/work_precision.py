@@ -140,8 +140,10 @@ class Config:
 
     @property
     def stepper_options(self) -> dict:
-        """Extra options for the stepper (on top of simulate's tuned ones)."""
-        opts: dict = {"rtol": self.rtol, "atol": self.atol} if self.stepper != "rk4" else {}
+        """Extra options for the stepper (on top of simulate's tuned ones, which hold the
+        tolerances :attr:`rtol` and :attr:`atol` scaled as the FMU scales them,
+        ``prsm_fmu.steppers.options.TOLERANCE_FACTOR``)."""
+        opts: dict = {}
         if self.knob == "substeps":
             opts["substeps"] = int(self.value)
         return opts
@@ -324,7 +326,8 @@ def make_simulate_runner(params, drive: str, t_end: float, comm_step: float, inp
             from fmu_build.native_stepper import NativeStepper
 
             def make():
-                return NativeStepper(model, rtol=opts["rtol"], atol=opts["atol"])
+                # the native stepper scales the tolerances itself, as the native FMU does
+                return NativeStepper(model, rtol=cfg.rtol, atol=cfg.atol)
         else:
             def make():
                 return make_stepper(stepper, model, **opts)
