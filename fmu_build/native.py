@@ -56,6 +56,8 @@ from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                              MechanismParams)
+from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
+from prsm_fmu.steppers.options import TOLERANCE_FACTOR
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
 from prsm_fmu.steppers.band import _GAUSS
@@ -276,6 +278,15 @@ static const double PRSM_GAUSS5_X[5] = {{{", ".join(_hex(v) for v in _GAUSS[0][0
 static const double PRSM_GAUSS5_W[5] = {{{", ".join(_hex(v) for v in _GAUSS[0][1])}}};
 static const double PRSM_GAUSS3_X[3] = {{{", ".join(_hex(v) for v in _GAUSS[1][0])}}};
 static const double PRSM_GAUSS3_W[3] = {{{", ".join(_hex(v) for v in _GAUSS[1][1])}}};
+
+/* kink landing (prsm_fmu.steppers.control): the landing band per v_eps, the resolution of the
+   friction law, the cuts of one internal step */
+#define PRSM_KINK_BAND {_hex(KINK_BAND)}
+#define PRSM_APPROACH {_hex(APPROACH)}
+#define PRSM_MAX_KINK_CUTS {MAX_KINK_CUTS}
+
+/* ROS34PW2's factor on the FMU's tolerances (prsm_fmu.steppers.options.TOLERANCE_FACTOR) */
+#define PRSM_ROS_TOLERANCE_FACTOR {_hex(TOLERANCE_FACTOR.get("rosenbrock", 1.0))}
 
 #endif
 """

@@ -757,6 +757,73 @@ class Mechanism:
             acc = [0.0] * len(per_stage)
         return acc, p_fric
 
+    def sliding_velocities(self, omega: float, carrier_state) -> list:
+        """Sliding velocity of every regularised friction law that acts [m/s], in the order of
+        :meth:`kink_speeds`.
+
+        Per stage and thread flank the slip velocity s = ω a + ω_P b (three components, with
+        µ_SR > 0) and the differential-sliding speed ω r (with µ_3 > 0); then the spline's
+        ω ℓ_(k−1) and the bearing face's ω r_NS (where they have friction).  The laws of
+        friction.py act on these through |s| and, for the one-component ones, their sign.
+
+        Parameters
+        ----------
+        omega : float
+            Screw speed [rad/s].
+        carrier_state : sequence of float
+            The carrier speeds [rad/s] (dynamic level; ignored when the carriers are slaved).
+
+        Returns
+        -------
+        list of tuple of float
+            One tuple per law: its sliding velocity's components [m/s].
+        """
+        wps = self.carrier_speeds(omega, carrier_state)
+        out = []
+        mu, mu3 = self.mu, self.mu3
+        for s, wp in zip(self.stages, wps):
+            for fl in s.flanks:
+                if mu:
+                    out.append((omega * fl.ax + wp * fl.bx, omega * fl.ay + wp * fl.by,
+                                omega * fl.az))
+                if mu3:
+                    out.append((omega * fl.radius,))
+            if s.e_spline:
+                out.append((omega * s.spline_speed_factor,))
+            if s.g_bearing:
+                out.append((omega * s.bearing_speed_factor,))
+        return out
+
+    def kink_speeds(self) -> tuple:
+        """Per entry of :meth:`sliding_velocities`, the sliding speeds |s| [m/s] at which its law
+        is only C¹.
+
+        The regularised Coulomb law µ|N| r(2 − r), r = |s|/v_ε (friction.py), meets exact
+        Coulomb at |s| = v_ε with equal value and slope but not curvature, and its one-component
+        form s φ(|s|) has the same break where s changes sign.  So a one-component law has the
+        kinks (0, v_ε), a three-component one v_ε alone (its slip vector does not pass through
+        zero unless every component does at once).
+
+        Returns
+        -------
+        tuple of tuple of float
+            One tuple of kink speeds [m/s] per law.
+        """
+        v = self.v_eps
+        signed, vector = (0.0, v), (v,)
+        out = []
+        for s in self.stages:
+            for _ in s.flanks:
+                if self.mu:
+                    out.append(vector)
+                if self.mu3:
+                    out.append(signed)
+            if s.e_spline:
+                out.append(signed)
+            if s.g_bearing:
+                out.append(signed)
+        return tuple(out)
+
     def fastest_time_constant(self, omega: float, carrier_state, load: float) -> float:
         """Smallest carrier time constant J_Pk / |∂G_Pk/∂ω_Pk| at this point [s] (inf if none;
         Coulomb and viscous friction both damp the carriers).

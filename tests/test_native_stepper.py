@@ -142,3 +142,27 @@ def test_quasi_static_level_equals_the_python_closed_form_explicit(stepper):
         band_steps += sa.rhs_calls > 1
         assert xb == xa and sb.rhs_calls == sa.rhs_calls, i
     assert band_steps >= 1 and xa[1] > 0.0          # it left the band, numerically stepped
+
+
+@pytest.mark.parametrize("drive,u", [("speed", (-500.0, 2000.0)), ("torque", (-0.5, 2000.0))])
+def test_reversal_through_zero_speed_equals_the_python_rosenbrock_bit_for_bit(drive, u):
+    """Through zero screw speed every sliding speed passes its friction band, where both steppers
+    end internal steps on the friction law's kinks (and shorten the steps that approach them):
+    the C must take the same cuts.  Speed drive: 0.5 rad/s braked at 500 rad/s² through zero to
+    −0.5 rad/s in 2 ms; torque drive: −0.5 N·m with 2 kN on the rod from 0.5 rad/s, carriers
+    at equilibrium, 0.1 ms steps."""
+    model = make_model(presets.load("li2021_two_stage"), "dynamic", drive)
+    x0 = model.initial_state(u, screw_speed=0.5, carrier_ratio=None)
+    for rtol in (1e-4, 1e-7):
+        py = make_stepper("rosenbrock", model, **tuned_stepper_options("rosenbrock", rtol, rtol * 1e-3))
+        nat = _native(model, rtol=rtol, atol=rtol * 1e-3)
+        xa = xb = x0
+        cut_or_rejected = 0
+        for i in range(20):
+            xa, sa = py.advance(i * 1e-4, xa, u, 1e-4)
+            xb, sb = nat.advance(i * 1e-4, xb, u, 1e-4)
+            cut_or_rejected += sa.rejected
+            assert xb == xa and (sb.rhs_calls, sb.substeps, sb.rejected) == (
+                sa.rhs_calls, sa.substeps, sa.rejected), (rtol, i)
+        assert xa[1] < 0.0 < x0[1]              # the screw went through zero speed
+        assert cut_or_rejected > 0

@@ -91,8 +91,11 @@ void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
  * exponential band step). */
 void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
     prsm_handle *h = (prsm_handle *)handle;
-    h->model.rtol = h->model.ros.rtol = h->model.band.rtol = rtol;
-    h->model.atol = h->model.ros.atol = h->model.band.atol = atol;
+    h->model.rtol = h->model.band.rtol = rtol;
+    h->model.atol = h->model.band.atol = atol;
+    /* ROS34PW2's tolerances as prsm_model_init sets them from the FMU's */
+    h->model.ros.rtol = h->model.ros.fixed_substeps ? rtol : rtol * PRSM_ROS_TOLERANCE_FACTOR;
+    h->model.ros.atol = h->model.ros.fixed_substeps ? atol : atol * PRSM_ROS_TOLERANCE_FACTOR;
 }
 
 /* The slaved levels' method where the closed form declines: 1 the exponential band step (the

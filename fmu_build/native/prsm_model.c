@@ -341,6 +341,31 @@ static void rhs(const prsm_model *m, const double *x, const double *u, double *d
     dx[ie + 2] = p_fric + loss * omega;
 }
 
+/* Model.sliding_velocities at the dynamic level (Mechanism.sliding_velocities: per stage the
+ * thread flanks' slip velocities, then the spline's and the bearing's speeds, where they have
+ * friction), PRSM_SLIP_DIM slots per law, with the signature of prsm_ros's slip */
+static void slip_ctx(const void *ctx, const double *x, double *v) {
+    const prsm_model *m = (const prsm_model *)ctx;
+    double omega = x[1];
+    int j = 0;
+    for (int k = 0; k < NS; k++) {
+        const prsm_stage *s = &m->st[k];
+        double wp = x[2 + k];
+        for (int f = 0; f < 2; f++) {
+            const prsm_flank *fl = &m->fl[k][f];
+            if (m->mu != 0.0) {
+                v[j] = omega * fl->ax + wp * fl->bx;
+                v[j + 1] = omega * fl->ay + wp * fl->by;
+                v[j + 2] = omega * fl->az;
+                j += PRSM_SLIP_DIM;
+            }
+            if (m->mu3 != 0.0) { v[j] = omega * fl->radius; j += PRSM_SLIP_DIM; }
+        }
+        if (s->e_spline != 0.0) { v[j] = omega * s->spline_f; j += PRSM_SLIP_DIM; }
+        if (s->g_bearing != 0.0) { v[j] = omega * s->bearing_f; j += PRSM_SLIP_DIM; }
+    }
+}
+
 /* rhs with the signature of prsm_ros.h's right-hand side */
 static void rhs_ctx(const void *ctx, const double *x, const double *u, double *dx) {
     rhs((const prsm_model *)ctx, x, u, dx);
@@ -624,8 +649,9 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     for (int k = 0; k < r->nd; k++) r->dyn[k] = 1 + k;
     r->quad[0] = 0;
     for (int k = 1; k < 4; k++) r->quad[k] = 1 + NS + k;
-    r->rtol = m->rtol;
-    r->atol = m->atol;
+    /* steppers.options.TOLERANCE_FACTOR when adaptive (tuned_stepper_options) */
+    r->rtol = cfg->substeps ? m->rtol : m->rtol * PRSM_ROS_TOLERANCE_FACTOR;
+    r->atol = cfg->substeps ? m->atol : m->atol * PRSM_ROS_TOLERANCE_FACTOR;
     r->h_min = m->h_min;
     r->safety = m->safety;
     r->fac_min = m->fac_min;
@@ -644,6 +670,18 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     bd->fac_max = m->fac_max;
     bd->max_substeps = cfg->max_substeps;
     bd->fixed_substeps = cfg->substeps;
+    /* kink landing: the laws of slip_ctx in its order (Mechanism.kink_speeds) */
+    r->n_laws = 0;
+    for (int k = 0; k < NS; k++) {
+        for (int f = 0; f < 2; f++) {
+            if (m->mu != 0.0) r->law_dim[r->n_laws++] = 3;
+            if (m->mu3 != 0.0) r->law_dim[r->n_laws++] = 1;
+        }
+        if (m->st[k].e_spline != 0.0) r->law_dim[r->n_laws++] = 1;
+        if (m->st[k].g_bearing != 0.0) r->law_dim[r->n_laws++] = 1;
+    }
+    r->band = m->v_eps;
+    r->slip = m->dynamic && r->n_laws ? slip_ctx : NULL;
     return 0;
 }
 

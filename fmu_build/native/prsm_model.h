@@ -76,6 +76,12 @@ typedef struct {
     int n_rollers, carriers;
 } prsm_stage_values;
 
+/* friction laws with a sliding velocity (Mechanism.sliding_velocities): per stage two thread
+ * flanks, the spline and the bearing; three components each at most */
+/* per stage: both flanks' slip and differential sliding, the spline, the bearing face */
+#define PRSM_MAX_LAWS (6 * PRSM_N_STAGES)
+#define PRSM_SLIP_DIM 3
+
 /* the dynamic level's stepper ROS34PW2 (prsm_ros.h): Rosenbrock.__init__ with the FMU's options */
 typedef struct {
     int n, nd, nq;                       /* states; non-quadrature states d; quadrature states q */
@@ -83,6 +89,12 @@ typedef struct {
     double rtol, atol, h_min, safety, fac_min, fac_max;
     double jacobian_reuse, first_step_stiffness;
     int max_substeps, fixed_substeps;    /* fixed_substeps 0: adaptive */
+    /* kink landing (control.kink_fraction): the model's sliding velocities, PRSM_SLIP_DIM
+     * components per law (slip NULL: no landing), per law its components (1 or 3) and whether
+     * its kinks include 0 (one-component laws: kinks 0 and v_eps; three-component: v_eps) */
+    void (*slip)(const void *ctx, const double *x, double *v);
+    int n_laws, law_dim[PRSM_MAX_LAWS];
+    double band;                         /* v_eps [m/s] */
 } prsm_ros;
 
 /* the friction band's exponential step (prsm_band.h): ScalarExponential.__init__ with the FMU's

@@ -354,6 +354,64 @@ static int trial(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double
     return 0;
 }
 
+/* control.kink_fraction: the fraction of the step in (0, 1) at which it should end (returned
+ * through *frac with 1), or 0 if the step may stand; v0, v1 the sliding velocities of r->slip */
+static int kink_fraction(const prsm_ros *r, const double *v0, const double *v1, double *frac) {
+    double band = r->band;
+    double tol = PRSM_KINK_BAND * band;
+    double best = 2.0;
+    for (int l = 0; l < r->n_laws; l++) {
+        const double *s0 = v0 + PRSM_SLIP_DIM * l, *s1 = v1 + PRSM_SLIP_DIM * l;
+        double r0, r1;
+        if (r->law_dim[l] == 1) {
+            double a0 = s0[0], a1 = s1[0];
+            double d = a1 - a0;
+            double dn = fabs(d);
+            if (!(dn > tol)) continue;
+            r0 = fabs(a0);
+            r1 = fabs(a1);
+            if (a0 * a1 <= 0.0 || r0 <= band || r1 <= band) {
+                /* kinks 0 and v_eps: the roots -a0/d, then (v_eps - a0)/d and (-v_eps - a0)/d */
+                double roots[3] = {-a0 / d, (band - a0) / d, (-band - a0) / d};
+                for (int i = 0; i < 3; i++) {
+                    double root = roots[i];
+                    if (0.0 < root && root < 1.0 && root * dn > tol && (1.0 - root) * dn > tol
+                        && root < best)
+                        best = root;
+                }
+            }
+        } else {
+            double x0 = s0[0], y0 = s0[1], z0 = s0[2];
+            double dx = s1[0] - x0, dy = s1[1] - y0, dz = s1[2] - z0;
+            double aa = dx * dx + dy * dy + dz * dz;
+            double dn = sqrt(aa);
+            if (!(dn > tol)) continue;
+            double rr0 = x0 * x0 + y0 * y0 + z0 * z0;
+            r0 = sqrt(rr0);
+            r1 = sqrt(s1[0] * s1[0] + s1[1] * s1[1] + s1[2] * s1[2]);
+            double b = x0 * dx + y0 * dy + z0 * dz;
+            /* the kink v_eps: |s0 + theta dv| = v_eps, where |s| may reach it */
+            double disc = b * b - aa * (rr0 - band * band);
+            if (r0 + r1 - dn <= 2.0 * band && !(disc < 0.0)) {
+                double sq = sqrt(disc);
+                double roots[2] = {(-b - sq) / aa, (-b + sq) / aa};
+                for (int i = 0; i < 2; i++) {
+                    double root = roots[i];
+                    if (0.0 < root && root < 1.0 && root * dn > tol && (1.0 - root) * dn > tol
+                        && root < best)
+                        best = root;
+                }
+            }
+        }
+        double change = fabs(r1 - r0);
+        double limit = PRSM_APPROACH * pmax(band, r1 < r0 ? r0 / (1.0 + PRSM_APPROACH) : r0);
+        if (change > limit && limit / change < best) best = limit / change;
+    }
+    if (!(best < 1.0)) return 0;
+    *frac = best;
+    return 1;
+}
+
 static int ros_fail(char *msg, int len, const char *what, double t, double hs, double t0, double h) {
     snprintf(msg, (size_t)len, "rosenbrock: %s at t = %.17g s with internal step %.17g s "
              "(advance from t = %.17g s over h = %.17g s)", what, t, hs, t0, h);
@@ -395,6 +453,10 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
     memcpy(y, x, sizeof(double) * (size_t)n);
     int attempts = 0, just_rejected = 0, have_f0 = 0, have_jac = 0, jac_at_y = 0, has_h_mem = 0;
     int i_fixed = 0;
+    /* kink landing: sliding velocities at the accepted point and at the trial's end, the cuts of
+     * this internal step and the step the first one shortened */
+    int kinks = !fixed && r->slip != NULL, have_v0 = 0, have_v_new = 0, cuts = 0;
+    double v0[PRSM_SLIP_DIM * PRSM_MAX_LAWS], v_new[PRSM_SLIP_DIM * PRSM_MAX_LAWS], h_uncut = 0.0;
     ros_jac jac;
     ros_lu lu;
     char reason[160] = "", what[320];
@@ -445,7 +507,7 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         }
         if (!fixed) {
             double rem = h - tau;
-            last = hs * 1.05 >= rem;
+            last = !cuts && hs * 1.05 >= rem;
             h_step = last ? rem : hs;
             attempts += 1;
             if (attempts > r->max_substeps) {
@@ -482,11 +544,38 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
             i_fixed += 1;
             continue;
         }
+        have_v_new = 0;
+        if (kinks && !bad && cuts < PRSM_MAX_KINK_CUTS) {
+            double s_cut;
+            if (!have_v0) {
+                memset(v0, 0, sizeof v0);
+                r->slip(ctx, y, v0);
+                have_v0 = 1;
+            }
+            memset(v_new, 0, sizeof v_new);
+            r->slip(ctx, y_new, v_new);
+            have_v_new = 1;
+            if (kink_fraction(r, v0, v_new, &s_cut) && h_step * s_cut >= r->h_min) {
+                /* the step would cross a kink of the friction law: end it on the kink */
+                if (!cuts) h_uncut = h_step;
+                cuts += 1;
+                stats->rejected += 1;
+                hs = h_step * s_cut;
+                continue;
+            }
+        }
         if (err <= 1.0) {
             stats->substeps += 1;
             double fac = factor(r, err);
             if (just_rejected && fac > 1.0) fac = 1.0;
             double h_new = h_step * fac;
+            if (cuts) {
+                /* landed on a kink: go on with the step the cut shortened */
+                if (fac >= 1.0) h_new = pmax(h_new, h_uncut);
+                cuts = 0;
+            }
+            have_v0 = have_v_new;
+            if (have_v_new) memcpy(v0, v_new, sizeof v0);
             if (!has_h_mem) {
                 h_mem = last && h_new >= h_step ? pmax(h_new, hs) : h_new;
                 has_h_mem = 1;
@@ -512,6 +601,7 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         } else {
             stats->rejected += 1;
             just_rejected = 1;
+            h_uncut = 0.0;  /* a cut step that fails its error test: no return to the uncut */
             hs = h_step * factor(r, err);
             if (hs < r->h_min) {
                 snprintf(what, sizeof what, "step size %.17g s below h_min = %.17g s after "

@@ -248,14 +248,14 @@ class SwitchingStepper(Stepper):
         is zero or heads through zero within the step (at the last step's acceleration); else
         explicit (DP5(4)) where the communication step is at most :data:`EXPLICIT_STEP_PER_TAU`
         times the fastest carrier time constant at the step's start (τ_k = c_k |ω|/|F|), and the
-        exponential stepper (exprb32) at the tolerances scaled by
-        :data:`prsm_fmu.steppers.options.TOLERANCE_FACTOR` everywhere else. Why: ROS34PW2 at the
-        tolerance misses it on the approach to a zero-speed crossing (8.7e-4 at tolerance 1e-4
-        on the speed reversal scene, docs/accuracy.md §2), which the exponential stepper meets;
-        through the crossing itself, where every friction law passes the three
-        once-differentiable points of its band, ROS34PW2 at the tolerance is accurate and takes
-        a third of the exponential stepper's rhs calls (375 against 1117 in that 0.1 ms step at
-        tolerance 1e-6). ``closed_form`` and ``closed_form_explicit`` mean ``rosenbrock``.
+        exponential stepper (exprb32) everywhere else, each at the tolerances scaled by
+        :data:`prsm_fmu.steppers.options.TOLERANCE_FACTOR`. Why: the exponential stepper takes
+        the fewest rhs calls at the loop scenes' 0.1 ms steps; through a zero-speed crossing,
+        where every friction law passes the once-differentiable points of its band and every
+        stepper lands on them, ROS34PW2 takes about half of its rhs calls (593 against 1126 in
+        the speed reversal's crossing step at tolerance 1e-6, docs/accuracy.md §2, "Landing on
+        the friction law's kinks"). ``closed_form`` and ``closed_form_explicit`` mean
+        ``rosenbrock``.
     **options
         That stepper's options; ``rtol``, ``atol`` and ``max_substeps`` also set the
         quasi-static closed form's fallback integrator (with ``default``, they and
@@ -275,12 +275,17 @@ class SwitchingStepper(Stepper):
             if "fixed_substeps" in options:          # fixed steps: no step-size tuning
                 common["fixed_substeps"] = options["fixed_substeps"]
                 tuned = {}
-            k = TOLERANCE_FACTOR["exponential"]
-            stiff = {key: v * k if key in ("rtol", "atol") else v for key, v in common.items()}
+            def scaled(stepper: str) -> dict:
+                # the tolerances as tuned_stepper_options scales them
+                k = TOLERANCE_FACTOR.get(stepper, 1.0)
+                return {key: v * k if key in ("rtol", "atol") else v for key, v in common.items()}
+
             self.dynamic_steppers = {
-                "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic, **common),
-                "exponential": make_stepper("exponential", model.dynamic, **stiff),
-                "rosenbrock": make_stepper("rosenbrock", model.dynamic, **tuned, **common)}
+                "explicit_adaptive": make_stepper("explicit_adaptive", model.dynamic,
+                                                  **scaled("explicit_adaptive")),
+                "exponential": make_stepper("exponential", model.dynamic, **scaled("exponential")),
+                "rosenbrock": make_stepper("rosenbrock", model.dynamic, **tuned,
+                                           **scaled("rosenbrock"))}
         else:
             name = "rosenbrock" if name in ("closed_form", "closed_form_explicit") else name
             self.dynamic_steppers = {name: make_stepper(name, model.dynamic, **options)}

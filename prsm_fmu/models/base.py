@@ -177,6 +177,32 @@ class Model(ABC):
         dx += (motor * omega, load * mech.c_out * omega, p_fric + loss * omega)
         return dx
 
+    def sliding_velocities(self, x: list[float]) -> list[tuple]:
+        """Sliding velocity of every regularised friction law at state ``x`` [m/s], one tuple
+        of components per law: the mechanism's contacts, splines and bearings
+        (:meth:`prsm_fmu.mechanics.Mechanism.sliding_velocities`), then ω·ΣL/2π where a level's
+        own Coulomb-like loss acts.  The adaptive steppers end an internal step on each kink
+        speed (:attr:`kink_speeds`) that a step would cross (docs/accuracy.md, "Landing on the
+        friction law's kinks")."""
+        omega = x[1]
+        out = self.mechanism.sliding_velocities(omega, x[2:self._i_energy])
+        if getattr(self, "coulomb_loss", False):
+            out.append((omega * self.mechanism.c_out,))
+        return out
+
+    @property
+    def kink_speeds(self) -> tuple:
+        """Per entry of :meth:`sliding_velocities`, the sliding speeds [m/s] where its law is
+        only C¹ (:meth:`prsm_fmu.mechanics.Mechanism.kink_speeds`; the loss law's are a
+        one-component law's, 0 and v_ε)."""
+        kinks = self.__dict__.get("_kink_speeds")
+        if kinks is None:
+            kinks = self.mechanism.kink_speeds()
+            if getattr(self, "coulomb_loss", False):
+                kinks += ((0.0, self.mechanism.v_eps),)
+            self._kink_speeds = kinks
+        return kinks
+
     def outputs(self, t: float, x: list[float], u: tuple) -> dict[str, float]:
         """All outputs (the names of docs/fmu.md, "Variables"), consistent with :meth:`rhs`.
 

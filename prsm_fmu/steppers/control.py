@@ -1,5 +1,15 @@
-"""Shared machinery of the adaptive steppers: tolerances, error weights, the first-step norms
-and the elementary step-size controller (memory: the proposal for the next internal step)."""
+"""Shared machinery of the adaptive steppers: tolerances, error weights, the first-step norms,
+the elementary step-size controller (memory: the proposal for the next internal step) and the
+landing on the friction law's kinks.
+
+Kink landing: a model may report ``sliding_velocities(x)`` (one tuple of components [m/s] per
+regularised friction law) and ``kink_speeds`` (per law the sliding speeds [m/s] where the law is
+only C¹: v_ε, and 0 for a one-component law).  After each trial step the adaptive steppers ask
+:func:`kink_fraction` whether the step crosses a kink or changes a sliding speed faster than
+the law resolves, and if so retry it cut to that fraction (counted as a rejection; at most
+:data:`MAX_KINK_CUTS` per internal step); after a landing the next step resumes the size the cut
+shortened.  No embedded error estimate then spans a kink (docs/accuracy.md, "Landing on the
+friction law's kinks")."""
 
 from __future__ import annotations
 
@@ -8,10 +18,163 @@ from typing import Any, Sequence
 
 from .base import Stepper, _INF, _check_count, _check_tol, _model_mask, _model_scale
 
-__all__ = ["AdaptiveBase"]
+__all__ = ["AdaptiveBase", "KinkLanding", "KINK_BAND", "APPROACH", "MAX_KINK_CUTS", "kink_fraction"]
 
 #: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
 _TIME_MATCH = 4e-16
+
+#: a sliding speed within this fraction of the friction band's speed v_ε (the smallest positive
+#: kink speed) of a kink counts as on it: a step that starts there is not cut for that kink (it
+#: leaves it), one that ends there has landed on it.  The law's curvature jump acts over that
+#: distance only, so what a step within it misses is below (1e-3)² of the law's curvature term
+KINK_BAND = 1e-3
+
+#: the friction law's resolution: between its kinks, Coulomb's s/|s| has k-th derivatives of
+#: order 1/|s|^k, so a step may change a sliding speed |s| by at most this fraction of
+#: max(|s|, v_ε), |s| the smaller of its ends (approaching zero speed: at most halving it)
+APPROACH = 1.0
+
+#: secant cuts of one internal step towards a kink before the step is taken as it is (the
+#: secant on the sliding velocities converges in one or two where they are smooth in time)
+MAX_KINK_CUTS = 4
+
+
+def kink_fraction(v0: Sequence[tuple], v1: Sequence[tuple], kinks: Sequence[tuple],
+                  band: float) -> float | None:
+    """Where a step should end so that it neither crosses a kink of a friction law nor changes a
+    sliding speed faster than the law resolves: the fraction of the step in (0, 1), or None.
+
+    Along the step the sliding velocities are taken linear in time, s(θ) = s0 + θ (s1 − s0)
+    (secant through the step's ends).  Kinks: the roots θ of |s(θ)| = k for each kink speed
+    k > 0 of the law, and of s(θ) = 0 for the kink 0 of a one-component law, that lie more than
+    the landing band (:data:`KINK_BAND` · v_ε, as distance travelled) from both ends.
+    Resolution: where |s| changes by more than :data:`APPROACH` · max(v_ε, r) — r = |s0| when
+    it grows, |s0|/(1 + APPROACH) when it falls (at most halving it on the way to zero) — the
+    fraction that keeps the change within that.
+
+    Parameters
+    ----------
+    v0, v1 : sequence of tuple of float
+        Sliding velocities [m/s] at the step's start and at the trial end, one tuple per law.
+    kinks : sequence of tuple of float
+        Per law, its kink speeds [m/s] (0 for a sign change of a one-component law).
+    band : float
+        v_ε [m/s], the friction band's speed (> 0).
+
+    Returns
+    -------
+    float or None
+        The smallest such fraction, or None if the step may stand.
+    """
+    tol = KINK_BAND * band
+    best = 2.0
+    for s0, s1, ks in zip(v0, v1, kinks):
+        if len(s0) == 1:
+            a0, a1 = s0[0], s1[0]
+            d = a1 - a0
+            dn = abs(d)
+            if not dn > tol:
+                continue
+            r0, r1 = abs(a0), abs(a1)
+            if a0 * a1 <= 0.0 or r0 <= band or r1 <= band:
+                # the segment reaches 0 or the band: its roots (else there are none in it)
+                for k in ks:
+                    for root in ((k - a0) / d, (-k - a0) / d) if k else (-a0 / d,):
+                        if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
+                                and root < best:
+                            best = root
+        else:
+            x0, y0, z0 = s0
+            dx, dy, dz = s1[0] - x0, s1[1] - y0, s1[2] - z0
+            aa = dx * dx + dy * dy + dz * dz
+            dn = math.sqrt(aa)
+            if not dn > tol:
+                continue
+            rr0 = x0 * x0 + y0 * y0 + z0 * z0
+            r0 = math.sqrt(rr0)
+            r1 = math.sqrt(s1[0] * s1[0] + s1[1] * s1[1] + s1[2] * s1[2])
+            if r0 + r1 - dn <= 2.0 * band:
+                # |s| may reach the band on the way (it stays above (r0 + r1 − dn)/2)
+                b = x0 * dx + y0 * dy + z0 * dz
+                for k in ks:
+                    if not k:
+                        continue
+                    disc = b * b - aa * (rr0 - k * k)
+                    if disc < 0.0:
+                        continue
+                    sq = math.sqrt(disc)
+                    for root in ((-b - sq) / aa, (-b + sq) / aa):
+                        if 0.0 < root < 1.0 and root * dn > tol and (1.0 - root) * dn > tol \
+                                and root < best:
+                            best = root
+        change = abs(r1 - r0)
+        limit = APPROACH * max(band, r0 / (1.0 + APPROACH) if r1 < r0 else r0)
+        if change > limit and limit / change < best:
+            best = limit / change
+    return best if best < 1.0 else None
+
+
+class KinkLanding:
+    """One advance's landing on the kinks of a model's friction laws (module docstring).
+
+    Holds the sliding velocities at the current accepted point, the cuts of the internal step
+    being tried and the step size [s] the first cut shortened.
+
+    Parameters
+    ----------
+    speeds : callable
+        The model's ``sliding_velocities(x)``.
+    kinks : tuple of tuple of float
+        The model's ``kink_speeds`` [m/s].
+    band : float
+        v_ε [m/s].
+    h_min : float
+        Smallest internal step [s]: no cut below it.
+    """
+
+    __slots__ = ("speeds", "kinks", "band", "h_min", "v0", "v_new", "cuts", "h_uncut")
+
+    def __init__(self, speeds: Any, kinks: tuple, band: float, h_min: float) -> None:
+        self.speeds, self.kinks, self.band, self.h_min = speeds, kinks, band, h_min
+        self.v0 = self.v_new = None
+        self.cuts = 0
+        self.h_uncut = 0.0
+
+    def cut(self, y: Sequence[float], y_new: Sequence[float], h_step: float,
+            stats: Any) -> float | None:
+        """The size [s] to retry a trial step from ``y`` to ``y_new`` of size ``h_step`` with,
+        if it must end on a kink (:func:`kink_fraction`: no error estimate holds across one),
+        counted in ``stats.rejected``; else None, as well once :data:`MAX_KINK_CUTS` cuts were
+        made or below ``h_min``."""
+        self.v_new = None
+        if self.cuts >= MAX_KINK_CUTS:
+            return None
+        if self.v0 is None:
+            self.v0 = self.speeds(y)
+        self.v_new = self.speeds(y_new)
+        s = kink_fraction(self.v0, self.v_new, self.kinks, self.band)
+        if s is None or h_step * s < self.h_min:
+            return None
+        if not self.cuts:
+            self.h_uncut = h_step
+        self.cuts += 1
+        stats.rejected += 1
+        return h_step * s
+
+    def accepted(self, h_new: float, fac: float) -> float:
+        """The next step's size [s] after an accepted one whose controller proposed ``h_new``
+        with factor ``fac``: after a landing the size the cut shortened (the controller chose it
+        on the smooth side), unless the controller asks for less."""
+        if self.cuts:
+            if fac >= 1.0:
+                h_new = max(h_new, self.h_uncut)
+            self.cuts = 0
+        self.v0 = self.v_new
+        return h_new
+
+    def rejected(self) -> None:
+        """A trial failed its error test: no return to the uncut size after it."""
+        self.h_uncut = 0.0
 
 
 def _finite_floats(v: Any, n: int | None) -> bool:
@@ -63,6 +226,17 @@ class AdaptiveBase(Stepper):
         self._atol_w = [self.atol * s if m else _INF for s, m in zip(self.state_scale, self.error_mask)]
         self._n_err = sum(self.error_mask)
         self._h_prop: float | None = None
+
+        # the friction law's kinks (docs/accuracy.md, "Landing on the friction law's kinks"):
+        # the model's sliding speeds and their kink speeds, if it reports them
+        speeds = getattr(model, "sliding_velocities", None)
+        kinks = tuple(getattr(model, "kink_speeds", ()) or ()) if callable(speeds) else ()
+        positive = [abs(k) for ks in kinks for k in ks if k != 0.0]
+        #: the model's sliding velocities (None: no kink landing), their kink speeds [m/s] and
+        #: the friction band's speed v_ε [m/s]
+        self._speeds = speeds if kinks and positive else None
+        self._kinks = kinks
+        self._band = min(positive) if positive else 0.0
 
     # --- memory ---------------------------------------------------------------------
 
@@ -138,6 +312,13 @@ class AdaptiveBase(Stepper):
         d0 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(x, w)]) / self._n_err)
         d1 = math.sqrt(sum([(a / wi) ** 2 for a, wi in zip(f0, w)]) / self._n_err)
         return w, d0, d1
+
+    def _landing(self) -> KinkLanding | None:
+        """A fresh :class:`KinkLanding` for an adaptive advance, None if the model reports no
+        sliding velocities (or landing is off)."""
+        if self._speeds is None:
+            return None
+        return KinkLanding(self._speeds, self._kinks, self._band, self.h_min)
 
     def _factor(self, err: float) -> float:
         """Step-size ratio proposed by the elementary controller for error norm ``err``."""

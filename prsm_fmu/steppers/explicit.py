@@ -63,6 +63,9 @@ class ExplicitAdaptive(AdaptiveBase):
         5: Dormand-Prince 5(4); 3: Bogacki-Shampine 3(2).
     safety, fac_min, fac_max : float, optional
         Controller safety factor and limits of the step-size ratio.
+    land_on_kinks : bool, optional
+        End internal steps on the friction law's kinks where the model reports its sliding
+        velocities (default; :func:`.control.kink_fraction`); False: plain error control.
     """
 
     name = "explicit_adaptive"
@@ -80,8 +83,11 @@ class ExplicitAdaptive(AdaptiveBase):
         safety: float = 0.9,
         fac_min: float = 0.2,
         fac_max: float = 5.0,
+        land_on_kinks: bool = True,
     ) -> None:
         super().__init__(model, rtol, atol, h_min, max_substeps, fixed_substeps, safety, fac_min, fac_max)
+        if not land_on_kinks:
+            self._speeds = None
         if order == 5:
             self._trial = self._trial_dp5
             self._rhs_per_trial = 6
@@ -302,9 +308,11 @@ class ExplicitAdaptive(AdaptiveBase):
         max_sub = self.max_substeps
         h_min = self.h_min
         reason = ""
+        landing = self._landing()  # kink landing
         while True:
             rem = h - tau
-            last = hs * 1.05 >= rem
+            # a step cut to end on a kink has exactly the cut size, never stretched to t + h
+            last = not (landing and landing.cuts) and hs * 1.05 >= rem
             h_step = rem if last else hs
             attempts += 1
             if attempts > max_sub:
@@ -326,12 +334,18 @@ class ExplicitAdaptive(AdaptiveBase):
                     reason = _bad_text(bad)
                 elif not err <= 1.0:
                     reason = f"error norm {err:.3g} > 1"
+            h_cut = landing.cut(y, y_new, h_step, stats) if landing and not bad and y_new else None
+            if h_cut is not None:  # it would cross a kink: ends on it instead (KinkLanding)
+                hs = h_cut
+                continue
             if err <= 1.0:
                 stats.substeps += 1
                 fac = self._factor(err)
                 if just_rejected and fac > 1.0:
                     fac = 1.0
                 h_new = h_step * fac
+                if landing:
+                    h_new = landing.accepted(h_new, fac)
                 y = y_new
                 k1 = k_new
                 stats.error_estimate = err
@@ -347,6 +361,8 @@ class ExplicitAdaptive(AdaptiveBase):
             else:
                 stats.rejected += 1
                 just_rejected = True
+                if landing:
+                    landing.rejected()
                 hs = h_step * self._factor(err)
                 if hs < h_min:
                     raise self._fail(

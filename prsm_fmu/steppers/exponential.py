@@ -301,6 +301,7 @@ class ExponentialRosenbrock(AdaptiveBase):
         h_mem = None
         reason = ""
         i_fixed = 0
+        landing = None if fixed is not None else self._landing()  # kink landing
         while True:
             if fixed is not None:
                 ti = t + i_fixed * hs
@@ -309,7 +310,8 @@ class ExponentialRosenbrock(AdaptiveBase):
             else:
                 ti = t + tau
                 rem = h - tau
-                last = hs * 1.05 >= rem
+                # a step cut to end on a kink has exactly the cut size, never stretched to t + h
+                last = not (landing and landing.cuts) and hs * 1.05 >= rem
                 h_step = rem if last else hs
                 attempts += 1
                 if attempts > self.max_substeps:
@@ -360,6 +362,10 @@ class ExponentialRosenbrock(AdaptiveBase):
                     return y, stats
                 i_fixed += 1
                 continue
+            h_cut = landing.cut(y, y_new, h_step, stats) if landing and not bad and y_new else None
+            if h_cut is not None:  # it would cross a kink: ends on it instead (KinkLanding)
+                hs = h_cut
+                continue
             if err <= 1.0:
                 stats.substeps += 1
                 stats.error_estimate = err
@@ -367,6 +373,8 @@ class ExponentialRosenbrock(AdaptiveBase):
                 if just_rejected and fac > 1.0:
                     fac = 1.0
                 h_new = h_step * fac
+                if landing:
+                    h_new = landing.accepted(h_new, fac)
                 # for a step shortened to land on t + h, the untruncated size unless the
                 # controller asks to shrink
                 h_next = max(h_new, hs) if last and h_new >= h_step else h_new
@@ -399,6 +407,8 @@ class ExponentialRosenbrock(AdaptiveBase):
             else:
                 stats.rejected += 1
                 just_rejected = True
+                if landing:
+                    landing.rejected()
                 hs = h_step * self._factor(err)
                 if hs < self.h_min:
                     raise self._fail(

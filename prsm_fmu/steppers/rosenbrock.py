@@ -406,6 +406,7 @@ class Rosenbrock(AdaptiveBase):
         h_mem = None  # proposal for the first step of the next advance
         reason = ""
         i_fixed = 0
+        landing = None if fixed is not None else self._landing()  # kink landing
         while True:
             if fixed is not None:
                 ti = t + i_fixed * hs
@@ -444,7 +445,8 @@ class Rosenbrock(AdaptiveBase):
                         hs = self._initial_step_stiff(y, f0, jac, h)
             if fixed is None:
                 rem = h - tau
-                last = hs * 1.05 >= rem
+                # a step cut to end on a kink has exactly the cut size, never stretched to t + h
+                last = not (landing and landing.cuts) and hs * 1.05 >= rem
                 h_step = rem if last else hs
                 attempts += 1
                 if attempts > self.max_substeps:
@@ -492,6 +494,10 @@ class Rosenbrock(AdaptiveBase):
                     return y, stats
                 i_fixed += 1
                 continue
+            h_cut = landing.cut(y, y_new, h_step, stats) if landing and not bad and y_new else None
+            if h_cut is not None:  # it would cross a kink: ends on it instead (KinkLanding)
+                hs = h_cut
+                continue
             if err <= 1.0:
                 stats.substeps += 1
                 stats.error_estimate = err
@@ -499,6 +505,8 @@ class Rosenbrock(AdaptiveBase):
                 if just_rejected and fac > 1.0:
                     fac = 1.0
                 h_new = h_step * fac
+                if landing:
+                    h_new = landing.accepted(h_new, fac)
                 if h_mem is None:
                     # the next advance starts, like this one, right after the master may
                     # have changed the inputs: propose what this advance's first step
@@ -520,6 +528,8 @@ class Rosenbrock(AdaptiveBase):
             else:
                 stats.rejected += 1
                 just_rejected = True
+                if landing:
+                    landing.rejected()
                 hs = h_step * self._factor(err)
                 if hs < self.h_min:
                     raise self._fail(
