@@ -13,12 +13,32 @@ The physics never imports FMI or fmpy.
 
 from __future__ import annotations
 
-from . import presets
-from .models import FIDELITIES, make_model
-from .params import MechanismParams, StageParams
-from .simulate import simulate
-from .steady_state import steady_state
+import importlib
+from typing import Any
 
 __all__ = ["presets", "simulate", "steady_state", "make_model", "FIDELITIES", "MechanismParams",
            "StageParams"]
 __version__ = "0.1.0.dev0"
+
+#: public name -> (module, attribute); imported on first use (PEP 562), so that a command that
+#: needs none of the physics (``prsm-ema list``, argument parsing) does not pay for numpy, scipy
+#: and every model at start-up
+_LAZY = {"presets": (".presets", None), "simulate": (".simulate", "simulate"),
+         "steady_state": (".steady_state", "steady_state"), "make_model": (".models", "make_model"),
+         "FIDELITIES": (".models", "FIDELITIES"), "MechanismParams": (".params", "MechanismParams"),
+         "StageParams": (".params", "StageParams")}
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module, attr = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    mod = importlib.import_module(module, __name__)
+    value = mod if attr is None else getattr(mod, attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -33,7 +33,7 @@ __all__ = ["main", "build_parser"]
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``prsm-ema`` (bad arguments: one line, exit status 2)."""
-    from .master import MAX_HALVINGS
+    from .retry_limit import MAX_HALVINGS
 
     ap = ArgumentParser(prog="prsm-ema", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
