@@ -18,6 +18,7 @@ Plots (matplotlib, PNG, one figure per question a reader asks):
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 from pathlib import Path
@@ -25,6 +26,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from prsm_fmu.csv_format import format_table
 from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, MICROMETRE, MILLIMETRE,
                             MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
                             RADIAN_PER_SECOND, SECOND, VOLT, label)
@@ -43,16 +45,18 @@ def ordered_columns(res: Result, first: Iterable[str] = ()) -> list[str]:
 def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     """All outputs on the macro grid; header ``time [s],prsm.rod_position [m],...`` (UTF-8).
 
-    Values with 15 significant digits (enough to compare runs to 1e-10 from the file)."""
+    Every value reads back as the same double, bit for bit (15 significant digits where they
+    suffice, else 17; :mod:`prsm_fmu.csv_format`, formatted with numpy: ~0.1 s for a
+    15 001-row run)."""
     cols = ordered_columns(res, first)
     path = Path(path)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow([label("time", SECOND)]
-                   + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
-        data = np.column_stack([res.time] + [res[c] for c in cols])
-        for row in data:
-            w.writerow([f"{v:.15g}" for v in row])
+    header = io.StringIO()
+    csv.writer(header, lineterminator="\n").writerow(
+        [label("time", SECOND)] + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
+    data = np.column_stack([res.time] + [res[c] for c in cols])
+    with open(path, "wb") as fh:
+        fh.write(header.getvalue().encode("utf-8"))
+        fh.write(format_table(data))
     return path
 
 
