@@ -14,6 +14,8 @@ The physics never imports FMI or fmpy.
 from __future__ import annotations
 
 import importlib
+import sys
+import types
 from typing import Any
 
 __all__ = ["presets", "simulate", "steady_state", "make_model", "FIDELITIES", "MechanismParams",
@@ -42,3 +44,18 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """``prsm_fmu.simulate`` and ``prsm_fmu.steady_state`` are functions named as their
+    modules: importing the module ``prsm_fmu.simulate`` (from anywhere) makes the import system
+    set the package's attribute to the module; this keeps the function there instead, as the
+    eager ``from .simulate import simulate`` did."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if isinstance(value, types.ModuleType) and _LAZY.get(name, (None, None))[1] == name:
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

@@ -4,15 +4,21 @@ Units are spelled as in the FMU's modelDescription (:mod:`prsm_fmu.units`).
 
 Plots (matplotlib, PNG, one figure per question a reader asks):
 
-``<scene>_position.png``    rod position against the reference, and the tracking error
+``<scene>_position.png``    rod position against the reference, and the tracking error (in
+                            µm, mm or m, whichever keeps the ticks to three digits)
 ``<scene>_speed.png``       screw speed and the speed reference
 ``<scene>_motor.png``       motor currents (i_q, i_d, reference, limit), voltage against the
                             inverter's limit, torque
 ``<scene>_forces.png``      axial contact force per roller of each stage; the total load against
                             N_R × the per-roller force; spline friction
 ``<scene>_carriers.png``    carrier speed ratios against their equilibrium (when recorded)
-``<scene>_efficiency.png``  PRSM efficiency and the actuator's (load power / electrical power)
-``<scene>_power.png``       the power bookkeeping integrated over the run
+``<scene>_efficiency.png``  PRSM efficiency and the actuator's (load power / electrical power),
+                            with a gap where no power flows (standstill), not a drop to 0
+``<scene>_power.png``       the power bookkeeping integrated over the run (legend beside the
+                            axes, off the data)
+
+The figures are built by :func:`figures` (one function per figure, returning the unsaved
+Figure) on the shared setup of :mod:`prsm_fmu.figures` and written by :func:`write_plots`.
 """
 
 from __future__ import annotations
@@ -27,13 +33,15 @@ from typing import Any, Iterable
 import numpy as np
 
 from prsm_fmu.csv_format import format_table
-from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, MICROMETRE, MILLIMETRE,
-                            MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
+from prsm_fmu.figures import legend_outside, subplots
+from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MICROMETRE,
+                            MILLIMETRE, MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
                             RADIAN_PER_SECOND, SECOND, VOLT, label)
 
 from .master import Result
 
-__all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns", "figure_writer"]
+__all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns", "figure_writer", "figures",
+           "length_scale", "power_flows"]
 
 
 def ordered_columns(res: Result, first: Iterable[str] = ()) -> list[str]:
@@ -85,24 +93,242 @@ def _stages(res: Result) -> int:
 
 
 def figure_writer(out_dir: str | Path, scene: str):
-    """(pyplot, save, files): ``save(fig, name)`` writes ``<out_dir>/<scene>_<name>.png``
-    (tight layout, 110 dpi), closes the figure and appends the path to ``files``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """(plt, save, files): ``plt.subplots`` makes a figure with fixed margins
+    (:mod:`prsm_fmu.figures`: no pyplot, no extra layout draw); ``save(fig, name)`` writes
+    ``<out_dir>/<scene>_<name>.png`` (110 dpi) and appends the path to ``files``."""
+    from prsm_fmu.figures import Pyplotless, save as save_png
 
     out = Path(out_dir)
     files: list[Path] = []
 
     def save(fig, name: str) -> None:
-        p = out / f"{scene}_{name}.png"
-        fig.tight_layout()
-        fig.savefig(p, dpi=110)
-        plt.close(fig)
-        files.append(p)
+        files.append(save_png(fig, out / f"{scene}_{name}.png"))
 
-    return plt, save, files
+    return Pyplotless(), save, files
+
+
+def length_scale(max_abs: float) -> tuple[float, str]:
+    """(factor, unit) to plot a length [m] whose largest magnitude is ``max_abs`` [m] with tick
+    labels of at most three integer digits: µm below 1 mm, mm below 1 m, else m."""
+    if max_abs < 1e-3:
+        return 1e6, MICROMETRE
+    if max_abs < 1.0:
+        return 1e3, MILLIMETRE
+    return 1.0, METRE
+
+
+def power_flows(p_in: np.ndarray, p_out: np.ndarray, fraction: float = 1e-3) -> np.ndarray:
+    """Where power flows through the mechanism: |P_in| or |P_out| above ``fraction`` of the
+    run's peak |P_in| [W].  Elsewhere (standstill) an efficiency is undefined: the plots leave a
+    gap there instead of a drop to 0."""
+    peak = float(np.nanmax(np.abs(p_in))) if np.size(p_in) else 0.0
+    with np.errstate(invalid="ignore"):
+        return (np.abs(p_in) > fraction * peak) | (np.abs(p_out) > fraction * peak)
+
+
+def _limit_lines(ax, value, label_text, unit, symmetric=True):
+    ax.axhline(value, color="k", lw=0.9, ls=":", label=f"{label_text} ±{value:.4g} {unit}"
+               if symmetric else f"{label_text} {value:.4g} {unit}")
+    if symmetric:
+        ax.axhline(-value, color="k", lw=0.9, ls=":")
+
+
+def position_figure(res: Result, scene: str, reference=None, mode: str = "position",
+                    sub: str = ""):
+    """Rod position against the reference and the tracking error (position control), or the
+    rod's motion; the error in µm, mm or m so that its ticks read well."""
+    fig, (a1, a2) = subplots(2, 1, figsize=(8, 6), sharex=True,
+                             gridspec_kw={"height_ratios": [2, 1]})
+    t = res.time
+    tm = 1e3 * t
+    x = res["prsm.rod_position"]
+    a1.plot(tm, 1e3 * x, label="rod position")
+    if mode == "position" and reference is not None:
+        r = np.array([reference(v) for v in t])
+        a1.plot(tm, 1e3 * r, "--", label="position reference")
+        err = x - r
+        factor, unit = length_scale(float(np.nanmax(np.abs(err))) if err.size else 0.0)
+        a2.plot(tm, factor * err, color="C3")
+        a2.set_ylabel(label("tracking error", unit))
+        title = "rod position tracking"
+    else:
+        a2.plot(tm, 1e3 * res["prsm.rod_velocity"], color="C2")
+        a2.set_ylabel(label("rod velocity", MILLIMETRE_PER_SECOND))
+        title = f"rod motion ({mode} control: no position reference)"
+    a1.set_ylabel(label("rod position", MILLIMETRE))
+    a1.legend()
+    a1.grid(True)
+    a2.grid(True)
+    a2.set_xlabel(label("time", MILLISECOND))
+    a1.set_title(f"{scene}: {title}{sub}", fontsize=10)
+    return fig
+
+
+def speed_figure(res: Result, scene: str, mode: str = "position", sub: str = ""):
+    """Screw speed and the speed reference."""
+    fig, ax = subplots(figsize=(8, 4))
+    tm = 1e3 * res.time
+    ax.plot(tm, res["prsm.screw_speed"], label="screw (motor) speed")
+    ax.step(tm, res["controller.speed_ref"], where="post", ls="--",
+            label="speed reference" + (" (position loop output)" if mode == "position" else ""))
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("speed", RADIAN_PER_SECOND))
+    ax.grid(True)
+    ax.legend()
+    ax.set_title(f"{scene}: screw (motor) speed{sub}", fontsize=10)
+    return fig
+
+
+def motor_figure(res: Result, scene: str, current_limit: float | None = None,
+                 voltage_limit: float | None = None, sub: str = ""):
+    """Motor currents, voltage against the inverter's limit, torque."""
+    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
+    tm = 1e3 * res.time
+    a1.plot(tm, res["motor.i_q"], label="i_q")
+    a1.plot(tm, res["motor.i_d"], label="i_d")
+    a1.step(tm, res["controller.i_q_ref"], where="post", ls="--", label="i_q reference")
+    if current_limit:
+        _limit_lines(a1, current_limit, "current limit", "A")
+    a1.set_ylabel(label("current", AMPERE))
+    a1.legend(fontsize=8, loc="best")
+    a1.grid(True)
+    vmag = np.hypot(res["motor.v_d"], res["motor.v_q"])
+    a2.plot(tm, vmag, color="C4", label="phase voltage amplitude √(v_d² + v_q²)")
+    if voltage_limit:
+        _limit_lines(a2, voltage_limit, "inverter limit V_dc/√3 =", "V", symmetric=False)
+        a2.set_ylim(0.0, 1.1 * max(voltage_limit, float(np.max(vmag))))
+    a2.set_ylabel(label("voltage", VOLT))
+    a2.legend(fontsize=8, loc="best")
+    a2.grid(True)
+    a3.plot(tm, res["motor.torque"], label="electromagnetic torque")
+    a3.plot(tm, res["prsm.stage[1].driven_torque"], "--", label="torque held at the screw (PRSM input)")
+    a3.set_ylabel(label("torque", NEWTON_METRE))
+    a3.set_xlabel(label("time", MILLISECOND))
+    a3.legend(fontsize=8)
+    a3.grid(True)
+    a1.set_title(f"{scene}: motor current, voltage and torque{sub}", fontsize=10)
+    return fig
+
+
+def forces_figure(res: Result, scene: str, n_rollers: list[int] | None = None, sub: str = ""):
+    """Axial contact force per roller of each stage, the total load against N_R × the per-roller
+    force, spline friction."""
+    n = _stages(res)
+    nr = list(n_rollers) if n_rollers else [None] * n
+    tm = 1e3 * res.time
+    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
+    for k in range(1, n + 1):
+        what = f" ({nr[k - 1]} rollers)" if nr[k - 1] else ""
+        a1.plot(tm, 1e-3 * res[f"prsm.stage[{k}].contact_force"],
+                label=f"stage {k}: axial contact force per roller{what}")
+    a1.set_ylabel(label("per roller", KILONEWTON))
+    a1.legend(fontsize=8)
+    a1.grid(True)
+    a2.plot(tm, 1e-3 * res["load.force"], "k", lw=1.2, label="load force on the rod (total)")
+    for k in range(1, n + 1):
+        if nr[k - 1]:
+            a2.plot(tm, 1e-3 * nr[k - 1] * res[f"prsm.stage[{k}].contact_force"], "--",
+                    label=f"stage {k}: {nr[k - 1]} × per-roller force (all its threads)")
+    a2.set_ylabel(label("total", KILONEWTON))
+    a2.legend(fontsize=8)
+    a2.grid(True)
+    for k in range(2, n + 1):
+        a3.plot(tm, res[f"prsm.stage[{k}].spline_friction"], color=f"C{k - 1}",
+                label=f"stage {k}: spline friction (screw {k - 1} → {k})")
+    a3.set_ylabel(label("friction", NEWTON))
+    a3.set_xlabel(label("time", MILLISECOND))
+    if n > 1:
+        a3.legend(fontsize=8)
+    a3.grid(True)
+    a1.set_title(f"{scene}: thread forces per roller, and the total load{sub}", fontsize=10)
+    return fig
+
+
+def carriers_figure(res: Result, scene: str, carrier_equilibrium: dict[int, float],
+                    sub: str = ""):
+    """Carrier speed ratios against their equilibrium; None when none is recorded."""
+    n = _stages(res)
+    ratios = [k for k in range(1, n + 1) if f"prsm.stage[{k}].carrier_speed_ratio" in res]
+    if not (carrier_equilibrium and ratios):
+        return None
+    tm = 1e3 * res.time
+    fig, ax = subplots(figsize=(8, 4))
+    for k in ratios:
+        ax.plot(tm, res[f"prsm.stage[{k}].carrier_speed_ratio"], color=f"C{k - 1}",
+                label=f"stage {k}: carrier speed / screw speed")
+        if k in carrier_equilibrium:
+            ax.axhline(carrier_equilibrium[k], color=f"C{k - 1}", ls=":", lw=1.0,
+                       label=f"stage {k}: equilibrium {carrier_equilibrium[k]:.4f} "
+                             "(steady-state solver)")
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("carrier speed ratio", DIMENSIONLESS))
+    ax.grid(True)
+    ax.legend(fontsize=8)
+    ax.set_title(f"{scene}: carrier speed ratios{sub}", fontsize=10)
+    return fig
+
+
+def efficiency_figure(res: Result, scene: str, sub: str = ""):
+    """PRSM and actuator efficiency; a gap wherever no power flows (:func:`power_flows`) or the
+    efficiency is undefined (NaN), not a drop to 0."""
+    fig, ax = subplots(figsize=(8, 4))
+    tm = 1e3 * res.time
+    pel = res["motor.electrical_power"]
+    pout = res["prsm.output_power"]
+    pin = res["prsm.input_power"] if "prsm.input_power" in res else pel
+    eta_prsm = np.where(power_flows(pin, pout), res["prsm.efficiency"], np.nan)
+    ax.plot(tm, eta_prsm, label="PRSM (instantaneous)")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eta = np.where((pel > 1.0) & (pout >= 0.0), pout / pel, np.nan)
+    ax.plot(tm, eta, label="actuator: load power / electrical power")
+    ax.set_ylim(-0.05, 1.2)
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("efficiency", DIMENSIONLESS))
+    ax.grid(True)
+    ax.legend(title="gaps: standstill (no power flows)", title_fontsize=8, fontsize=8)
+    ax.set_title(f"{scene}: efficiency (instantaneous; > 1 while stored energy is released){sub}",
+                 fontsize=10)
+    return fig
+
+
+def power_figure(res: Result, scene: str, sub: str = ""):
+    """The power bookkeeping integrated over the run; the legend beside the axes, off the data."""
+    fig, ax = subplots(figsize=(10.5, 4), margins={"right": 2.7})
+    tm = 1e3 * res.time
+    e0 = {k: res[k] - res[k][0] for k in ("motor.magnetic_energy", "prsm.kinetic_energy")}
+    ax.plot(tm, res["motor.electrical_energy"], label="electrical input")
+    ax.plot(tm, res["motor.copper_energy"], label="copper losses")
+    ax.plot(tm, res["prsm.friction_work"], label="PRSM friction")
+    ax.plot(tm, res["prsm.output_work"], label="work on the load")
+    ax.plot(tm, e0["motor.magnetic_energy"] + e0["prsm.kinetic_energy"], label="Δ stored (kinetic + magnetic)")
+    resid = (res["motor.electrical_energy"] - res["motor.copper_energy"] - res["prsm.friction_work"]
+             - res["prsm.output_work"] - e0["motor.magnetic_energy"] - e0["prsm.kinetic_energy"])
+    ax.plot(tm, resid, "k:", label="residual")
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("energy", JOULE))
+    ax.grid(True)
+    legend_outside(ax)
+    ax.set_title(f"{scene}: power bookkeeping (integrated){sub}", fontsize=10)
+    return fig
+
+
+def figures(res: Result, scene: str, reference=None, mode: str = "position",
+            current_limit: float | None = None, *, description: str = "",
+            voltage_limit: float | None = None, n_rollers: list[int] | None = None,
+            carrier_equilibrium: dict[int, float] | None = None) -> dict[str, Any]:
+    """The figures of the module docstring by name (``position``, ``speed``, ...), unsaved;
+    parameters as :func:`write_plots`."""
+    sub = f"\n{description}" if description else ""
+    out = {"position": position_figure(res, scene, reference, mode, sub),
+           "speed": speed_figure(res, scene, mode, sub),
+           "motor": motor_figure(res, scene, current_limit, voltage_limit, sub),
+           "forces": forces_figure(res, scene, n_rollers, sub)}
+    carriers = carriers_figure(res, scene, carrier_equilibrium or {}, sub)
+    if carriers is not None:
+        out["carriers"] = carriers
+    out["efficiency"] = efficiency_figure(res, scene, sub)
+    out["power"] = power_figure(res, scene, sub)
+    return out
 
 
 def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mode: str = "position",
@@ -130,159 +356,10 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
         Stage -> the carriers' equilibrium speed ratio (the steady-state solver's), drawn on
         ``<scene>_carriers.png``; the figure is written when the ratios are recorded and given.
     """
-    plt, save, files = figure_writer(out_dir, scene)
-    t = res.time
-    tm = 1e3 * t
-    sub = f"\n{description}" if description else ""
-
-    def limit_lines(ax, value, label, unit, symmetric=True):
-        ax.axhline(value, color="k", lw=0.9, ls=":", label=f"{label} ±{value:.4g} {unit}"
-                   if symmetric else f"{label} {value:.4g} {unit}")
-        if symmetric:
-            ax.axhline(-value, color="k", lw=0.9, ls=":")
-
-    # position: tracking in position mode, otherwise the rod's motion
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True,
-                                 gridspec_kw={"height_ratios": [2, 1]})
-    x = res["prsm.rod_position"]
-    a1.plot(tm, 1e3 * x, label="rod position")
-    if mode == "position" and reference is not None:
-        r = np.array([reference(v) for v in t])
-        a1.plot(tm, 1e3 * r, "--", label="position reference")
-        a2.plot(tm, 1e6 * (x - r), color="C3")
-        a2.set_ylabel(label("tracking error", MICROMETRE))
-        title = "rod position tracking"
-    else:
-        a2.plot(tm, 1e3 * res["prsm.rod_velocity"], color="C2")
-        a2.set_ylabel(label("rod velocity", MILLIMETRE_PER_SECOND))
-        title = f"rod motion ({mode} control: no position reference)"
-    a1.set_ylabel(label("rod position", MILLIMETRE))
-    a1.legend()
-    a1.grid(True)
-    a2.grid(True)
-    a2.set_xlabel(label("time", MILLISECOND))
-    a1.set_title(f"{scene}: {title}{sub}", fontsize=10)
-    save(fig, "position")
-
-    # screw speed
-    fig, ax = plt.subplots(figsize=(8, 4))
-    ax.plot(tm, res["prsm.screw_speed"], label="screw (motor) speed")
-    ax.step(tm, res["controller.speed_ref"], where="post", ls="--",
-            label="speed reference" + (" (position loop output)" if mode == "position" else ""))
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("speed", RADIAN_PER_SECOND))
-    ax.grid(True)
-    ax.legend()
-    ax.set_title(f"{scene}: screw (motor) speed{sub}", fontsize=10)
-    save(fig, "speed")
-
-    # motor: currents, voltage against the inverter's limit, torque
-    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(8, 8.5), sharex=True)
-    a1.plot(tm, res["motor.i_q"], label="i_q")
-    a1.plot(tm, res["motor.i_d"], label="i_d")
-    a1.step(tm, res["controller.i_q_ref"], where="post", ls="--", label="i_q reference")
-    if current_limit:
-        limit_lines(a1, current_limit, "current limit", "A")
-    a1.set_ylabel(label("current", AMPERE))
-    a1.legend(fontsize=8, loc="best")
-    a1.grid(True)
-    vmag = np.hypot(res["motor.v_d"], res["motor.v_q"])
-    a2.plot(tm, vmag, color="C4", label="phase voltage amplitude √(v_d² + v_q²)")
-    if voltage_limit:
-        limit_lines(a2, voltage_limit, "inverter limit V_dc/√3 =", "V", symmetric=False)
-        a2.set_ylim(0.0, 1.1 * max(voltage_limit, float(np.max(vmag))))
-    a2.set_ylabel(label("voltage", VOLT))
-    a2.legend(fontsize=8, loc="best")
-    a2.grid(True)
-    a3.plot(tm, res["motor.torque"], label="electromagnetic torque")
-    a3.plot(tm, res["prsm.stage[1].driven_torque"], "--", label="torque held at the screw (PRSM input)")
-    a3.set_ylabel(label("torque", NEWTON_METRE))
-    a3.set_xlabel(label("time", MILLISECOND))
-    a3.legend(fontsize=8)
-    a3.grid(True)
-    a1.set_title(f"{scene}: motor current, voltage and torque{sub}", fontsize=10)
-    save(fig, "motor")
-
-    # forces: per roller, apart from the total load
-    n = _stages(res)
-    nr = list(n_rollers) if n_rollers else [None] * n
-    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(8, 8.5), sharex=True)
-    for k in range(1, n + 1):
-        what = f" ({nr[k - 1]} rollers)" if nr[k - 1] else ""
-        a1.plot(tm, 1e-3 * res[f"prsm.stage[{k}].contact_force"],
-                label=f"stage {k}: axial contact force per roller{what}")
-    a1.set_ylabel(label("per roller", KILONEWTON))
-    a1.legend(fontsize=8)
-    a1.grid(True)
-    a2.plot(tm, 1e-3 * res["load.force"], "k", lw=1.2, label="load force on the rod (total)")
-    for k in range(1, n + 1):
-        if nr[k - 1]:
-            a2.plot(tm, 1e-3 * nr[k - 1] * res[f"prsm.stage[{k}].contact_force"], "--",
-                    label=f"stage {k}: {nr[k - 1]} × per-roller force (all its threads)")
-    a2.set_ylabel(label("total", KILONEWTON))
-    a2.legend(fontsize=8)
-    a2.grid(True)
-    for k in range(2, n + 1):
-        a3.plot(tm, res[f"prsm.stage[{k}].spline_friction"], color=f"C{k - 1}",
-                label=f"stage {k}: spline friction (screw {k - 1} → {k})")
-    a3.set_ylabel(label("friction", NEWTON))
-    a3.set_xlabel(label("time", MILLISECOND))
-    if n > 1:
-        a3.legend(fontsize=8)
-    a3.grid(True)
-    a1.set_title(f"{scene}: thread forces per roller, and the total load{sub}", fontsize=10)
-    save(fig, "forces")
-
-    # carriers: speed ratios against their equilibrium
-    ratios = [k for k in range(1, n + 1) if f"prsm.stage[{k}].carrier_speed_ratio" in res]
-    if carrier_equilibrium and ratios:
-        fig, ax = plt.subplots(figsize=(8, 4))
-        for k in ratios:
-            ax.plot(tm, res[f"prsm.stage[{k}].carrier_speed_ratio"], color=f"C{k - 1}",
-                    label=f"stage {k}: carrier speed / screw speed")
-            if k in carrier_equilibrium:
-                ax.axhline(carrier_equilibrium[k], color=f"C{k - 1}", ls=":", lw=1.0,
-                           label=f"stage {k}: equilibrium {carrier_equilibrium[k]:.4f} "
-                                 "(steady-state solver)")
-        ax.set_xlabel(label("time", MILLISECOND))
-        ax.set_ylabel(label("carrier speed ratio", DIMENSIONLESS))
-        ax.grid(True)
-        ax.legend(fontsize=8)
-        ax.set_title(f"{scene}: carrier speed ratios{sub}", fontsize=10)
-        save(fig, "carriers")
-
-    # efficiency
-    fig, ax = plt.subplots(figsize=(8, 4))
-    ax.plot(tm, res["prsm.efficiency"], label="PRSM (instantaneous)")
-    pel = res["motor.electrical_power"]
-    pout = res["prsm.output_power"]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        eta = np.where((pel > 1.0) & (pout >= 0.0), pout / pel, np.nan)
-    ax.plot(tm, eta, label="actuator: load power / electrical power")
-    ax.set_ylim(-0.05, 1.2)
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("efficiency", DIMENSIONLESS))
-    ax.grid(True)
-    ax.legend()
-    ax.set_title(f"{scene}: efficiency (instantaneous; > 1 while stored energy is released){sub}",
-                 fontsize=10)
-    save(fig, "efficiency")
-
-    # power bookkeeping
-    fig, ax = plt.subplots(figsize=(8, 4))
-    e0 = {k: res[k] - res[k][0] for k in ("motor.magnetic_energy", "prsm.kinetic_energy")}
-    ax.plot(tm, res["motor.electrical_energy"], label="electrical input")
-    ax.plot(tm, res["motor.copper_energy"], label="copper losses")
-    ax.plot(tm, res["prsm.friction_work"], label="PRSM friction")
-    ax.plot(tm, res["prsm.output_work"], label="work on the load")
-    ax.plot(tm, e0["motor.magnetic_energy"] + e0["prsm.kinetic_energy"], label="Δ stored (kinetic + magnetic)")
-    resid = (res["motor.electrical_energy"] - res["motor.copper_energy"] - res["prsm.friction_work"]
-             - res["prsm.output_work"] - e0["motor.magnetic_energy"] - e0["prsm.kinetic_energy"])
-    ax.plot(tm, resid, "k:", label="residual")
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("energy", JOULE))
-    ax.grid(True)
-    ax.legend(fontsize=8)
-    ax.set_title(f"{scene}: power bookkeeping (integrated){sub}", fontsize=10)
-    save(fig, "power")
+    _, save, files = figure_writer(out_dir, scene)
+    for name, fig in figures(res, scene, reference, mode, current_limit,
+                             description=description, voltage_limit=voltage_limit,
+                             n_rollers=n_rollers,
+                             carrier_equilibrium=carrier_equilibrium).items():
+        save(fig, name)
     return files

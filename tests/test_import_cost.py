@@ -61,3 +61,12 @@ def test_solving_still_loads_scipy_on_demand():
                             "ss = steady_state(presets.load('seed000_two_stage'), "
                             "screw_speed=100.0, load_force=5000.0)\n")
     assert "scipy" in loaded
+
+
+def test_functions_named_as_their_modules_stay_functions():
+    # importing the submodule prsm_fmu.steady_state first must not hide the function
+    _modules_after("import types\n"
+                   "import prsm_fmu.steady_state, prsm_fmu.simulate\n"
+                   "from prsm_fmu import simulate, steady_state\n"
+                   "assert isinstance(simulate, types.FunctionType), simulate\n"
+                   "assert isinstance(steady_state, types.FunctionType), steady_state\n")
