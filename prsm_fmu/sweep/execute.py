@@ -28,9 +28,12 @@ machine's file system (they need ``prsm_fmu``, numpy, scipy, fmpy and pythonfmu 
 A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points one after the
 other in this process (the reference the Dask overhead is measured against).
 
-A point is submitted once (``retries=0``, ``pure=False``); its result comes back as soon as it
-is done and is appended to the table at once, so an interrupted study keeps every finished
-point.  A rerun with the same output directory skips the points whose id (a hash of the
+The points go to the workers in chunks (:func:`chunk_size`: about four per worker, so both stay
+busy to the end while the scheduler's cost per task is shared by a chunk's points), each chunk
+submitted once (``retries=0``, ``pure=False``); its results come back as soon as it is done and
+are appended to the table at once, so an interrupted study keeps every finished point.  The
+progress bar shows the points done, failed and the time left; the Dask dashboard's progress
+shows the chunks (``prsm-points``) done of total.  A rerun with the same output directory skips the points whose id (a hash of the
 point's preset, parameters, scenario and backend) is already in the table with status ``ok``
 and whose series file exists; failed points are run again.  A point whose worker dies is
 recorded as failed with the scheduler's message.
@@ -50,14 +53,14 @@ from typing import Any, Callable, Sequence, TextIO
 import numpy as np
 
 from .metrics import standard_metrics
-from .points import FmuFile, PointResult, PointTask, run_point
+from .points import FmuFile, PointResult, PointTask, run_point, run_points
 from .study import Study
 from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
                     write_table)
 from .trends import TrendResult, evaluate
 
 __all__ = ["run_study", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
-           "EXECUTORS", "Progress", "local_cluster", "LOOPBACK"]
+           "EXECUTORS", "Progress", "local_cluster", "LOOPBACK", "chunk_size", "eta"]
 
 EXECUTORS = ("dask", "loop")
 
@@ -185,9 +188,11 @@ class Progress:
         self._last_decile = decile
         filled = round(frac * self.width)
         bar = "#" * filled + "." * (self.width - filled)
+        elapsed = time.perf_counter() - self.t0
+        left = eta(elapsed, self.done, n)
         text = (f"[{bar}] {self.done}/{n} points, {self.failed} failed"
                 f"{f', {self.skipped} already done' if self.skipped else ''}, "
-                f"{time.perf_counter() - self.t0:.1f} s")
+                f"{elapsed:.1f} s{f', ~{left:.0f} s left' if left is not None else ''}")
         if self.tty:
             self.stream.write("\r" + text)
         else:
@@ -198,6 +203,20 @@ class Progress:
         if self.stream is not None and self.tty:
             self.stream.write("\n")
             self.stream.flush()
+
+
+def eta(elapsed: float, done: int, total: int) -> float | None:
+    """Seconds left at the rate so far (None before the first point and once all are done)."""
+    if done <= 0 or done >= total:
+        return None
+    return elapsed / done * (total - done)
+
+
+def chunk_size(n_tasks: int, n_workers: int, per_worker: int = 4) -> int:
+    """Points per Dask task: each worker gets about ``per_worker`` chunks (so that a slow chunk
+    at the end leaves the others little idle time), and the scheduler's cost per task
+    (~10–15 ms) is shared by the chunk's points."""
+    return max(1, n_tasks // max(1, n_workers * per_worker))
 
 
 def _label(values: dict[str, Any]) -> str:
@@ -257,20 +276,26 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for sha, path in files.items():
             with open(path, "rb") as fh:
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
+    n_workers = len(client.scheduler_info().get("workers", {})) or (workers or 1)
+    size = chunk_size(len(tasks), n_workers)
     futures = {}
-    for t in tasks:
-        fut = client.submit(run_point, t, blobs, key=f"prsm-point-{t.id}-{t.index}",
+    for k in range(0, len(tasks), size):
+        chunk = tasks[k:k + size]
+        # one task per chunk; the dashboard's progress shows "prsm-points" done of total
+        fut = client.submit(run_points, chunk, blobs,
+                            key=f"prsm-points-{chunk[0].index}-{chunk[-1].index}-{chunk[0].id}",
                             pure=False, retries=0)
-        futures[fut] = t
+        futures[fut] = chunk
 
     def results():
         for fut in as_completed(list(futures)):
-            t = futures[fut]
+            chunk = futures[fut]
             try:
-                yield fut.result()
+                yield from fut.result()
             except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
-                yield PointResult(t.index, t.id, dict(t.values), "error",
-                                  f"{type(exc).__name__}: {exc}")
+                for t in chunk:
+                    yield PointResult(t.index, t.id, dict(t.values), "error",
+                                      f"{type(exc).__name__}: {exc}")
             fut.release()
 
     def close():
