@@ -16,7 +16,7 @@ in double-double arithmetic (a value as the unevaluated sum of two doubles, ~106
    covers the computation's own errors, so none of them can pass a wrong text; 17 correctly
    rounded digits always pass but for a value within the margin of a tie (then step 3);
 3. the fewer digits that pass are written, ``[-]d.ddde±XX`` without trailing zeros; zeros as
-   ``0.0``/``-0.0``; what is left (NaN, ±inf, |x| outside step 1's range, anything not passed)
+   ``0e+00``/``-0e+00``; what is left (NaN, ±inf, |x| outside step 1's range, anything not passed)
    by ``repr``, exact by definition (the shortest text that reads back as the same double).
 
 The tests read values back with ``float()`` and compare the bits (tests/test_csv_format.py).
@@ -59,6 +59,10 @@ _P10_HI, _P10_LO = _pow10_table()
 _GROUPS = np.frombuffer("".join(f"{i:04d}" for i in range(10000)).encode("ascii"),
                         dtype=np.uint8).reshape(10000, 4)
 _DIGITS = np.frombuffer(b"0123456789", dtype=np.uint8)
+#: the same four characters as one uint32 each, and two-digit numbers as one uint16 each
+_GROUPS32 = _GROUPS.reshape(-1).view(np.uint32).copy()
+_PAIRS16 = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode("ascii"),
+                         dtype=np.uint16).copy()
 _SPLIT = 134217729.0          # 2^27 + 1, Dekker's splitting constant for float64
 
 
@@ -118,30 +122,29 @@ def _shortest(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _fill(buf: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.ndarray,
           e: np.ndarray) -> None:
     """Write ``[-]d.ddde±XX`` (17 digits, trailing zeros not kept) into rows of buf/keep."""
-    g = np.empty((d17.size, 5), dtype=np.int64)       # one digit, then four groups of four
-    rest = d17
-    for j in range(4, 0, -1):
-        rest, g[:, j] = np.divmod(rest, 10000)
-    g[:, 0] = rest
+    first, rest = np.divmod(d17, 10 ** 16)
+    hi, lo = np.divmod(rest, 10 ** 8)
+    g = np.empty((d17.size, 4), dtype=np.int64)       # the other 16 digits, four groups of 4
+    g[:, 0], g[:, 1] = np.divmod(hi, 10000)
+    g[:, 2], g[:, 3] = np.divmod(lo, 10000)
     buf[:, 0] = ord("-")
     keep[:, 0] = negative
-    buf[:, 1] = _DIGITS[g[:, 0]]
+    buf[:, 1] = np.take(_DIGITS, first)
     buf[:, 2] = ord(".")
-    for j in range(1, 5):
-        buf[:, 4 * j - 1:4 * j + 3] = _GROUPS[g[:, j]]
-    nz = buf[:, 3:19] != ord("0")
+    buf[:, 3:19] = np.take(_GROUPS32, g).view(np.uint8)
     # keep the mantissa's digits up to its last nonzero one, and the point only before a digit
-    last = 15 - np.argmax(nz[:, ::-1], axis=1)        # 15 - 0 = 15 also when all are zero,
-    last[~nz[:, 0] & (last == 15) & ~nz[:, 15]] = -1  # which this marks
+    nz = buf[:, 3:19] != ord("0")
+    last = 15 - np.argmax(nz[:, ::-1], axis=1)        # 15 also when all are zero,
+    last[(last == 15) & ~nz[:, 15]] = -1              # which this marks
     keep[:, 3:19] = np.arange(16)[None, :] <= last[:, None]
     keep[:, 1] = True
     keep[:, 2] = keep[:, 3]
     buf[:, 19] = ord("e")
     buf[:, 20] = np.where(e < 0, ord("-"), ord("+"))
     ae = np.abs(e)
-    buf[:, 21] = _DIGITS[ae // 100]
-    buf[:, 22] = _DIGITS[(ae // 10) % 10]
-    buf[:, 23] = _DIGITS[ae % 10]
+    h, tu = np.divmod(ae, 100)
+    buf[:, 21] = np.take(_DIGITS, h)
+    buf[:, 22:24] = np.take(_PAIRS16, tu).view(np.uint8).reshape(-1, 2)
     keep[:, 19:24] = True
     keep[:, 21] = ae >= 100                           # two exponent digits at least, as %e
 
@@ -155,26 +158,21 @@ def format_cells(x: np.ndarray, extra: int = 0) -> tuple[np.ndarray, np.ndarray]
     buf = np.zeros((n, WIDTH + extra), dtype=np.uint8)
     keep = np.zeros((n, WIDTH + extra), dtype=bool)
     ax = np.abs(x)
+    zero = ax == 0.0
     inside = (ax > _LO) & (ax < _HI)
-    fin = np.flatnonzero(inside)
-    d17, e, ok = _shortest(x[fin])
-    if fin.size == n and ok.all():                    # the common case: no scatter
-        _fill(buf, keep, x < 0, d17, e)
-        return buf, keep
-    idx = fin[ok]
-    b = np.zeros((idx.size, WIDTH + extra), dtype=np.uint8)
-    k = np.zeros((idx.size, WIDTH + extra), dtype=bool)
-    _fill(b, k, x[idx] < 0, d17[ok], e[ok])
-    buf[idx] = b
-    keep[idx] = k
-    # zeros (set at once), then NaN, ±inf and what step 2 did not settle: repr
-    zero = x == 0.0
-    for text, which in ((b"0.0", zero & ~np.signbit(x)), (b"-0.0", zero & np.signbit(x))):
-        buf[which, :len(text)] = np.frombuffer(text, dtype=np.uint8)
-        keep[which, :len(text)] = True
+    d17 = np.zeros(n, dtype=np.int64)                 # zeros: 0e+00 (or -0e+00)
+    e = np.zeros(n, dtype=np.int64)
     settled = zero.copy()
-    settled[idx] = True
+    if inside.all():                                  # the common case: no gather/scatter
+        d17, e, settled = _shortest(x)
+    else:
+        fin = np.flatnonzero(inside)
+        d17[fin], e[fin], settled[fin] = _shortest(x[fin])
+    _fill(buf, keep, np.signbit(x), d17, e)
+    # NaN, ±inf, |x| outside step 1's range and what step 2 did not settle: repr
     for i in np.flatnonzero(~settled).tolist():
+        buf[i] = 0
+        keep[i] = False
         text = repr(float(x[i])).encode("ascii")
         buf[i, :len(text)] = np.frombuffer(text, dtype=np.uint8)
         keep[i, :len(text)] = True

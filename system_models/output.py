@@ -41,7 +41,7 @@ from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MIC
 from .master import Result
 
 __all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns", "figure_writer", "figures",
-           "length_scale", "power_flows"]
+           "length_scale", "power_flows", "reference_values", "FigureWorkers", "FIGURES"]
 
 
 def ordered_columns(res: Result, first: Iterable[str] = ()) -> list[str]:
@@ -126,6 +126,14 @@ def power_flows(p_in: np.ndarray, p_out: np.ndarray, fraction: float = 1e-3) -> 
         return (np.abs(p_in) > fraction * peak) | (np.abs(p_out) > fraction * peak)
 
 
+def reference_values(reference, t: np.ndarray) -> np.ndarray:
+    """The reference on the time grid: ``reference`` is a profile (callable of t [s]) or
+    already its values on ``t``."""
+    if callable(reference):
+        return np.array([reference(v) for v in t])
+    return np.asarray(reference, dtype=float)
+
+
 def _limit_lines(ax, value, label_text, unit, symmetric=True):
     ax.axhline(value, color="k", lw=0.9, ls=":", label=f"{label_text} ±{value:.4g} {unit}"
                if symmetric else f"{label_text} {value:.4g} {unit}")
@@ -144,7 +152,7 @@ def position_figure(res: Result, scene: str, reference=None, mode: str = "positi
     x = res["prsm.rod_position"]
     a1.plot(tm, 1e3 * x, label="rod position")
     if mode == "position" and reference is not None:
-        r = np.array([reference(v) for v in t])
+        r = reference_values(reference, t)
         a1.plot(tm, 1e3 * r, "--", label="position reference")
         err = x - r
         factor, unit = length_scale(float(np.nanmax(np.abs(err))) if err.size else 0.0)
@@ -312,23 +320,104 @@ def power_figure(res: Result, scene: str, sub: str = ""):
     return fig
 
 
+#: the figures in the order they are written
+FIGURES = ("position", "speed", "motor", "forces", "carriers", "efficiency", "power")
+
+
 def figures(res: Result, scene: str, reference=None, mode: str = "position",
             current_limit: float | None = None, *, description: str = "",
             voltage_limit: float | None = None, n_rollers: list[int] | None = None,
-            carrier_equilibrium: dict[int, float] | None = None) -> dict[str, Any]:
+            carrier_equilibrium: dict[int, float] | None = None,
+            only: Iterable[str] | None = None) -> dict[str, Any]:
     """The figures of the module docstring by name (``position``, ``speed``, ...), unsaved;
-    parameters as :func:`write_plots`."""
+    parameters as :func:`write_plots` (``reference`` may also be its values on the time grid);
+    ``only``: those names only."""
     sub = f"\n{description}" if description else ""
-    out = {"position": position_figure(res, scene, reference, mode, sub),
-           "speed": speed_figure(res, scene, mode, sub),
-           "motor": motor_figure(res, scene, current_limit, voltage_limit, sub),
-           "forces": forces_figure(res, scene, n_rollers, sub)}
-    carriers = carriers_figure(res, scene, carrier_equilibrium or {}, sub)
-    if carriers is not None:
-        out["carriers"] = carriers
-    out["efficiency"] = efficiency_figure(res, scene, sub)
-    out["power"] = power_figure(res, scene, sub)
+    make = {"position": lambda: position_figure(res, scene, reference, mode, sub),
+            "speed": lambda: speed_figure(res, scene, mode, sub),
+            "motor": lambda: motor_figure(res, scene, current_limit, voltage_limit, sub),
+            "forces": lambda: forces_figure(res, scene, n_rollers, sub),
+            "carriers": lambda: carriers_figure(res, scene, carrier_equilibrium or {}, sub),
+            "efficiency": lambda: efficiency_figure(res, scene, sub),
+            "power": lambda: power_figure(res, scene, sub)}
+    wanted = FIGURES if only is None else [n for n in FIGURES if n in set(only)]
+    out = {}
+    for name in wanted:
+        fig = make[name]()
+        if fig is not None:
+            out[name] = fig
     return out
+
+
+def _draw_some(args: tuple) -> list[Path]:
+    """Worker side of :func:`write_plots_parallel`: build and save the figures named."""
+    names, res, out_dir, scene, reference, mode, current_limit, kw = args
+    _, save, files = figure_writer(out_dir, scene)
+    for name, fig in figures(res, scene, reference, mode, current_limit, only=names,
+                             **kw).items():
+        save(fig, name)
+    return files
+
+
+def _warm() -> None:
+    """A drawing worker's start: matplotlib imported while the run is still going."""
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
+
+
+class FigureWorkers:
+    """Processes that draw a run's figures beside the parent (which writes the CSV meanwhile).
+
+    Started before the run (:meth:`start`), they import matplotlib on the other core while the
+    co-simulation runs; :meth:`write_plots` then splits the figures between them.  On a
+    machine with one core, or if the processes cannot start, the figures are drawn in this
+    process (same files, same content)."""
+
+    def __init__(self, workers: int | None = None) -> None:
+        import os
+
+        self.n = workers if workers is not None else min(2, os.cpu_count() or 1)
+        self.pool = None
+
+    def start(self) -> "FigureWorkers":
+        if self.n < 2:
+            return self
+        try:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            # spawn: fresh interpreters (nothing of this process's FMU or fmpy state copied)
+            self.pool = ProcessPoolExecutor(self.n, mp_context=multiprocessing.get_context("spawn"),
+                                            initializer=_warm)
+            for _ in range(self.n):           # start the workers now, not at the first task
+                self.pool.submit(int)
+        except (OSError, RuntimeError, ImportError):
+            self.pool = None
+        return self
+
+    def write_plots(self, res: Result, out_dir: str | Path, scene: str, reference=None,
+                    mode: str = "position", current_limit: float | None = None,
+                    **kw: Any) -> list[Path]:
+        """As :func:`write_plots` (same files, in the same order)."""
+        if self.pool is None:
+            return write_plots(res, out_dir, scene, reference, mode, current_limit, **kw)
+        ref = reference_values(reference, res.time) if reference is not None else None
+        # largest first, alternating: the 3-panel figures take longest
+        order = ["motor", "forces", "position", "power", "speed", "efficiency", "carriers"]
+        parts = [order[i::self.n] for i in range(self.n)]
+        try:
+            futures = [self.pool.submit(_draw_some, (p, res, out_dir, scene, ref, mode,
+                                                     current_limit, kw)) for p in parts]
+            done = [f for fut in futures for f in fut.result()]
+        except Exception:  # noqa: BLE001 - a broken worker: draw here instead
+            return write_plots(res, out_dir, scene, reference, mode, current_limit, **kw)
+        by_name = {p.name: p for p in done}
+        return [by_name[f"{scene}_{n}.png"] for n in FIGURES if f"{scene}_{n}.png" in by_name]
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            self.pool = None
 
 
 def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mode: str = "position",

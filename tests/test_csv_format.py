@@ -70,7 +70,7 @@ def test_specials_and_round_numbers_are_written_plainly():
     x = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 0.1, 0.25, 3.0, 1e-5, -1234.5, 1e22])
     texts = format_values(x)
     # round numbers need few digits: the text is the shortest of 15 or 17 digits that is exact
-    assert texts[:5] == ["0.0", "-0.0", "nan", "inf", "-inf"]
+    assert texts[:5] == ["0e+00", "-0e+00", "nan", "inf", "-inf"]
     assert [float(t) for t in texts[5:]] == [0.1, 0.25, 3.0, 1e-5, -1234.5, 1e22]
     assert texts[5:] == ["1e-01", "2.5e-01", "3e+00", "1e-05", "-1.2345e+03", "1e+22"]
     assert np.signbit(float(texts[1]))
@@ -78,7 +78,7 @@ def test_specials_and_round_numbers_are_written_plainly():
 
 def test_table_layout():
     data = np.array([[0.0, 1.5, -2.0], [1e-3, np.nan, 7.0]])
-    assert format_table(data) == b"0.0,1.5e+00,-2e+00\n1e-03,nan,7e+00\n"
+    assert format_table(data) == b"0e+00,1.5e+00,-2e+00\n1e-03,nan,7e+00\n"
 
 
 def test_write_csv_reads_back_bit_for_bit(tmp_path):
