@@ -173,3 +173,25 @@ def test_time_panels_legend_tells_the_stage_line_styles(saved, tmp_path):
     assert styles == sorted(drawn), (styles, drawn)
     # and the runs keep their entries
     assert {"µ 0.05", "µ 0.1"} <= set(entries)
+
+
+def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path):
+    """prsm-ema run draws its figures in two spawned processes: the same files, byte for byte
+    (Agg renders deterministically), as drawn in this process."""
+    from system_models.output import FigureWorkers
+
+    res = _step_result()
+    kw = dict(voltage_limit=300.0, n_rollers=[10, 10], description="a step")
+    (tmp_path / "here").mkdir()
+    (tmp_path / "there").mkdir()
+    here = write_plots(res, tmp_path / "here", "s", lambda t: 0.01, "position", 40.0, **kw)
+    workers = FigureWorkers(2).start()
+    try:
+        there = workers.write_plots(res, tmp_path / "there", "s", lambda t: 0.01, "position",
+                                    40.0, **kw)
+        assert workers.pool is not None              # really drawn in the workers
+    finally:
+        workers.close()
+    assert [p.name for p in there] == [p.name for p in here]
+    for a, b in zip(here, there):
+        assert a.read_bytes() == b.read_bytes(), a.name
