@@ -70,3 +70,12 @@ def test_functions_named_as_their_modules_stay_functions():
                    "from prsm_fmu import simulate, steady_state\n"
                    "assert isinstance(simulate, types.FunctionType), simulate\n"
                    "assert isinstance(steady_state, types.FunctionType), steady_state\n")
+
+
+def test_the_package_pickles_by_name():
+    # Dask (cloudpickle) sends module objects by name; the lazy package must allow it
+    import pickle
+
+    import prsm_fmu
+
+    assert pickle.loads(pickle.dumps(prsm_fmu)) is prsm_fmu
