@@ -1,29 +1,14 @@
-"""The sweep's chunks of points and its progress bar (prsm_fmu.sweep.execute).
+"""The sweep's progress bar (prsm_fmu.sweep.execute): points done, failed, time left.
 
-The Dask runs themselves (chunks on 1 and 2 workers giving byte-identical tables) are in
+The Dask runs themselves (1 and 2 workers giving byte-identical tables) are in
 tests/test_sweep.py.
 """
 
 from __future__ import annotations
 
 import io
-import math
 
-from prsm_fmu.sweep.execute import Progress, chunk_size, eta
-
-
-def test_chunks_keep_every_worker_busy_and_cover_every_point():
-    cases = 0
-    for workers in range(1, 5):
-        for n in range(1, 201):
-            size = chunk_size(n, workers)
-            chunks = math.ceil(n / size)
-            # at least four chunks per worker when there are enough points, else one per point
-            assert size >= 1 and chunks >= min(n, 4 * workers), (n, workers, size)
-            cases += 1
-    print(f"{cases} (points, workers) cases")
-    # 24 points of the start-up study on 2 workers: 8 chunks of 3 (24 // (2 × 4) = 3)
-    assert chunk_size(24, 2) == 3
+from prsm_fmu.sweep.execute import Progress, eta
 
 
 def test_time_left_at_the_rate_so_far():

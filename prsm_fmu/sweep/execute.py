@@ -28,12 +28,10 @@ machine's file system (they need ``prsm_fmu``, numpy, scipy, fmpy and pythonfmu 
 A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points one after the
 other in this process (the reference the Dask overhead is measured against).
 
-The points go to the workers in chunks (:func:`chunk_size`: about four per worker, so both stay
-busy to the end while the scheduler's cost per task is shared by a chunk's points), each chunk
-submitted once (``retries=0``, ``pure=False``); its results come back as soon as it is done and
-are appended to the table at once, so an interrupted study keeps every finished point.  The
-progress bar shows the points done, failed and the time left; the Dask dashboard's progress
-shows the chunks (``prsm-points``) done of total.  A rerun with the same output directory skips the points whose id (a hash of the
+A point is submitted once (``retries=0``, ``pure=False``); its result comes back as soon as it
+is done and is appended to the table at once, so an interrupted study keeps every finished
+point.  The progress bar shows the points done, failed and the time left; the Dask dashboard's
+progress shows the tasks (``prsm-point``) done of total.  A rerun with the same output directory skips the points whose id (a hash of the
 point's preset, parameters, scenario and backend) is already in the table with status ``ok``
 and whose series file exists; failed points are run again.  A point whose worker dies is
 recorded as failed with the scheduler's message.
@@ -53,14 +51,14 @@ from typing import Any, Callable, Sequence, TextIO
 import numpy as np
 
 from .metrics import standard_metrics
-from .points import FmuFile, PointResult, PointTask, run_point, run_points
+from .points import FmuFile, PointResult, PointTask, run_point
 from .study import Study
 from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
                     write_table)
 from .trends import TrendResult, evaluate
 
 __all__ = ["run_study", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
-           "EXECUTORS", "Progress", "local_cluster", "LOOPBACK", "chunk_size", "eta"]
+           "EXECUTORS", "Progress", "local_cluster", "LOOPBACK", "eta"]
 
 EXECUTORS = ("dask", "loop")
 
@@ -212,13 +210,6 @@ def eta(elapsed: float, done: int, total: int) -> float | None:
     return elapsed / done * (total - done)
 
 
-def chunk_size(n_tasks: int, n_workers: int, per_worker: int = 4) -> int:
-    """Points per Dask task: each worker gets about ``per_worker`` chunks (so that a slow chunk
-    at the end leaves the others little idle time), and the scheduler's cost per task
-    (~10–15 ms) is shared by the chunk's points."""
-    return max(1, n_tasks // max(1, n_workers * per_worker))
-
-
 def _label(values: dict[str, Any]) -> str:
     from .plots import short_label
 
@@ -276,26 +267,23 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for sha, path in files.items():
             with open(path, "rb") as fh:
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
-    n_workers = len(client.scheduler_info().get("workers", {})) or (workers or 1)
-    size = chunk_size(len(tasks), n_workers)
     futures = {}
-    for k in range(0, len(tasks), size):
-        chunk = tasks[k:k + size]
-        # one task per chunk; the dashboard's progress shows "prsm-points" done of total
-        fut = client.submit(run_points, chunk, blobs,
-                            key=f"prsm-points-{chunk[0].index}-{chunk[-1].index}-{chunk[0].id}",
+    for t in tasks:
+        # one task per point: its result comes back (and is saved) while the others run;
+        # chunks of points were measured slower (benchmarks/sweep_scaling.py: 1.52x against
+        # 1.81x on 2 workers), the last chunk's results all arriving at the end
+        fut = client.submit(run_point, t, blobs, key=f"prsm-point-{t.id}-{t.index}",
                             pure=False, retries=0)
-        futures[fut] = chunk
+        futures[fut] = t
 
     def results():
         for fut in as_completed(list(futures)):
-            chunk = futures[fut]
+            t = futures[fut]
             try:
-                yield from fut.result()
+                yield fut.result()
             except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
-                for t in chunk:
-                    yield PointResult(t.index, t.id, dict(t.values), "error",
-                                      f"{type(exc).__name__}: {exc}")
+                yield PointResult(t.index, t.id, dict(t.values), "error",
+                                  f"{type(exc).__name__}: {exc}")
             fut.release()
 
     def close():

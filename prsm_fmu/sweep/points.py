@@ -31,8 +31,7 @@ from ..profiles import ConstantSpeed, RampSpeed, SpeedProfile
 from .metrics import compute_metrics, derive_series
 from .study import apply_overrides, resolve_preset
 
-__all__ = ["PointTask", "PointResult", "FmuFile", "run_point", "run_points", "worker_info",
-           "speed_profile"]
+__all__ = ["PointTask", "PointResult", "FmuFile", "run_point", "worker_info", "speed_profile"]
 
 #: largest number of output intervals of one point
 MAX_STEPS = 10_000_000
@@ -229,9 +228,3 @@ def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None) -> Poin
     result.fmu_instances = sum(r.instances_made for r in stats)
     result.fmu_points = sum(r.points_run for r in stats)
     return result
-
-
-def run_points(tasks: list[PointTask], blobs: Mapping[str, bytes] | None = None) -> list[PointResult]:
-    """Run a chunk of points one after the other on this worker (one Dask task for several
-    points: the scheduler's per-task cost is paid once per chunk); as :func:`run_point`."""
-    return [run_point(t, blobs) for t in tasks]
