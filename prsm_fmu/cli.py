@@ -127,12 +127,13 @@ def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str
         Figure title.
     """
     import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+    from .figures import save, subplots
 
     styles = ["-", "--", "-.", ":"]
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5), sharex=True)
+    colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig, axes = subplots(2, 2, figsize=(10, 7.5), sharex=True, wspace=0.45, hspace=0.25,
+                         margins={"right": 0.9, "top": 0.5 + (0.3 if title else 0.0)})
     ax_z, ax_m, ax_f, ax_e = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
     ax_h = ax_e.twinx()
     for j, (run_label, res) in enumerate(runs):
@@ -172,10 +173,7 @@ def plot_startup(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str
     ax_e.legend(h1 + h2, l1 + l2, fontsize=8, loc="center right")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save(fig, path)
 
 
 def _sample_indices(time: np.ndarray, n_rows: int = 11) -> list[int]:

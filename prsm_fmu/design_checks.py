@@ -47,7 +47,6 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .params import GEOMETRY_RTOL, MechanismParams
 
@@ -284,6 +283,8 @@ def stepped_column_load(moments: Sequence[float], lengths: Sequence[float],
         if prev_d == 0.0:
             return prev_p * elastic_modulus * i1 / total ** 2
         if d * prev_d < 0.0:
+            from scipy.optimize import brentq   # on demand: scipy costs ~0.8 s to import
+
             root = brentq(det, prev_p, p, xtol=1e-14 * p, rtol=1e-14, maxiter=200)
             return root * elastic_modulus * i1 / total ** 2
         prev_p, prev_d = p, d
@@ -453,6 +454,8 @@ def _buckling_check(params: MechanismParams, inputs: DesignInputs) -> Check:
     long_ = 1.0
     while margin(long_) > 0 and long_ < 1e4:
         long_ *= 2.0
+    from scipy.optimize import brentq   # on demand: scipy costs ~0.8 s to import
+
     l_max = brentq(margin, short, long_, xtol=1e-9)
     return Check(name, cond, f"no length given: stable (F_a ≤ F_cr / n_st) for an extended "
                  f"length L ≤ {l_max:.4g} m", "not checked", needs=("extended_length",))

@@ -42,7 +42,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import root
 
 from .params import StageParams
 
@@ -290,6 +289,8 @@ def _solve_contact(r_s: float, r_r: float, lead: float, n_s: int,
         p_s, p_r, n_s_hat, n_r_hat = surfaces(u)
         # both unit normals have z > 0, so equal x and y components make them equal
         return np.concatenate(((p_s - p_r) / r_s, (n_s_hat - n_r_hat)[:2]))
+
+    from scipy.optimize import root   # on demand: importing scipy.optimize costs ~0.8 s
 
     sol = root(residual, np.zeros(5), method="hybr", options={"xtol": 1e-15})
     u = sol.x

@@ -29,7 +29,6 @@ import time as _time
 from typing import Mapping, Sequence
 
 import numpy as np
-from scipy.optimize import brentq
 
 from . import presets
 from .cli import plot_startup
@@ -420,6 +419,8 @@ def _section_002(fig_rel: str, zetas_seen: list[float]) -> str:
     z_lo, z_hi = min(zetas_seen), max(zetas_seen)
     z2_gt = all(s["stage[2].carrier_speed_ratio"] > s["stage[1].carrier_speed_ratio"]
                 for s in ss.values())
+    from scipy.optimize import brentq   # imported on demand: scipy costs ~0.8 s to import
+
     r_fit = brentq(lambda x: eta_at(x) - PAPER_002["high_mu_ns"][2], 1e-5, r_ns, xtol=1e-8)
     r_spline = st2.spline_radius
     bearing_verdict = (

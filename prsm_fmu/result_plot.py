@@ -98,17 +98,16 @@ def plot_fmu_result(res: Mapping[str, np.ndarray], units: Mapping[str, str],
     ValueError
         If none of ``variables`` is in the result.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .figures import save, subplots
 
     panels = _panels(res, variables)
     if not panels:
         raise ValueError(f"none of the variables {', '.join(variables)} is in the result: "
                          f"must be among {', '.join(n for n in res if n != 'time')} "
                          "(stage[k].NAME for every stage)")
-    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.2 * len(panels) + 0.8), sharex=True,
-                             squeeze=False)
+    fig, axes = subplots(len(panels), 1, figsize=(8, 2.2 * len(panels) + 0.8), sharex=True,
+                         squeeze=False, hspace=0.2,
+                         margins={"top": 0.3 + (0.3 if title else 0.0)})
     t = res["time"]
     for ax, cols in zip(axes[:, 0], panels):
         for c in cols:
@@ -121,7 +120,5 @@ def plot_fmu_result(res: Mapping[str, np.ndarray], units: Mapping[str, str],
     axes[-1, 0].set_xlabel(label("time", SECOND))
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
     return [c for cols in panels for c in cols]

@@ -47,7 +47,6 @@ from dataclasses import dataclass
 from typing import Optional, Sequence
 
 import numpy as np
-from scipy.optimize import root
 
 from .friction import regularised_factor, regularised_sign
 from .geometry import ContactGeometry, contact_geometry
@@ -295,6 +294,8 @@ class _Problem:
     def solve(self, guess: np.ndarray) -> tuple[np.ndarray, float]:
         """Solve from the physical guess; returns (scaled solution, residual norm)."""
         x0 = np.asarray(guess, dtype=float) / self.x_scale
+        from scipy.optimize import root   # on demand: importing scipy.optimize costs ~0.8 s
+
         sol = root(self.residual, x0, method="hybr", options={"xtol": 1e-14})
         x = sol.x
         # polish with Newton steps on a central-difference Jacobian (the problem is smooth

@@ -23,9 +23,28 @@ Modules (docs/ema.md):
 The physics of the mechanism stays in :mod:`prsm_fmu`; nothing here imports pythonfmu.
 """
 
-from .master import CoSimulationError, Master, Result, RetryPolicy
-from .run import SceneRun, run_scene
-from .scenes import list_scenes, load_scene
+import importlib
+from typing import Any
 
 __all__ = ["Master", "RetryPolicy", "Result", "CoSimulationError", "run_scene", "SceneRun",
            "load_scene", "list_scenes"]
+
+#: public name -> its module; imported on first use (PEP 562): ``prsm-ema list`` and argument
+#: parsing need neither numpy nor the physics
+_LAZY = {"Master": ".master", "RetryPolicy": ".master", "Result": ".master",
+         "CoSimulationError": ".master", "run_scene": ".run", "SceneRun": ".run",
+         "load_scene": ".scenes", "list_scenes": ".scenes"}
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -37,7 +37,7 @@ __all__ = ["main", "build_parser"]
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``prsm-ema`` (bad arguments: one line, exit status 2)."""
-    from .master import MAX_HALVINGS
+    from .retry_limit import MAX_HALVINGS
 
     ap = ArgumentParser(prog="prsm-ema", description=__doc__.splitlines()[0])
     ap.add_argument("--engine", choices=ENGINES, default=None,
@@ -97,8 +97,9 @@ def _refuse(message: str) -> int:
     return 2
 
 
-def _plots(run, out: Path) -> list[Path]:
-    """The run's figures for its topology (system_models.output, .plots_geared)."""
+def _plots(run, out: Path, workers=None) -> list[Path]:
+    """The run's figures for its topology (system_models.output, .plots_geared); ``workers``:
+    a started :class:`~system_models.output.FigureWorkers` to draw them in."""
     scene, system = run.scene, run.system
     if scene.topology == "geared":
         from .plots_geared import write_geared_plots
@@ -110,6 +111,8 @@ def _plots(run, out: Path) -> list[Path]:
                                   current_limit=system.motor.current_limit)
     from .output import write_plots
 
+    if workers is not None:
+        write_plots = workers.write_plots
     params = system.prsm.params()
     res = run.result
     equilibrium = None
@@ -132,10 +135,8 @@ def _cmd_run(args, ap) -> int:
     from prsm_fmu.extras import require
 
     from .fmu import FMUError, ensure_fmu
-    from .master import CoSimulationError, RetryPolicy, whole_steps
-    from .output import write_csv, write_summary
-    from .progress import Progress
-    from .run import run_scene
+    from .master import RetryPolicy, whole_steps
+    from .output import FigureWorkers
     from .scene_check import check_fmu_stages, check_output_dir, check_scene
     from .scenes import load_scene
 
@@ -179,6 +180,24 @@ def _cmd_run(args, ap) -> int:
             print(f"prsm-ema: {exc}", file=sys.stderr)
             return 1
     print(f"scene {scene.name}: {scene.description}")
+    # the figures' processes start now and import matplotlib while the scene runs
+    workers = None if args.no_plots or scene.topology != "direct" else FigureWorkers().start()
+    try:
+        return _run_and_write(args, ap, scene, fmu_path, retry, workers)
+    finally:
+        if workers is not None:
+            workers.close()
+
+
+def _run_and_write(args, ap, scene, fmu_path, retry, workers) -> int:
+    from fmu_build.builder import BuildError
+
+    from .fmu import FMUError
+    from .master import CoSimulationError
+    from .output import write_csv, write_summary
+    from .progress import Progress
+    from .run import run_scene
+
     prog = Progress(t_start=scene.t0)
     try:
         # Ctrl-C is held back to the master's steps: raised inside an FMU's own Python it would
@@ -241,8 +260,20 @@ def _cmd_run(args, ap) -> int:
               f"+ residual {e['residual']:.3g} J ({e['relative_residual']:.3g} relative)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
-    if not args.no_plots:
+    if args.no_plots:
+        files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
+    elif workers is not None and workers.pool is not None:
+        # the figures are drawn in the workers while this process writes the CSV
+        import threading
+
+        drawn: list = []
+        t = threading.Thread(target=lambda: drawn.append(_plots(run, out, workers)))
+        t.start()
+        files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
+        t.join()
+        files += drawn[0] if drawn else _plots(run, out)
+    else:
+        files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
         files += _plots(run, out)
     files.append(write_summary(out / f"{scene.name}_summary.json", s))
     print("wrote " + ", ".join(str(f) for f in files))

@@ -100,7 +100,6 @@ from fractions import Fraction
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import expm
 
 from prsm_fmu.models import make_model
 
@@ -319,6 +318,8 @@ def motor_transition(loop: LinearLoop, h: float) -> np.ndarray:
     a[1, 0], a[1, 1] = -lp.p * lp.w0, -lp.R / lp.L
     a[1, 2], a[1, 5] = -lp.p * lp.id0 - lp.p * lp.psi / lp.L, 1.0 / lp.L
     a[2, 3] = 1.0
+    from scipy.linalg import expm   # on demand: scipy costs ~0.5 s to import
+
     return expm(a * h)
 
 

@@ -24,7 +24,6 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Callable, Sequence
 
-from scipy.optimize import brentq
 
 from prsm_fmu.models import make_model
 
@@ -133,6 +132,8 @@ def steady_torque(config: PRSMConfig, fidelity: str, speed: float, load_force: f
 
     t_ideal = c * load_force
     span = 2.0 * abs(t_ideal) + 1.0
+    from scipy.optimize import brentq   # on demand: importing scipy.optimize costs ~0.8 s
+
     return brentq(acc, t_ideal - span, t_ideal + span, xtol=1e-14, rtol=1e-14)
 
 

@@ -46,13 +46,12 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from .blocks import Block, StepRefused
+from .retry_limit import MAX_HALVINGS
 
 __all__ = ["Master", "RetryPolicy", "Result", "CoSimulationError", "ORDERS"]
 
 ORDERS = ("jacobi", "gauss-seidel")
 
-#: most halvings of a macro step a RetryPolicy allows (2**30 substeps)
-MAX_HALVINGS = 30
 
 
 def whole_steps(t0: float, t_end: float, h: float) -> int:

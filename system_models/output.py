@@ -4,20 +4,27 @@ Units are spelled as in the FMU's modelDescription (:mod:`prsm_fmu.units`).
 
 Plots (matplotlib, PNG, one figure per question a reader asks):
 
-``<scene>_position.png``    rod position against the reference, and the tracking error
+``<scene>_position.png``    rod position against the reference, and the tracking error (in
+                            µm, mm or m, whichever keeps the ticks to three digits)
 ``<scene>_speed.png``       screw speed and the speed reference
 ``<scene>_motor.png``       motor currents (i_q, i_d, reference, limit), voltage against the
                             inverter's limit, torque
 ``<scene>_forces.png``      axial contact force per roller of each stage; the total load against
                             N_R × the per-roller force; spline friction
 ``<scene>_carriers.png``    carrier speed ratios against their equilibrium (when recorded)
-``<scene>_efficiency.png``  PRSM efficiency and the actuator's (load power / electrical power)
-``<scene>_power.png``       the power bookkeeping integrated over the run
+``<scene>_efficiency.png``  PRSM efficiency and the actuator's (load power / electrical power),
+                            with a gap where no power flows (standstill), not a drop to 0
+``<scene>_power.png``       the power bookkeeping integrated over the run (legend beside the
+                            axes, off the data)
+
+The figures are built by :func:`figures` (one function per figure, returning the unsaved
+Figure) on the shared setup of :mod:`prsm_fmu.figures` and written by :func:`write_plots`.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 from pathlib import Path
@@ -26,13 +33,16 @@ from typing import Any, Iterable
 import numpy as np
 
 from prsm_fmu.atomic import atomic_path
-from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, MICROMETRE, MILLIMETRE,
-                            MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
+from prsm_fmu.csv_format import format_table
+from prsm_fmu.figures import legend_outside, subplots
+from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MICROMETRE,
+                            MILLIMETRE, MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
                             RADIAN_PER_SECOND, SECOND, VOLT, label)
 
 from .master import Result
 
-__all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns", "figure_writer"]
+__all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns", "figure_writer", "figures",
+           "length_scale", "power_flows", "reference_values", "FigureWorkers", "FIGURES"]
 
 
 def ordered_columns(res: Result, first: Iterable[str] = ()) -> list[str]:
@@ -44,16 +54,18 @@ def ordered_columns(res: Result, first: Iterable[str] = ()) -> list[str]:
 def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     """All outputs on the macro grid; header ``time [s],prsm.rod_position [m],...`` (UTF-8).
 
-    Values with 15 significant digits (enough to compare runs to 1e-10 from the file)."""
+    Every value reads back as the same double, bit for bit (15 significant digits where they
+    suffice, else 17; :mod:`prsm_fmu.csv_format`, formatted with numpy: ~0.1 s for a
+    15 001-row run)."""
     cols = ordered_columns(res, first)
     path = Path(path)
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow([label("time", SECOND)]
-                   + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
-        data = np.column_stack([res.time] + [res[c] for c in cols])
-        for row in data:
-            w.writerow([f"{v:.15g}" for v in row])
+    header = io.StringIO()
+    csv.writer(header, lineterminator="\n").writerow(
+        [label("time", SECOND)] + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
+    data = np.column_stack([res.time] + [res[c] for c in cols])
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(header.getvalue().encode("utf-8"))
+        fh.write(format_table(data))
     return path
 
 
@@ -84,25 +96,331 @@ def _stages(res: Result) -> int:
 
 
 def figure_writer(out_dir: str | Path, scene: str):
-    """(pyplot, save, files): ``save(fig, name)`` writes ``<out_dir>/<scene>_<name>.png``
-    (tight layout, 110 dpi), closes the figure and appends the path to ``files``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """(plt, save, files): ``plt.subplots`` makes a figure with fixed margins
+    (:mod:`prsm_fmu.figures`: no pyplot, no extra layout draw); ``save(fig, name)`` writes
+    ``<out_dir>/<scene>_<name>.png`` (110 dpi) and appends the path to ``files``."""
+    from prsm_fmu.figures import Pyplotless, save as save_png
 
     out = Path(out_dir)
     files: list[Path] = []
 
     def save(fig, name: str) -> None:
-        p = out / f"{scene}_{name}.png"
-        fig.tight_layout()
-        with atomic_path(p) as tmp:
-            fig.savefig(tmp, dpi=110)
-        plt.close(fig)
-        files.append(p)
+        files.append(save_png(fig, out / f"{scene}_{name}.png"))
 
-    return plt, save, files
+    return Pyplotless(), save, files
+
+
+def length_scale(max_abs: float) -> tuple[float, str]:
+    """(factor, unit) to plot a length [m] whose largest magnitude is ``max_abs`` [m] with tick
+    labels of at most three integer digits: µm below 1 mm, mm below 1 m, else m."""
+    if max_abs < 1e-3:
+        return 1e6, MICROMETRE
+    if max_abs < 1.0:
+        return 1e3, MILLIMETRE
+    return 1.0, METRE
+
+
+def power_flows(p_in: np.ndarray, p_out: np.ndarray, fraction: float = 1e-3) -> np.ndarray:
+    """Where power flows through the mechanism: |P_in| or |P_out| above ``fraction`` of the
+    run's peak |P_in| [W].  Elsewhere (standstill) an efficiency is undefined: the plots leave a
+    gap there instead of a drop to 0."""
+    peak = float(np.nanmax(np.abs(p_in))) if np.size(p_in) else 0.0
+    with np.errstate(invalid="ignore"):
+        return (np.abs(p_in) > fraction * peak) | (np.abs(p_out) > fraction * peak)
+
+
+def reference_values(reference, t: np.ndarray) -> np.ndarray:
+    """The reference on the time grid: ``reference`` is a profile (callable of t [s]) or
+    already its values on ``t``."""
+    if callable(reference):
+        return np.array([reference(v) for v in t])
+    return np.asarray(reference, dtype=float)
+
+
+def _limit_lines(ax, value, label_text, unit, symmetric=True):
+    ax.axhline(value, color="k", lw=0.9, ls=":", label=f"{label_text} ±{value:.4g} {unit}"
+               if symmetric else f"{label_text} {value:.4g} {unit}")
+    if symmetric:
+        ax.axhline(-value, color="k", lw=0.9, ls=":")
+
+
+def position_figure(res: Result, scene: str, reference=None, mode: str = "position",
+                    sub: str = ""):
+    """Rod position against the reference and the tracking error (position control), or the
+    rod's motion; the error in µm, mm or m so that its ticks read well."""
+    fig, (a1, a2) = subplots(2, 1, figsize=(8, 6), sharex=True,
+                             gridspec_kw={"height_ratios": [2, 1]})
+    t = res.time
+    tm = 1e3 * t
+    x = res["prsm.rod_position"]
+    a1.plot(tm, 1e3 * x, label="rod position")
+    if mode == "position" and reference is not None:
+        r = reference_values(reference, t)
+        a1.plot(tm, 1e3 * r, "--", label="position reference")
+        err = x - r
+        factor, unit = length_scale(float(np.nanmax(np.abs(err))) if err.size else 0.0)
+        a2.plot(tm, factor * err, color="C3")
+        a2.set_ylabel(label("tracking error", unit))
+        title = "rod position tracking"
+    else:
+        a2.plot(tm, 1e3 * res["prsm.rod_velocity"], color="C2")
+        a2.set_ylabel(label("rod velocity", MILLIMETRE_PER_SECOND))
+        title = f"rod motion ({mode} control: no position reference)"
+    a1.set_ylabel(label("rod position", MILLIMETRE))
+    a1.legend()
+    a1.grid(True)
+    a2.grid(True)
+    a2.set_xlabel(label("time", MILLISECOND))
+    a1.set_title(f"{scene}: {title}{sub}", fontsize=10)
+    return fig
+
+
+def speed_figure(res: Result, scene: str, mode: str = "position", sub: str = ""):
+    """Screw speed and the speed reference."""
+    fig, ax = subplots(figsize=(8, 4))
+    tm = 1e3 * res.time
+    ax.plot(tm, res["prsm.screw_speed"], label="screw (motor) speed")
+    ax.step(tm, res["controller.speed_ref"], where="post", ls="--",
+            label="speed reference" + (" (position loop output)" if mode == "position" else ""))
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("speed", RADIAN_PER_SECOND))
+    ax.grid(True)
+    ax.legend()
+    ax.set_title(f"{scene}: screw (motor) speed{sub}", fontsize=10)
+    return fig
+
+
+def motor_figure(res: Result, scene: str, current_limit: float | None = None,
+                 voltage_limit: float | None = None, sub: str = ""):
+    """Motor currents, voltage against the inverter's limit, torque."""
+    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
+    tm = 1e3 * res.time
+    a1.plot(tm, res["motor.i_q"], label="i_q")
+    a1.plot(tm, res["motor.i_d"], label="i_d")
+    a1.step(tm, res["controller.i_q_ref"], where="post", ls="--", label="i_q reference")
+    if current_limit:
+        _limit_lines(a1, current_limit, "current limit", "A")
+    a1.set_ylabel(label("current", AMPERE))
+    a1.legend(fontsize=8, loc="best")
+    a1.grid(True)
+    vmag = np.hypot(res["motor.v_d"], res["motor.v_q"])
+    a2.plot(tm, vmag, color="C4", label="phase voltage amplitude √(v_d² + v_q²)")
+    if voltage_limit:
+        _limit_lines(a2, voltage_limit, "inverter limit V_dc/√3 =", "V", symmetric=False)
+        a2.set_ylim(0.0, 1.1 * max(voltage_limit, float(np.max(vmag))))
+    a2.set_ylabel(label("voltage", VOLT))
+    a2.legend(fontsize=8, loc="best")
+    a2.grid(True)
+    a3.plot(tm, res["motor.torque"], label="electromagnetic torque")
+    a3.plot(tm, res["prsm.stage[1].driven_torque"], "--", label="torque held at the screw (PRSM input)")
+    a3.set_ylabel(label("torque", NEWTON_METRE))
+    a3.set_xlabel(label("time", MILLISECOND))
+    a3.legend(fontsize=8)
+    a3.grid(True)
+    a1.set_title(f"{scene}: motor current, voltage and torque{sub}", fontsize=10)
+    return fig
+
+
+def forces_figure(res: Result, scene: str, n_rollers: list[int] | None = None, sub: str = ""):
+    """Axial contact force per roller of each stage, the total load against N_R × the per-roller
+    force, spline friction."""
+    n = _stages(res)
+    nr = list(n_rollers) if n_rollers else [None] * n
+    tm = 1e3 * res.time
+    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
+    for k in range(1, n + 1):
+        what = f" ({nr[k - 1]} rollers)" if nr[k - 1] else ""
+        a1.plot(tm, 1e-3 * res[f"prsm.stage[{k}].contact_force"],
+                label=f"stage {k}: axial contact force per roller{what}")
+    a1.set_ylabel(label("per roller", KILONEWTON))
+    a1.legend(fontsize=8)
+    a1.grid(True)
+    a2.plot(tm, 1e-3 * res["load.force"], "k", lw=1.2, label="load force on the rod (total)")
+    for k in range(1, n + 1):
+        if nr[k - 1]:
+            a2.plot(tm, 1e-3 * nr[k - 1] * res[f"prsm.stage[{k}].contact_force"], "--",
+                    label=f"stage {k}: {nr[k - 1]} × per-roller force (all its threads)")
+    a2.set_ylabel(label("total", KILONEWTON))
+    a2.legend(fontsize=8)
+    a2.grid(True)
+    for k in range(2, n + 1):
+        a3.plot(tm, res[f"prsm.stage[{k}].spline_friction"], color=f"C{k - 1}",
+                label=f"stage {k}: spline friction (screw {k - 1} → {k})")
+    a3.set_ylabel(label("friction", NEWTON))
+    a3.set_xlabel(label("time", MILLISECOND))
+    if n > 1:
+        a3.legend(fontsize=8)
+    a3.grid(True)
+    a1.set_title(f"{scene}: thread forces per roller, and the total load{sub}", fontsize=10)
+    return fig
+
+
+def carriers_figure(res: Result, scene: str, carrier_equilibrium: dict[int, float],
+                    sub: str = ""):
+    """Carrier speed ratios against their equilibrium; None when none is recorded."""
+    n = _stages(res)
+    ratios = [k for k in range(1, n + 1) if f"prsm.stage[{k}].carrier_speed_ratio" in res]
+    if not (carrier_equilibrium and ratios):
+        return None
+    tm = 1e3 * res.time
+    fig, ax = subplots(figsize=(8, 4))
+    for k in ratios:
+        ax.plot(tm, res[f"prsm.stage[{k}].carrier_speed_ratio"], color=f"C{k - 1}",
+                label=f"stage {k}: carrier speed / screw speed")
+        if k in carrier_equilibrium:
+            ax.axhline(carrier_equilibrium[k], color=f"C{k - 1}", ls=":", lw=1.0,
+                       label=f"stage {k}: equilibrium {carrier_equilibrium[k]:.4f} "
+                             "(steady-state solver)")
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("carrier speed ratio", DIMENSIONLESS))
+    ax.grid(True)
+    ax.legend(fontsize=8)
+    ax.set_title(f"{scene}: carrier speed ratios{sub}", fontsize=10)
+    return fig
+
+
+def efficiency_figure(res: Result, scene: str, sub: str = ""):
+    """PRSM and actuator efficiency; a gap wherever no power flows (:func:`power_flows`) or the
+    efficiency is undefined (NaN), not a drop to 0."""
+    fig, ax = subplots(figsize=(8, 4))
+    tm = 1e3 * res.time
+    pel = res["motor.electrical_power"]
+    pout = res["prsm.output_power"]
+    pin = res["prsm.input_power"] if "prsm.input_power" in res else pel
+    eta_prsm = np.where(power_flows(pin, pout), res["prsm.efficiency"], np.nan)
+    ax.plot(tm, eta_prsm, label="PRSM (instantaneous)")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eta = np.where((pel > 1.0) & (pout >= 0.0), pout / pel, np.nan)
+    ax.plot(tm, eta, label="actuator: load power / electrical power")
+    ax.set_ylim(-0.05, 1.2)
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("efficiency", DIMENSIONLESS))
+    ax.grid(True)
+    ax.legend(title="gaps: standstill (no power flows)", title_fontsize=8, fontsize=8)
+    ax.set_title(f"{scene}: efficiency (instantaneous; > 1 while stored energy is released){sub}",
+                 fontsize=10)
+    return fig
+
+
+def power_figure(res: Result, scene: str, sub: str = ""):
+    """The power bookkeeping integrated over the run; the legend beside the axes, off the data."""
+    fig, ax = subplots(figsize=(10.5, 4), margins={"right": 2.7})
+    tm = 1e3 * res.time
+    e0 = {k: res[k] - res[k][0] for k in ("motor.magnetic_energy", "prsm.kinetic_energy")}
+    ax.plot(tm, res["motor.electrical_energy"], label="electrical input")
+    ax.plot(tm, res["motor.copper_energy"], label="copper losses")
+    ax.plot(tm, res["prsm.friction_work"], label="PRSM friction")
+    ax.plot(tm, res["prsm.output_work"], label="work on the load")
+    ax.plot(tm, e0["motor.magnetic_energy"] + e0["prsm.kinetic_energy"], label="Δ stored (kinetic + magnetic)")
+    resid = (res["motor.electrical_energy"] - res["motor.copper_energy"] - res["prsm.friction_work"]
+             - res["prsm.output_work"] - e0["motor.magnetic_energy"] - e0["prsm.kinetic_energy"])
+    ax.plot(tm, resid, "k:", label="residual")
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("energy", JOULE))
+    ax.grid(True)
+    legend_outside(ax)
+    ax.set_title(f"{scene}: power bookkeeping (integrated){sub}", fontsize=10)
+    return fig
+
+
+#: the figures in the order they are written
+FIGURES = ("position", "speed", "motor", "forces", "carriers", "efficiency", "power")
+
+
+def figures(res: Result, scene: str, reference=None, mode: str = "position",
+            current_limit: float | None = None, *, description: str = "",
+            voltage_limit: float | None = None, n_rollers: list[int] | None = None,
+            carrier_equilibrium: dict[int, float] | None = None,
+            only: Iterable[str] | None = None) -> dict[str, Any]:
+    """The figures of the module docstring by name (``position``, ``speed``, ...), unsaved;
+    parameters as :func:`write_plots` (``reference`` may also be its values on the time grid);
+    ``only``: those names only."""
+    sub = f"\n{description}" if description else ""
+    make = {"position": lambda: position_figure(res, scene, reference, mode, sub),
+            "speed": lambda: speed_figure(res, scene, mode, sub),
+            "motor": lambda: motor_figure(res, scene, current_limit, voltage_limit, sub),
+            "forces": lambda: forces_figure(res, scene, n_rollers, sub),
+            "carriers": lambda: carriers_figure(res, scene, carrier_equilibrium or {}, sub),
+            "efficiency": lambda: efficiency_figure(res, scene, sub),
+            "power": lambda: power_figure(res, scene, sub)}
+    wanted = FIGURES if only is None else [n for n in FIGURES if n in set(only)]
+    out = {}
+    for name in wanted:
+        fig = make[name]()
+        if fig is not None:
+            out[name] = fig
+    return out
+
+
+def _draw_some(args: tuple) -> list[Path]:
+    """Worker side of :func:`write_plots_parallel`: build and save the figures named."""
+    names, res, out_dir, scene, reference, mode, current_limit, kw = args
+    _, save, files = figure_writer(out_dir, scene)
+    for name, fig in figures(res, scene, reference, mode, current_limit, only=names,
+                             **kw).items():
+        save(fig, name)
+    return files
+
+
+def _warm() -> None:
+    """A drawing worker's start: matplotlib imported while the run is still going."""
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
+
+
+class FigureWorkers:
+    """Processes that draw a run's figures beside the parent (which writes the CSV meanwhile).
+
+    Started before the run (:meth:`start`), they import matplotlib on the other core while the
+    co-simulation runs; :meth:`write_plots` then splits the figures between them.  On a
+    machine with one core, or if the processes cannot start, the figures are drawn in this
+    process (same files, same content)."""
+
+    def __init__(self, workers: int | None = None) -> None:
+        import os
+
+        self.n = workers if workers is not None else min(2, os.cpu_count() or 1)
+        self.pool = None
+
+    def start(self) -> "FigureWorkers":
+        if self.n < 2:
+            return self
+        try:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            # spawn: fresh interpreters (nothing of this process's FMU or fmpy state copied)
+            self.pool = ProcessPoolExecutor(self.n, mp_context=multiprocessing.get_context("spawn"),
+                                            initializer=_warm)
+            for _ in range(self.n):           # start the workers now, not at the first task
+                self.pool.submit(int)
+        except (OSError, RuntimeError, ImportError):
+            self.pool = None
+        return self
+
+    def write_plots(self, res: Result, out_dir: str | Path, scene: str, reference=None,
+                    mode: str = "position", current_limit: float | None = None,
+                    **kw: Any) -> list[Path]:
+        """As :func:`write_plots` (same files, in the same order)."""
+        if self.pool is None:
+            return write_plots(res, out_dir, scene, reference, mode, current_limit, **kw)
+        ref = reference_values(reference, res.time) if reference is not None else None
+        # largest first, alternating: the 3-panel figures take longest
+        order = ["motor", "forces", "position", "power", "speed", "efficiency", "carriers"]
+        parts = [order[i::self.n] for i in range(self.n)]
+        try:
+            futures = [self.pool.submit(_draw_some, (p, res, out_dir, scene, ref, mode,
+                                                     current_limit, kw)) for p in parts]
+            done = [f for fut in futures for f in fut.result()]
+        except Exception:  # noqa: BLE001 - a broken worker: draw here instead
+            return write_plots(res, out_dir, scene, reference, mode, current_limit, **kw)
+        by_name = {p.name: p for p in done}
+        return [by_name[f"{scene}_{n}.png"] for n in FIGURES if f"{scene}_{n}.png" in by_name]
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            self.pool = None
 
 
 def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mode: str = "position",
@@ -130,159 +448,10 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
         Stage -> the carriers' equilibrium speed ratio (the steady-state solver's), drawn on
         ``<scene>_carriers.png``; the figure is written when the ratios are recorded and given.
     """
-    plt, save, files = figure_writer(out_dir, scene)
-    t = res.time
-    tm = 1e3 * t
-    sub = f"\n{description}" if description else ""
-
-    def limit_lines(ax, value, label, unit, symmetric=True):
-        ax.axhline(value, color="k", lw=0.9, ls=":", label=f"{label} ±{value:.4g} {unit}"
-                   if symmetric else f"{label} {value:.4g} {unit}")
-        if symmetric:
-            ax.axhline(-value, color="k", lw=0.9, ls=":")
-
-    # position: tracking in position mode, otherwise the rod's motion
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True,
-                                 gridspec_kw={"height_ratios": [2, 1]})
-    x = res["prsm.rod_position"]
-    a1.plot(tm, 1e3 * x, label="rod position")
-    if mode == "position" and reference is not None:
-        r = np.array([reference(v) for v in t])
-        a1.plot(tm, 1e3 * r, "--", label="position reference")
-        a2.plot(tm, 1e6 * (x - r), color="C3")
-        a2.set_ylabel(label("tracking error", MICROMETRE))
-        title = "rod position tracking"
-    else:
-        a2.plot(tm, 1e3 * res["prsm.rod_velocity"], color="C2")
-        a2.set_ylabel(label("rod velocity", MILLIMETRE_PER_SECOND))
-        title = f"rod motion ({mode} control: no position reference)"
-    a1.set_ylabel(label("rod position", MILLIMETRE))
-    a1.legend()
-    a1.grid(True)
-    a2.grid(True)
-    a2.set_xlabel(label("time", MILLISECOND))
-    a1.set_title(f"{scene}: {title}{sub}", fontsize=10)
-    save(fig, "position")
-
-    # screw speed
-    fig, ax = plt.subplots(figsize=(8, 4))
-    ax.plot(tm, res["prsm.screw_speed"], label="screw (motor) speed")
-    ax.step(tm, res["controller.speed_ref"], where="post", ls="--",
-            label="speed reference" + (" (position loop output)" if mode == "position" else ""))
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("speed", RADIAN_PER_SECOND))
-    ax.grid(True)
-    ax.legend()
-    ax.set_title(f"{scene}: screw (motor) speed{sub}", fontsize=10)
-    save(fig, "speed")
-
-    # motor: currents, voltage against the inverter's limit, torque
-    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(8, 8.5), sharex=True)
-    a1.plot(tm, res["motor.i_q"], label="i_q")
-    a1.plot(tm, res["motor.i_d"], label="i_d")
-    a1.step(tm, res["controller.i_q_ref"], where="post", ls="--", label="i_q reference")
-    if current_limit:
-        limit_lines(a1, current_limit, "current limit", "A")
-    a1.set_ylabel(label("current", AMPERE))
-    a1.legend(fontsize=8, loc="best")
-    a1.grid(True)
-    vmag = np.hypot(res["motor.v_d"], res["motor.v_q"])
-    a2.plot(tm, vmag, color="C4", label="phase voltage amplitude √(v_d² + v_q²)")
-    if voltage_limit:
-        limit_lines(a2, voltage_limit, "inverter limit V_dc/√3 =", "V", symmetric=False)
-        a2.set_ylim(0.0, 1.1 * max(voltage_limit, float(np.max(vmag))))
-    a2.set_ylabel(label("voltage", VOLT))
-    a2.legend(fontsize=8, loc="best")
-    a2.grid(True)
-    a3.plot(tm, res["motor.torque"], label="electromagnetic torque")
-    a3.plot(tm, res["prsm.stage[1].driven_torque"], "--", label="torque held at the screw (PRSM input)")
-    a3.set_ylabel(label("torque", NEWTON_METRE))
-    a3.set_xlabel(label("time", MILLISECOND))
-    a3.legend(fontsize=8)
-    a3.grid(True)
-    a1.set_title(f"{scene}: motor current, voltage and torque{sub}", fontsize=10)
-    save(fig, "motor")
-
-    # forces: per roller, apart from the total load
-    n = _stages(res)
-    nr = list(n_rollers) if n_rollers else [None] * n
-    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(8, 8.5), sharex=True)
-    for k in range(1, n + 1):
-        what = f" ({nr[k - 1]} rollers)" if nr[k - 1] else ""
-        a1.plot(tm, 1e-3 * res[f"prsm.stage[{k}].contact_force"],
-                label=f"stage {k}: axial contact force per roller{what}")
-    a1.set_ylabel(label("per roller", KILONEWTON))
-    a1.legend(fontsize=8)
-    a1.grid(True)
-    a2.plot(tm, 1e-3 * res["load.force"], "k", lw=1.2, label="load force on the rod (total)")
-    for k in range(1, n + 1):
-        if nr[k - 1]:
-            a2.plot(tm, 1e-3 * nr[k - 1] * res[f"prsm.stage[{k}].contact_force"], "--",
-                    label=f"stage {k}: {nr[k - 1]} × per-roller force (all its threads)")
-    a2.set_ylabel(label("total", KILONEWTON))
-    a2.legend(fontsize=8)
-    a2.grid(True)
-    for k in range(2, n + 1):
-        a3.plot(tm, res[f"prsm.stage[{k}].spline_friction"], color=f"C{k - 1}",
-                label=f"stage {k}: spline friction (screw {k - 1} → {k})")
-    a3.set_ylabel(label("friction", NEWTON))
-    a3.set_xlabel(label("time", MILLISECOND))
-    if n > 1:
-        a3.legend(fontsize=8)
-    a3.grid(True)
-    a1.set_title(f"{scene}: thread forces per roller, and the total load{sub}", fontsize=10)
-    save(fig, "forces")
-
-    # carriers: speed ratios against their equilibrium
-    ratios = [k for k in range(1, n + 1) if f"prsm.stage[{k}].carrier_speed_ratio" in res]
-    if carrier_equilibrium and ratios:
-        fig, ax = plt.subplots(figsize=(8, 4))
-        for k in ratios:
-            ax.plot(tm, res[f"prsm.stage[{k}].carrier_speed_ratio"], color=f"C{k - 1}",
-                    label=f"stage {k}: carrier speed / screw speed")
-            if k in carrier_equilibrium:
-                ax.axhline(carrier_equilibrium[k], color=f"C{k - 1}", ls=":", lw=1.0,
-                           label=f"stage {k}: equilibrium {carrier_equilibrium[k]:.4f} "
-                                 "(steady-state solver)")
-        ax.set_xlabel(label("time", MILLISECOND))
-        ax.set_ylabel(label("carrier speed ratio", DIMENSIONLESS))
-        ax.grid(True)
-        ax.legend(fontsize=8)
-        ax.set_title(f"{scene}: carrier speed ratios{sub}", fontsize=10)
-        save(fig, "carriers")
-
-    # efficiency
-    fig, ax = plt.subplots(figsize=(8, 4))
-    ax.plot(tm, res["prsm.efficiency"], label="PRSM (instantaneous)")
-    pel = res["motor.electrical_power"]
-    pout = res["prsm.output_power"]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        eta = np.where((pel > 1.0) & (pout >= 0.0), pout / pel, np.nan)
-    ax.plot(tm, eta, label="actuator: load power / electrical power")
-    ax.set_ylim(-0.05, 1.2)
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("efficiency", DIMENSIONLESS))
-    ax.grid(True)
-    ax.legend()
-    ax.set_title(f"{scene}: efficiency (instantaneous; > 1 while stored energy is released){sub}",
-                 fontsize=10)
-    save(fig, "efficiency")
-
-    # power bookkeeping
-    fig, ax = plt.subplots(figsize=(8, 4))
-    e0 = {k: res[k] - res[k][0] for k in ("motor.magnetic_energy", "prsm.kinetic_energy")}
-    ax.plot(tm, res["motor.electrical_energy"], label="electrical input")
-    ax.plot(tm, res["motor.copper_energy"], label="copper losses")
-    ax.plot(tm, res["prsm.friction_work"], label="PRSM friction")
-    ax.plot(tm, res["prsm.output_work"], label="work on the load")
-    ax.plot(tm, e0["motor.magnetic_energy"] + e0["prsm.kinetic_energy"], label="Δ stored (kinetic + magnetic)")
-    resid = (res["motor.electrical_energy"] - res["motor.copper_energy"] - res["prsm.friction_work"]
-             - res["prsm.output_work"] - e0["motor.magnetic_energy"] - e0["prsm.kinetic_energy"])
-    ax.plot(tm, resid, "k:", label="residual")
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("energy", JOULE))
-    ax.grid(True)
-    ax.legend(fontsize=8)
-    ax.set_title(f"{scene}: power bookkeeping (integrated){sub}", fontsize=10)
-    save(fig, "power")
+    _, save, files = figure_writer(out_dir, scene)
+    for name, fig in figures(res, scene, reference, mode, current_limit,
+                             description=description, voltage_limit=voltage_limit,
+                             n_rollers=n_rollers,
+                             carrier_equilibrium=carrier_equilibrium).items():
+        save(fig, name)
     return files

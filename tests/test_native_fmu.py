@@ -29,6 +29,7 @@ pytest.importorskip("pythonfmu")
 from fmpy import read_model_description  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
+from conftest import shared_build  # noqa: E402
 from test_fmu import OK, DISCARD, Host, built_fmus, max_relative_difference, subprocess_env  # noqa: E402
 from test_fmu_c_host import STEPS as HOST_STEPS, c_host  # noqa: E402,F401 - fixture
 from text_numbers import number_after  # noqa: E402
@@ -49,12 +50,16 @@ GEOMETRY = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_
 
 @functools.cache
 def built_native() -> dict[str, Path]:
-    """Build PRSM2/PRSM3-native.fmu once per test process, in a child process."""
-    dest = Path(tempfile.mkdtemp(prefix="prsm_native_"))
-    proc = subprocess.run([sys.executable, "-m", "fmu_build", "--native", *NATIVE, "--dest",
-                           str(dest)], env=subprocess_env(), capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, f"python -m fmu_build --native failed:\n{proc.stdout}\n{proc.stderr}"
+    """Build PRSM2/PRSM3-native.fmu once per test session (shared by pytest-xdist's workers:
+    tests/conftest.py), in a child process."""
+    def build(dest: Path) -> None:
+        proc = subprocess.run([sys.executable, "-m", "fmu_build", "--native", *NATIVE, "--dest",
+                               str(dest)], env=subprocess_env(), capture_output=True, text=True,
+                              timeout=300)
+        assert proc.returncode == 0, \
+            f"python -m fmu_build --native failed:\n{proc.stdout}\n{proc.stderr}"
+
+    dest = shared_build("prsm_native", build)
     return {n: dest / f"{n}-native.fmu" for n in NATIVE}
 
 

@@ -297,9 +297,11 @@ def check_case(case: Case, baseline: Baseline, result) -> CaseResult:
 
 
 def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
-          parameters: dict[str, Any] | None = None) -> list[CaseResult]:
+          parameters: dict[str, Any] | None = None, workers: int | None = None
+          ) -> list[CaseResult]:
     """Run every case (or those named) on ``fmu`` and compare with the baselines at ``where``
-    (a directory or an FMU with ``extra/baselines``)."""
+    (a directory or an FMU with ``extra/baselines``); the cases run in ``workers`` processes
+    (default: the cores; 1: in this process)."""
     all_cases = load_cases(where)
     chosen = [c for c in all_cases if cases is None or c.name in cases]
     unknown = set(cases or ()) - {c.name for c in all_cases}
@@ -307,23 +309,46 @@ def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
         raise ValueError(f"unknown case(s) {sorted(unknown)}: the cases are "
                          f"{', '.join(c.name for c in all_cases)}")
     bases = read_baselines(where, chosen)
+    runnable = [c for c in chosen if c.name in bases]
+    runs = dict(zip((c.name for c in runnable),
+                    _run_cases(runnable, fmu, parameters, workers)))
     out = []
-    # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
-    # FMU's fatal error, recorded as a failing case, and the next case would run)
-    with deferred_interrupt() as interrupted:
-        for c in chosen:
-            if c.name not in bases:
-                out.append(CaseResult(c, [], {}, {}, error="no baseline (run prsm-fmu "
-                                                           "regress --update)"))
-                continue
-            try:
-                res = simulate_case(c, fmu, parameters=parameters,
-                                    progress=lambda t, t_end: interrupted())
-            except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
-                out.append(CaseResult(c, [], {}, {}, error=f"the run failed: {exc}"))
-                continue
-            out.append(check_case(c, bases[c.name], res))
+    for c in chosen:
+        if c.name not in bases:
+            out.append(CaseResult(c, [], {}, {}, error="no baseline (run prsm-fmu regress "
+                                                       "--update)"))
+            continue
+        res = runs[c.name]
+        if isinstance(res, str):                   # a failing run is a failing case
+            out.append(CaseResult(c, [], {}, {}, error=f"the run failed: {res}"))
+            continue
+        out.append(check_case(c, bases[c.name], res))
     return out
+
+
+def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None):
+    """One case's Result, or the message of its failure (a string), in whatever process."""
+    try:
+        return simulate_case(case, fmu, parameters=parameters)
+    except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
+        return str(exc) or type(exc).__name__
+
+
+def _run_cases(cases: list[Case], fmu: Path, parameters: dict[str, Any] | None,
+               workers: int | None) -> list:
+    """The cases' Results (or failure messages), in order: the cases are independent, so with
+    ``workers`` > 1 they run in that many fresh processes (each loads the FMU once per case as
+    the serial run does), else one after the other in this process."""
+    n = min(workers if workers is not None else (os.cpu_count() or 1), len(cases))
+    if n <= 1:
+        return [_run_case(c, fmu, parameters) for c in cases]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # spawn: a fresh interpreter per worker (no FMU or fmpy state copied from this process)
+    with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return list(pool.map(_run_case, cases, [fmu] * len(cases),
+                             [parameters] * len(cases)))
 
 
 def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None) -> str:

@@ -25,15 +25,13 @@ def _slug(text: str) -> str:
 
 def plot_output(cr: CaseResult, name: str, path: Path) -> None:
     """The tube plot of one output of one case."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..figures import save, subplots
 
     t, yb, yi, lo, hi = cr.plots[name]
     r = next(x for x in cr.results if x.name == name)
     unit = cr.units.get(name, "")
-    fig, (ax, ad) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True,
-                                 gridspec_kw={"height_ratios": [3, 2]})
+    fig, (ax, ad) = subplots(2, 1, figsize=(9, 6.5), sharex=True, hspace=0.15,
+                             gridspec_kw={"height_ratios": [3, 2]}, margins={"top": 0.45})
     ax.fill_between(t, lo, hi, color="tab:green", alpha=0.25, lw=0, label="tolerance tube")
     ax.plot(t, yb, color="tab:green", lw=1.0, label="baseline")
     ax.plot(t, yi, color="tab:red", lw=1.0, ls="--", label="this run")
@@ -52,10 +50,7 @@ def plot_output(cr: CaseResult, name: str, path: Path) -> None:
     ad.set_xlabel("time [s]")
     ad.set_ylabel(f"difference [{unit}]")
     ad.legend(loc="best", fontsize=8)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
+    save(fig, path, dpi=90)
 
 
 def verdict_table(results: list[CaseResult]) -> str:

@@ -34,7 +34,8 @@ other in this process (the reference the Dask overhead is measured against).
 
 A point is submitted once (``retries=0``, ``pure=False``); its result comes back as soon as it
 is done and is appended to the table at once, so an interrupted study keeps every finished
-point.  A rerun with the same output directory skips the points whose id (a hash of the
+point.  The progress bar shows the points done, failed and the time left; the Dask dashboard's
+progress shows the tasks (``prsm-point``) done of total.  A rerun with the same output directory skips the points whose id (a hash of the
 point's preset, parameters, scenario and backend) is already in the table with status ``ok``
 and whose series file exists; failed points are run again.  A point whose worker dies is
 recorded as failed with the scheduler's message.
@@ -66,8 +67,9 @@ from .table import (append_row, columns, markdown_table, numeric_rows, read_tabl
                     write_table)
 from .trends import TrendResult, evaluate
 
-__all__ = ["run_study", "claim_out_dir", "STUDY_MARKER", "SweepResult", "ensure_fmus", "metric_columns", "load_series",
-           "EXECUTORS", "Progress", "local_cluster", "LOOPBACK"]
+__all__ = ["run_study", "claim_out_dir", "STUDY_MARKER", "SweepResult", "ensure_fmus",
+           "metric_columns", "load_series", "EXECUTORS", "Progress", "local_cluster", "LOOPBACK",
+           "eta"]
 
 EXECUTORS = ("dask", "loop")
 
@@ -195,9 +197,11 @@ class Progress:
         self._last_decile = decile
         filled = round(frac * self.width)
         bar = "#" * filled + "." * (self.width - filled)
+        elapsed = time.perf_counter() - self.t0
+        left = eta(elapsed, self.done, n)
         text = (f"[{bar}] {self.done}/{n} points, {self.failed} failed"
                 f"{f', {self.skipped} already done' if self.skipped else ''}, "
-                f"{time.perf_counter() - self.t0:.1f} s")
+                f"{elapsed:.1f} s{f', ~{left:.0f} s left' if left is not None else ''}")
         if self.tty:
             self.stream.write("\r" + text)
         else:
@@ -208,6 +212,13 @@ class Progress:
         if self.stream is not None and self.tty:
             self.stream.write("\n")
             self.stream.flush()
+
+
+def eta(elapsed: float, done: int, total: int) -> float | None:
+    """Seconds left at the rate so far (None before the first point and once all are done)."""
+    if done <= 0 or done >= total:
+        return None
+    return elapsed / done * (total - done)
 
 
 def _label(values: dict[str, Any]) -> str:
@@ -282,6 +293,9 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
     futures = {}
     for t in tasks:
+        # one task per point: its result comes back (and is saved) while the others run;
+        # chunks of points were measured slower (benchmarks/sweep_scaling.py: 1.52x against
+        # 1.81x on 2 workers), the last chunk's results all arriving at the end
         fut = client.submit(run_point, t, blobs, key=f"prsm-point-{t.id}-{t.index}",
                             pure=False, retries=0)
         futures[fut] = t

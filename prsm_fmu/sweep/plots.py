@@ -3,12 +3,13 @@ swept parameter.
 
 * :func:`plot_time_panels`: one panel per signal (default: carrier speed ratios, axial contact
   forces per roller, efficiency, spline friction, as Li et al. (2021) Figs. 4–5), every run in its own
-  colour, stages told apart by line style.  :func:`prsm_fmu.report.plot_runs` is this function
+  colour, stages told apart by line style (a legend entry per stage style).  :func:`prsm_fmu.report.plot_runs` is this function
   with the default panels.
 * :func:`plot_steady`: one panel per metric of the table against one swept parameter, one
   line per combination of the other swept parameters.
 
-matplotlib's Agg backend is used (no display needed).
+Figures are built on :mod:`prsm_fmu.figures` (Agg canvas, no display, fixed margins);
+:func:`time_panels_figure` and :func:`steady_figure` return them unsaved.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from ..atomic import atomic_path
 from ..units import (DIMENSIONLESS, METRE, METRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
                      NEWTON_SECOND_PER_METRE, RADIAN_PER_SECOND, SECOND, WATT, label, unit_of)
 
-__all__ = ["plot_time_panels", "plot_steady", "PANELS", "DEFAULT_PANELS", "label_of",
-           "short_label"]
+__all__ = ["plot_time_panels", "plot_steady", "time_panels_figure", "steady_figure",
+           "metric_label", "PANELS", "DEFAULT_PANELS", "STAGE_STYLES", "label_of", "short_label"]
 
 #: time panels: signal -> (title, y label, per stage?, first stage)
 PANELS: dict[str, tuple[str, str, bool, int]] = {
@@ -86,16 +87,25 @@ def label_of(name: str) -> str:
     return name
 
 
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
+#: line style of stage k (k = 1, 2, ...), cycled
+STAGE_STYLES = ("-", "--", ":", "-.")
+_STYLE_NAMES = {"-": "solid", "--": "dashed", ":": "dotted", "-.": "dash-dot"}
 
 
 def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path: str,
                      panels: Sequence[str] = DEFAULT_PANELS, title: str = "") -> None:
-    """Save one panel per signal against time [ms] for several runs.
+    """Save :func:`time_panels_figure` as PNG at ``path``."""
+    from ..figures import save
+
+    save(time_panels_figure(runs, panels, title), path)
+
+
+def time_panels_figure(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]],
+                       panels: Sequence[str] = DEFAULT_PANELS, title: str = ""):
+    """One panel per signal against time [ms] for several runs; returns the Figure.
+
+    Each run has its colour; on per-stage panels each stage has its line style, and the legend
+    has an entry per stage style (``stage 1 (solid)``, ...) beside the runs' colours.
 
     Parameters
     ----------
@@ -108,17 +118,22 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
     title : str
         Figure title.
     """
-    plt = _pyplot()
+    import matplotlib
+    from matplotlib.lines import Line2D
+
+    from ..figures import subplots
+
     unknown = [p for p in panels if p not in PANELS]
     if unknown:
         raise ValueError(f"unknown time panels {unknown}: must be among {', '.join(PANELS)}")
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    stage_ls = ["-", "--", ":", "-."]
+    colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+    stage_ls = STAGE_STYLES
     n = len(panels)
     ncols = 1 if n == 1 else 2
     nrows = math.ceil(n / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(10, 3.75 * nrows), sharex=True,
-                             squeeze=False)
+    fig, axes = subplots(nrows, ncols, figsize=(10, 3.75 * nrows), sharex=True, squeeze=False,
+                         margins={"top": 0.5 + (0.35 if title else 0.0)})
+    stages_seen: dict[str, set[int]] = {p: set() for p in panels}
     ax_of = {p: axes[i // ncols, i % ncols] for i, p in enumerate(panels)}
     for ax in axes.flat[n:]:
         ax.set_visible(False)
@@ -136,6 +151,7 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
                 if k >= first and name in res:
                     ax_of[p].plot(t_ms, res[name], ls, color=c,
                                   label=run_label if k == first else None)
+                    stages_seen[p].add(k)
             k += 1
         for p in global_panels:
             if p in res:
@@ -144,34 +160,49 @@ def plot_time_panels(runs: Sequence[tuple[str, Mapping[str, np.ndarray]]], path:
         ax = ax_of[p]
         ax.set_title(f"({chr(ord('a') + i)}) {PANELS[p][0]}", fontsize=10)
         ax.set_ylabel(PANELS[p][1])
-    for ax in axes.flat[:n]:
+    for p in panels:
+        ax = ax_of[p]
         ax.grid(True, alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8, loc="best")
+        handles, labels = ax.get_legend_handles_labels()
+        # which line style is which stage: an entry per stage drawn on the panel
+        if len(stages_seen[p]) > 1:
+            for k in sorted(stages_seen[p]):
+                ls = stage_ls[(k - 1) % len(stage_ls)]
+                handles.append(Line2D([], [], color="0.3", ls=ls))
+                labels.append(f"stage {k} ({_STYLE_NAMES[ls]})")
+        if handles:
+            ax.legend(handles, labels, fontsize=8, loc="best")
     for i in range(n):
         if i >= n - ncols:
             axes.flat[i].set_xlabel(label("time", MILLISECOND))
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    return fig
 
 
-def _unit(metric: str) -> str:
-    """``[unit]`` of a metric column (settling times in s)."""
+def metric_label(metric: str) -> str:
+    """The y label of a metric column, ``quantity [unit]`` (settling times in s; the bare name
+    when the unit is unknown)."""
     signal, _, how = metric.rpartition("@")
     if how == "settle":
-        return f"[{SECOND}]"
+        return label(metric, SECOND)
     u = unit_of(signal)
-    return "" if u == "?" else f"[{u}]"
+    return metric if u == "?" else label(metric, u)
 
 
 def plot_steady(rows: Sequence[Mapping[str, Any]], x: str, metrics: Sequence[str],
                 group_by: Sequence[str], path: str, title: str = "",
                 x_values: Sequence[Any] | None = None) -> None:
-    """Save one panel per metric against the swept parameter ``x``.
+    """Save :func:`steady_figure` as PNG at ``path``."""
+    from ..figures import save
+
+    save(steady_figure(rows, x, metrics, group_by, title, x_values), path)
+
+
+def steady_figure(rows: Sequence[Mapping[str, Any]], x: str, metrics: Sequence[str],
+                  group_by: Sequence[str], title: str = "",
+                  x_values: Sequence[Any] | None = None):
+    """One panel per metric against the swept parameter ``x``; returns the Figure.
 
     Parameters
     ----------
@@ -183,19 +214,19 @@ def plot_steady(rows: Sequence[Mapping[str, Any]], x: str, metrics: Sequence[str
         Metric columns, one panel each.
     group_by : sequence of str
         Columns whose combinations make the lines (the other swept parameters).
-    path : str
-        Output PNG.
     title : str
         Figure title.
     x_values : sequence, optional
         Tick labels for a non-numeric ``x`` (in order).
     """
-    plt = _pyplot()
+    from ..figures import subplots
+
     ok = [r for r in rows if r.get("status") == "ok"]
     n = max(len(metrics), 1)
     ncols = 1 if n == 1 else 2
     nrows = math.ceil(n / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(10, 3.6 * nrows), squeeze=False)
+    fig, axes = subplots(nrows, ncols, figsize=(10, 3.6 * nrows), squeeze=False,
+                         margins={"top": 0.5 + (0.35 if title else 0.0)}, wspace=0.35)
     for ax in axes.flat[n:]:
         ax.set_visible(False)
     groups: dict[tuple, list] = {}
@@ -219,13 +250,10 @@ def plot_steady(rows: Sequence[Mapping[str, Any]], x: str, metrics: Sequence[str
             ax.set_xticklabels([str(o) for o in order], fontsize=8)
         ax.set_title(f"({chr(ord('a') + i)}) {m}", fontsize=10)
         ax.set_xlabel(label_of(x))
-        ax.set_ylabel(_unit(m))
+        ax.set_ylabel(metric_label(m))
         ax.grid(True, alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8, loc="best")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    return fig

@@ -1,0 +1,241 @@
+"""What a user waits for: the commands' cost, this checkout against an older commit, in one run.
+
+The older code (default: commit 707572e, before the "speed a user feels" work) is unpacked with
+``git archive`` into a temporary folder and run through ``PYTHONPATH`` (it comes before the
+editable install of this checkout on ``sys.path``); this checkout runs the same way.  Every
+measurement runs in a fresh child process; old and new repetitions are interleaved (old, new,
+old, new, ...) and the median of each counts, so a load that comes and goes on a shared machine
+hits both alike.  Printed, each beside its goal:
+
+1. ``prsm-ema list``: CPU time [s] (user + system of the child), old and new, against
+   ``python -c "import numpy"`` — goal ≤ 1× numpy's import [floor ≤ 2×];
+2. the README's first command, ``prsm-ema run --scene position_step``: wall time, old / new,
+   with the same files written — goal ≥ 3× [≥ 2×].  Each tree's ``dist/PRSM2.fmu`` is built
+   before the clock starts (its first run builds it; not timed);
+3. writing the results CSV of ``position_step`` held 1.5 s (15 001 rows: the 0.25 s run's
+   result repeated to that length, every column a real output): CPU of ``write_csv``, old / new
+   — goal ≥ 10× [≥ 5×];
+4. the figures of that 0.25 s run (``write_plots``, matplotlib imported inside): CPU, old / new;
+5. the pythonfmu FMU's start-up, instantiate to the end of the first ``doStep`` (fmpy, in a
+   fresh process: imports included), old FMU / new FMU.
+
+Not measured here (say so rather than guess): the sweep's scaling (``benchmarks/sweep_scaling.py``)
+and ``prsm-fmu regress`` (``--regress`` adds it: wall time, old / new).
+
+Run: ``python benchmarks/command_cost.py [--old 707572e] [--repeat 3] [--regress]``
+(several minutes: the README command runs 2 × repeat times).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pickle
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _env(tree: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(tree)
+    env.pop("PYTHONHASHSEED", None)
+    return env
+
+
+#: the children's working directory when none is given: not a source tree (``python -m`` and
+#: ``python -c`` put the working directory first on sys.path, before PYTHONPATH)
+NEUTRAL = Path(tempfile.gettempdir())
+
+
+def _child(args: list[str], tree: Path, cwd: Path | None = None) -> tuple[float, float, str]:
+    """(CPU [s] of the child, wall [s], stdout) of one child process."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run(args, env=_env(tree), cwd=cwd or NEUTRAL, capture_output=True,
+                          text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode not in ((0, 1) if "run" in args else (0,)):
+        raise RuntimeError(f"{' '.join(args)} (PYTHONPATH={tree}) failed:\n{proc.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return cpu, wall, proc.stdout
+
+
+def _interleaved(repeat: int, runs: dict[str, callable]) -> dict[str, list]:
+    out: dict[str, list] = {k: [] for k in runs}
+    for _ in range(repeat):
+        for k, f in runs.items():
+            out[k].append(f())
+    return out
+
+
+def _med(xs) -> float:
+    return statistics.median(xs)
+
+
+def _old_tree(commit: str, where: Path) -> Path:
+    tree = where / f"old-{commit}"
+    tree.mkdir()
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    return tree
+
+
+_WRITE = """
+import pickle, sys, time
+from system_models.output import write_csv
+res = pickle.load(open(sys.argv[1], 'rb'))
+t = time.process_time()
+write_csv(res, sys.argv[2], ["prsm.rod_position"])
+print(time.process_time() - t)
+"""
+
+_PLOTS = """
+import pickle, sys, time
+t = time.process_time()
+from system_models.output import write_plots
+res = pickle.load(open(sys.argv[1], 'rb'))
+write_plots(res, sys.argv[2], "position_step", lambda s: 0.01 if s >= 0.01 else 0.0,
+            "position", 40.0, description="rod position step", voltage_limit=300.0,
+            n_rollers=[10, 10])
+print(time.process_time() - t)
+"""
+
+_RESULT = """
+import pickle, sys
+import numpy as np
+from system_models.run import run_scene
+from system_models.master import Result
+run = run_scene("position_step", prsm="fmu", fmu_path=sys.argv[1])
+r = run.result
+pickle.dump(r, open(sys.argv[2], "wb"))
+# 1.5 s on the same grid: the run's rows repeated (time continued on the grid)
+n = 15001
+reps = -(-n // r.time.size)
+h = float(r.time[1] - r.time[0])
+values = {k: np.tile(v, reps)[:n] for k, v in r.values.items()}
+pickle.dump(Result(r.time[0] + h * np.arange(n), values, dict(r.units)), open(sys.argv[3], "wb"))
+"""
+
+_STARTUP = """
+import sys, time
+t0 = time.perf_counter()
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+path = sys.argv[1]
+md = read_model_description(path)
+unzip = extract(path)
+s = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+              modelIdentifier=md.coSimulation.modelIdentifier, instanceName="b")
+s.instantiate()
+s.setupExperiment(startTime=0.0)
+s.enterInitializationMode()
+s.exitInitializationMode()
+s.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+print(time.perf_counter() - t0)
+"""
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--old", default="707572e", help="the commit to compare with")
+    ap.add_argument("--repeat", type=int, default=3, help="repetitions of each (median counts)")
+    ap.add_argument("--regress", action="store_true", help="also time prsm-fmu regress")
+    args = ap.parse_args()
+    py = sys.executable
+    with tempfile.TemporaryDirectory(prefix="command_cost_") as tmp:
+        tmp = Path(tmp)
+        trees = {"old": _old_tree(args.old, tmp), "new": ROOT}
+        print(f"old: {args.old} (git archive into a temporary folder); new: {ROOT}; "
+              f"median of {args.repeat} interleaved runs each, this machine, this run\n")
+
+        # 1. prsm-ema list
+        r = _interleaved(args.repeat + 2, {
+            "numpy": lambda: _child([py, "-c", "import numpy"], trees["new"])[0],
+            "old": lambda: _child([py, "-m", "system_models", "list"], trees["old"])[0],
+            "new": lambda: _child([py, "-m", "system_models", "list"], trees["new"])[0]})
+        n, o, w = (_med(r[k]) for k in ("numpy", "old", "new"))
+        print(f"1. prsm-ema list, CPU: numpy import {n:.3f} s, old {o:.3f} s ({o / n:.2f}x numpy), "
+              f"new {w:.3f} s ({w / n:.2f}x numpy)   goal <= 1x [<= 2x]")
+
+        # FMUs of each tree, built before any clock (the README command's dist/PRSM2.fmu)
+        work = {k: tmp / f"run-{k}" for k in trees}
+        for k, tree in trees.items():
+            work[k].mkdir()
+            subprocess.run([py, "-m", "fmu_build", "PRSM2", "--dest", str(work[k] / "dist")],
+                           env=_env(tree), cwd=work[k], check=True, capture_output=True)
+
+        # 2. the README's first command
+        def readme(k: str) -> float:
+            out = work[k] / "out"
+            shutil.rmtree(out, ignore_errors=True)
+            wall = _child([py, "-m", "system_models", "run", "--scene", "position_step",
+                           "--out", str(out)], trees[k], cwd=work[k])[1]
+            return wall
+
+        r = _interleaved(args.repeat, {k: (lambda k=k: readme(k)) for k in trees})
+        files = {k: sorted(p.name for p in (work[k] / "out").iterdir()) for k in trees}
+        o, w = _med(r["old"]), _med(r["new"])
+        print(f"2. prsm-ema run --scene position_step, wall: old {o:.2f} s, new {w:.2f} s, "
+              f"{o / w:.2f}x faster   goal >= 3x [>= 2x]; same files written: "
+              f"{files['old'] == files['new']} ({len(files['new'])} files)")
+
+        # 3. writing the 1.5 s result; 4. the figures of the 0.25 s run
+        short, long_ = tmp / "result_0.25s.pkl", tmp / "result_1.5s.pkl"
+        subprocess.run([py, "-c", _RESULT, str(work["new"] / "dist" / "PRSM2.fmu"), str(short),
+                        str(long_)], env=_env(trees["new"]), cwd=NEUTRAL, check=True,
+                       capture_output=True)
+
+        def write(k: str) -> float:
+            return float(_child([py, "-c", _WRITE, str(long_), str(tmp / f"w-{k}.csv")],
+                                trees[k])[2].split()[-1])
+
+        r = _interleaved(args.repeat, {k: (lambda k=k: write(k)) for k in trees})
+        o, w = _med(r["old"]), _med(r["new"])
+        rows = sum(1 for _ in open(tmp / "w-new.csv", encoding="utf-8")) - 1
+        print(f"3. write_csv, {rows} rows: old {o:.3f} s, new {w:.3f} s CPU, {o / w:.1f}x faster"
+              f"   goal >= 10x [>= 5x]")
+
+        def plots(k: str) -> float:
+            d = tmp / f"plots-{k}"
+            d.mkdir(exist_ok=True)
+            return float(_child([py, "-c", _PLOTS, str(short), str(d)], trees[k])[2].split()[-1])
+
+        r = _interleaved(args.repeat, {k: (lambda k=k: plots(k)) for k in trees})
+        o, w = _med(r["old"]), _med(r["new"])
+        print(f"4. write_plots (7 figures, matplotlib import included): old {o:.2f} s, new {w:.2f} s "
+              f"CPU, {o / w:.2f}x faster")
+
+        # 5. the FMU's start-up
+        r = _interleaved(args.repeat + 2, {k: (lambda k=k: float(_child(
+            [py, "-c", _STARTUP, str(work[k] / "dist" / "PRSM2.fmu")], trees[k])[2].split()[-1]))
+            for k in trees})
+        o, w = _med(r["old"]), _med(r["new"])
+        print(f"5. pythonfmu FMU start-up (import fmpy .. end of the first doStep), wall: old "
+              f"{o:.2f} s, new {w:.2f} s, {o / w:.2f}x")
+
+        if args.regress:
+            r = _interleaved(args.repeat, {k: (lambda k=k: _child(
+                [py, "-m", "prsm_fmu.cli", "regress", "--out", str(tmp / f"reg-{k}")],
+                trees[k], cwd=work[k])[1]) for k in trees})
+            o, w = _med(r["old"]), _med(r["new"])
+            print(f"6. prsm-fmu regress, wall: old {o:.1f} s, new {w:.1f} s, {o / w:.2f}x   "
+                  "goal >= 3x [>= 2x]")
+        else:
+            print("6. prsm-fmu regress: not measured (--regress)")
+        print("   sweep scaling: not measured here (python benchmarks/sweep_scaling.py)")
+        print(json.dumps({"note": "ratios from one run; absolute times depend on the load"}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,87 @@
+"""Figure setup shared by every PNG the package writes: matplotlib's object API on the Agg canvas.
+
+Why not ``pyplot`` and ``tight_layout``: importing ``matplotlib.pyplot`` costs ~0.5 s (its GUI
+backend machinery), and ``tight_layout`` draws each figure once more to measure its labels
+before ``savefig`` draws it again.  Here a figure is a :class:`matplotlib.figure.Figure` on an
+Agg canvas, its margins are fixed in inches (room for two title lines, tick labels and an axis
+label) and it is drawn once, when saved.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+__all__ = ["new_figure", "subplots", "set_margins", "save", "legend_outside", "Pyplotless"]
+
+#: margins [in]: left (tick labels + y label), right, bottom (tick labels + x label), top (two
+#: title lines)
+MARGINS = {"left": 0.95, "right": 0.2, "bottom": 0.55, "top": 0.6}
+
+
+def new_figure(figsize: tuple[float, float]):
+    """A Figure [in] on an Agg canvas (no pyplot, no display)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def set_margins(fig, *, left: float | None = None, right: float | None = None,
+                bottom: float | None = None, top: float | None = None,
+                hspace: float = 0.35, wspace: float = 0.3) -> None:
+    """Fix the subplot area by margins in inches (defaults: :data:`MARGINS`)."""
+    w, h = fig.get_size_inches()
+    m = dict(MARGINS)
+    m.update({k: v for k, v in (("left", left), ("right", right), ("bottom", bottom),
+                                ("top", top)) if v is not None})
+    fig.subplots_adjust(left=m["left"] / w, right=1.0 - m["right"] / w, bottom=m["bottom"] / h,
+                        top=1.0 - m["top"] / h, hspace=hspace, wspace=wspace)
+
+
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float] = (8, 4),
+             margins: dict[str, float] | None = None, hspace: float = 0.35,
+             wspace: float = 0.3, **kw: Any):
+    """(fig, axes) as ``pyplot.subplots``, on :func:`new_figure`, with fixed margins [in] and
+    spacing (fractions of the mean axes height/width)."""
+    fig = new_figure(figsize)
+    axes = fig.subplots(nrows, ncols, **kw)
+    set_margins(fig, hspace=hspace, wspace=wspace, **(margins or {}))
+    return fig, axes
+
+
+def legend_outside(ax, **kw: Any):
+    """The legend to the right of the axes, top-aligned: it can cover no data."""
+    kw.setdefault("fontsize", 8)
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kw)
+
+
+def save(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Write the figure as PNG (one draw), whole or not at all (:func:`prsm_fmu.atomic.atomic_path`:
+    an interrupted run leaves no half-written file)."""
+    from .atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    return Path(path)
+
+
+class Pyplotless:
+    """The two calls of ``pyplot`` the figure writers use (``subplots``, ``rcParams``), made on
+    :func:`subplots` with the default margins."""
+
+    @staticmethod
+    def subplots(nrows: int = 1, ncols: int = 1, **kw: Any):
+        return subplots(nrows, ncols, **kw)
+
+    @property
+    def rcParams(self):
+        import matplotlib
+
+        return matplotlib.rcParams
+
+    @staticmethod
+    def close(fig) -> None:
+        """Nothing to release: the figure is not registered anywhere."""

@@ -1,0 +1,197 @@
+"""Plot layout: what the figures show, checked on the Figure objects (axis labels, tick ranges,
+legend boxes against the axes, the plotted data), not on pixels.
+
+* the tracking error is plotted in a unit whose ticks read well (at most three integer digits);
+* the power bookkeeping's legend lies outside the axes, so it covers no data;
+* the sweep's steady figures label their y axes ``quantity [unit]``;
+* the sweep's time panels say which line style is which stage;
+* the loop's efficiency plot shows standstill as a gap (NaN), not a drop to 0.
+
+The figures are caught when saved (``Figure.savefig`` spied on), so the tests drive the public
+writers (``write_plots``, ``plot_steady``, ``plot_time_panels``).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from system_models.master import Result
+from system_models.output import write_plots
+from prsm_fmu.sweep.plots import plot_steady, plot_time_panels
+
+#: an axis unit -> metres per unit (the test's own table)
+METRES_PER = {"µm": 1e-6, "mm": 1e-3, "m": 1.0}
+
+
+@pytest.fixture()
+def saved(monkeypatch):
+    """Figures saved while active, by the file name they were saved to (not rendered: the
+    tests read the Figure objects)."""
+    from matplotlib.figure import Figure
+
+    figs: dict[str, Figure] = {}
+
+    def spy(self, fname, *args, **kwargs):
+        figs[str(fname).rsplit("/", 1)[-1]] = self
+
+    monkeypatch.setattr(Figure, "savefig", spy)
+    return figs
+
+
+def _step_result(n: int = 601, standstill_from: int = 400) -> Result:
+    """A 10 mm position step answered by a first-order rod (τ = 5 ms), held still from sample
+    ``standstill_from`` on (no power flows there: the model's efficiency output is 0)."""
+    t = np.linspace(0.0, 0.06, n)
+    x = 0.01 * (1.0 - np.exp(-t / 5e-3))
+    moving = np.arange(n) < standstill_from
+    v = np.where(moving, 0.01 / 5e-3 * np.exp(-t / 5e-3), 0.0)
+    force = np.full(n, 3000.0)
+    p_out = force * v
+    p_in = np.where(moving, p_out / 0.8, 0.0)            # 80 % efficient while moving
+    eta = np.where(moving, 0.8, 0.0)
+    z = np.zeros(n)
+    vals = {"prsm.rod_position": x, "prsm.rod_velocity": v, "prsm.screw_speed": v * 1e3,
+            "controller.speed_ref": v * 1e3, "motor.i_q": p_in / 10, "motor.i_d": z,
+            "controller.i_q_ref": p_in / 10, "motor.v_d": z + 1.0, "motor.v_q": z + 2.0,
+            "motor.torque": p_in / 100, "prsm.stage[1].driven_torque": p_in / 100,
+            "prsm.stage[1].contact_force": force / 10, "prsm.stage[2].contact_force": force / 10,
+            "prsm.stage[2].spline_friction": z + 5.0, "load.force": force,
+            "prsm.efficiency": eta, "prsm.input_power": p_in, "prsm.output_power": p_out,
+            "motor.electrical_power": p_in * 1.1,
+            "motor.magnetic_energy": z, "prsm.kinetic_energy": z,
+            "motor.electrical_energy": np.cumsum(p_in * 1.1) * 1e-4,
+            "motor.copper_energy": np.cumsum(p_in * 0.1) * 1e-4,
+            "prsm.friction_work": np.cumsum(p_in * 0.2) * 1e-4,
+            "prsm.output_work": np.cumsum(p_out) * 1e-4}
+    return Result(t, vals, {k: "" for k in vals})
+
+
+def _write(saved, tmp_path, res):
+    write_plots(res, tmp_path, "s", lambda t: 0.01, "position", 40.0, voltage_limit=300.0,
+                n_rollers=[10, 10])
+    return saved
+
+
+def test_tracking_error_unit_keeps_ticks_to_three_digits(saved, tmp_path):
+    res = _step_result()
+    fig = _write(saved, tmp_path, res)["s_position.png"]
+    ax = fig.get_axes()[1]
+    m = re.fullmatch(r"tracking error \[(.+)\]", ax.get_ylabel())
+    assert m, ax.get_ylabel()
+    lo, hi = ax.get_ylim()
+    ticks = [v for v in ax.get_yticks() if lo <= v <= hi]
+    # the error runs from -10 mm to 0: in µm the ticks would reach -10000
+    assert ticks and max(abs(v) for v in ticks) < 1000, (m.group(1), ticks)
+    # the plotted values are the error in the labelled unit
+    line = ax.get_lines()[0]
+    err_m = np.asarray(line.get_ydata()) * METRES_PER[m.group(1)]
+    assert np.allclose(err_m, res["prsm.rod_position"] - 0.01, rtol=1e-12, atol=1e-15)
+
+
+def test_power_legend_lies_outside_the_axes(saved, tmp_path):
+    fig = _write(saved, tmp_path, _step_result())["s_power.png"]
+    fig.canvas.draw()
+    ax = fig.get_axes()[0]
+    leg = ax.get_legend()
+    assert leg is not None and len(leg.get_texts()) == 6
+    box = leg.get_window_extent()
+    axes_box = ax.get_window_extent()
+    # no overlap with the axes' area (where every line is drawn)
+    overlap_w = min(box.x1, axes_box.x1) - max(box.x0, axes_box.x0)
+    overlap_h = min(box.y1, axes_box.y1) - max(box.y0, axes_box.y0)
+    assert overlap_w <= 0 or overlap_h <= 0, (box, axes_box)
+    # and it is inside the figure (not cut off)
+    fig_box = fig.bbox
+    assert box.x1 <= fig_box.x1 + 1 and box.y0 >= fig_box.y0 - 1
+
+
+def test_efficiency_standstill_is_a_gap_not_a_drop(saved, tmp_path):
+    res = _step_result(standstill_from=400)
+    fig = _write(saved, tmp_path, res)["s_efficiency.png"]
+    ax = fig.get_axes()[0]
+    prsm = next(ln for ln in ax.get_lines() if ln.get_label().startswith("PRSM"))
+    y = np.asarray(prsm.get_ydata(), dtype=float)
+    assert np.all(np.isnan(y[400:])), "standstill drawn as values, not a gap"
+    # moving: the efficiency as given (0.8), where power flows (from sample 1: v(0) > 0)
+    assert np.allclose(y[:300], 0.8)
+    # an efficiency the model leaves undefined (NaN) stays a gap
+    res.values["prsm.efficiency"] = np.where(np.arange(res.time.size) < 100, np.nan, 0.8)
+    saved.clear()
+    fig = _write(saved, tmp_path, res)["s_efficiency.png"]
+    prsm = next(ln for ln in fig.get_axes()[0].get_lines() if ln.get_label().startswith("PRSM"))
+    assert np.all(np.isnan(np.asarray(prsm.get_ydata(), dtype=float)[:100]))
+
+
+def test_steady_figure_y_labels_name_quantity_and_unit(saved, tmp_path):
+    rows = [{"status": "ok", "mu_screw_roller": mu, "load_force": f,
+             "stage[1].contact_force@final": 100.0 * mu * f, "efficiency@final": 0.9 - mu,
+             "stage[1].carrier_speed_ratio@settle": 0.01 / mu}
+            for mu in (0.05, 0.1, 0.15) for f in (1000.0, 2000.0)]
+    metrics = ["stage[1].contact_force@final", "efficiency@final",
+               "stage[1].carrier_speed_ratio@settle"]
+    plot_steady(rows, "mu_screw_roller", metrics, ["load_force"], str(tmp_path / "st.png"))
+    fig = saved["st.png"]
+    labels = [ax.get_ylabel() for ax in fig.get_axes() if ax.get_visible()]
+    assert len(labels) == 3
+    for lab, m in zip(labels, metrics):
+        mm = re.fullmatch(r"(.+) \[(.+)\]", lab)
+        assert mm and mm.group(1).strip(), f"bare unit {lab!r}"
+        assert m in mm.group(1)
+    assert [re.fullmatch(r".+ \[(.+)\]", x).group(1) for x in labels] == ["N", "1", "s"]
+
+
+def test_time_panels_legend_tells_the_stage_line_styles(saved, tmp_path):
+    t = np.linspace(0.0, 1e-3, 50)
+    runs = []
+    for j, mu in enumerate((0.05, 0.1)):
+        runs.append((f"µ {mu}", {"time": t,
+                                 "stage[1].carrier_speed_ratio": 0.4 + 0 * t + j * 0.01,
+                                 "stage[2].carrier_speed_ratio": 0.45 + 0 * t + j * 0.01,
+                                 "stage[1].contact_force": 100 + t, "stage[2].contact_force": 90 + t,
+                                 "efficiency": 0.8 + 0 * t,
+                                 "stage[2].spline_friction": 5 + t}))
+    plot_time_panels(runs, str(tmp_path / "tp.png"))
+    fig = saved["tp.png"]
+    ax = fig.get_axes()[0]                          # carrier speed ratios, two stages
+    drawn = {}
+    for ln in ax.get_lines():
+        drawn.setdefault(ln.get_linestyle(), 0)
+        drawn[ln.get_linestyle()] += 1
+    assert len(drawn) == 2                          # stage 1 and stage 2 styles
+    leg = ax.get_legend()
+    entries = dict(zip([t.get_text() for t in leg.get_texts()], leg.legend_handles))
+    stage_entries = {k: h for k, h in entries.items() if k.startswith("stage ")}
+    assert sorted(k.split()[1] for k in stage_entries) == ["1", "2"], list(entries)
+    # each stage entry carries the line style its stage is drawn with
+    first_of = {}
+    for ln in ax.get_lines():
+        first_of.setdefault(ln.get_linestyle(), ln)
+    styles = sorted(h.get_linestyle() for h in stage_entries.values())
+    assert styles == sorted(drawn), (styles, drawn)
+    # and the runs keep their entries
+    assert {"µ 0.05", "µ 0.1"} <= set(entries)
+
+
+def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path):
+    """prsm-ema run draws its figures in two spawned processes: the same files, byte for byte
+    (Agg renders deterministically), as drawn in this process."""
+    from system_models.output import FigureWorkers
+
+    res = _step_result()
+    kw = dict(voltage_limit=300.0, n_rollers=[10, 10], description="a step")
+    (tmp_path / "here").mkdir()
+    (tmp_path / "there").mkdir()
+    here = write_plots(res, tmp_path / "here", "s", lambda t: 0.01, "position", 40.0, **kw)
+    workers = FigureWorkers(2).start()
+    try:
+        there = workers.write_plots(res, tmp_path / "there", "s", lambda t: 0.01, "position",
+                                    40.0, **kw)
+        assert workers.pool is not None              # really drawn in the workers
+    finally:
+        workers.close()
+    assert [p.name for p in there] == [p.name for p in here]
+    for a, b in zip(here, there):
+        assert a.read_bytes() == b.read_bytes(), a.name
