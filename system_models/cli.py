@@ -131,7 +131,6 @@ def _plots(run, out: Path, workers=None) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
-    from prsm_fmu.command import deferred_interrupt
     from prsm_fmu.extras import require
 
     from .fmu import FMUError, ensure_fmu
@@ -160,7 +159,7 @@ def _cmd_run(args, ap) -> int:
         # the fmu extra, before anything runs: fmpy steps the FMU, pythonfmu builds it (and
         # the native FMU's builder imports it)
         require("fmpy", "pythonfmu", purpose=f"running the PRSM as an FMU (--prsm {args.prsm})")
-        from fmu_build.builder import BuildError
+        from fmu_build.errors import BuildError
 
         build_errors = (FMUError, BuildError)
     if args.step is not None:
@@ -183,16 +182,16 @@ def _cmd_run(args, ap) -> int:
     # the figures' processes start now and import matplotlib while the scene runs
     workers = None if args.no_plots or scene.topology != "direct" else FigureWorkers().start()
     try:
-        return _run_and_write(args, ap, scene, fmu_path, retry, workers)
+        return _run_and_write(args, ap, scene, fmu_path, retry, workers, build_errors)
     finally:
         if workers is not None:
             workers.close()
 
 
-def _run_and_write(args, ap, scene, fmu_path, retry, workers) -> int:
-    from fmu_build.builder import BuildError
+def _run_and_write(args, ap, scene, fmu_path, retry, workers,
+                   build_errors: tuple[type[Exception], ...]) -> int:
+    from prsm_fmu.command import deferred_interrupt
 
-    from .fmu import FMUError
     from .master import CoSimulationError
     from .output import write_csv, write_summary
     from .progress import Progress

@@ -35,7 +35,10 @@ def saved(monkeypatch):
     figs: dict[str, Figure] = {}
 
     def spy(self, fname, *args, **kwargs):
-        figs[str(fname).rsplit("/", 1)[-1]] = self
+        name = str(fname).rsplit("/", 1)[-1]
+        # written whole: saved to a temporary ".NAME.<random>.part.png" beside NAME, then renamed
+        whole = re.fullmatch(r"\.(.+)\.[^.]+\.part\.[^.]+", name)
+        figs[whole.group(1) if whole else name] = self
 
     monkeypatch.setattr(Figure, "savefig", spy)
     return figs
