@@ -88,7 +88,7 @@ REFERENCE_RTOL, CHECK_RTOL = 1e-12, 1e-11
 AUTO_FIXED_STEP_TOLERANCE = 1e-6
 #: errors below this are plotted at it (round-off; a log axis has no zero)
 ERROR_FLOOR = 1e-16
-#: the dynamic level's ROS34PW2 in C (fmu_build.native_stepper, the native FMU's code): the
+#: the dynamic level's ROS34PW2 in C (fmu_build.native_stepper, the compiled engine both FMUs run): the
 #: configuration's outputs, errors and rhs calls are simulate's with the Python ROS34PW2 at the
 #: same options, its cost the timed replay with the C stepper (one call into C for the run's
 #: communication steps, NativeStepper.advance_many), whose final outputs must equal
@@ -687,7 +687,7 @@ def summary(scene: Scene, result: dict) -> list[str]:
         lines.append(f"  speed-up over Radau at rtol 1e-6 (error {conventional.error:.2e}): "
                      f"{conventional.cpu_per_s / best.cpu_per_s:.1f}x")
     if native is not None:
-        lines.append(f"the same ROS34PW2 in C (the native FMU's code, fmu_build.native_stepper), "
+        lines.append(f"the same ROS34PW2 in C (the compiled engine both FMUs run, fmu_build.native_stepper), "
                      f"cheapest at error ≤ {scene.target_error:g}: {native.config.label} (error "
                      f"{native.error:.2e}, {native.cpu_per_s:.3e} CPU s/s): "
                      f"{best.cpu_per_s / native.cpu_per_s:.1f}x the Python steppers' cheapest"
