@@ -6,9 +6,11 @@
 * ``prsm_engine_interface.py``: the engine's ctypes interface (:mod:`fmu_build.native_stepper`
   under a name of its own, which never shadows the ``fmu_build`` of a process that has one);
   not the FMU builders;
-* ``binaries/<platform>/prsm_engine.so``: the compiled engine (the native FMU's C model and
-  steppers with the flat interface ``prsm_api.c``) for the build's platform and geometry,
-  compiled here with gcc, so that no compiler is needed where the FMU runs, and
+* ``binaries/<platform>/prsm_engine.{so,dll}``: the compiled engine (the native FMU's C model
+  and steppers with the flat interface ``prsm_api.c``) for the build's geometry, for linux64
+  (glibc 2.17 and later) and win64, cross-compiled here with Zig's C compiler and checked (gcc
+  for this platform alone where ziglang is missing), so that no compiler is needed where the
+  FMU runs, and
   ``prsm_engine.json``: the geometry parameters it was built with (an instance whose geometry
   differs runs the Python model, logged);
 * ``prsm_start_values.json``: the parameters' start values, read by every instance.
@@ -100,21 +102,38 @@ def stage_runtime(dest: Path) -> list[Path]:
 
 
 def stage_engine(dest: Path, params: MechanismParams) -> list[Path]:
-    """Compile the engine for ``params``' geometry into ``dest/binaries/<platform>/`` and
-    describe it in ``dest/prsm_engine.json``; the project files created.
+    """Build the engine for ``params``' geometry into ``dest/binaries/<platform>/`` for every
+    platform pythonfmu ships a wrapper for (:data:`fmu_build.platforms.PYTHONFMU_PLATFORMS`:
+    cross-compiled with Zig's C compiler and checked, :mod:`fmu_build.engine_library`), and
+    describe it in ``dest/prsm_engine.json``; the project files created.  Without ziglang, this
+    platform's library is compiled with gcc instead (and the others are left out).
 
     Raises
     ------
     fmu_build.builder.BuildError
-        When gcc is missing or fails.
+        When no library can be built for this platform (no ziglang and no gcc).
     """
+    from .engine_library import build_engine_library
+    from .errors import BuildError
     from .native import STRUCTURAL
-    from .native_stepper import library_file
+    from .platforms import PYTHONFMU_PLATFORMS
 
-    lib = library_file(params)
-    folder = dest / "binaries" / platform_folder()
-    folder.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(lib, folder / library_name())
+    here = platform_folder()
+    built = []
+    for plat in PYTHONFMU_PLATFORMS:
+        try:
+            built.append(build_engine_library(params, plat, dest / "binaries" / plat))
+        except BuildError:
+            if plat != here:
+                continue
+            from .native_stepper import library_file   # no ziglang: gcc, this platform only
+
+            folder = dest / "binaries" / here
+            folder.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(library_file(params), folder / library_name())
+            built.append(folder / library_name())
+    if not built:
+        raise BuildError("no engine library could be built for any platform")
     geometry = {f"stage[{k}].{f}": getattr(st, f)
                 for k, st in enumerate(params.stages, start=1) for f in STRUCTURAL}
     (dest / ENGINE_FILE).write_text(json.dumps({"geometry": geometry}, indent=1),
