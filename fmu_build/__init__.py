@@ -35,7 +35,8 @@ __all__ = ["build_fmu", "build_native", "build_named", "validate", "BuildError",
 
 def build_named(name: str, dest="dist", check: bool = True, start: dict | None = None,
                 native: bool = False, engine: bool = True,
-                targets: tuple[str, ...] | None = None):
+                targets: tuple[str, ...] | None = None,
+                engine_platforms: tuple[str, ...] | None = None):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
     (``start``: parameter start values other than the preset's, see ``builder.start_values``;
     for the native FMU not the structural ones).
@@ -43,7 +44,8 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
     ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
     levels, :mod:`fmu_build.native`) instead of the Python one; ``targets``: its platforms
     (default: all of :data:`fmu_build.platforms.FMI2_PLATFORMS`).  ``engine``: the Python FMU
-    packs the compiled engine (:mod:`fmu_build.packing`); False: the Python model only.
+    packs the compiled engine (:mod:`fmu_build.packing`; for this platform and
+    ``engine_platforms``); False: the Python model only.
 
     Returns
     -------
@@ -61,4 +63,5 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
             return build_native(name, make(), source, dest, check, start)
         return build_native(name, make(), source, dest, check, start, targets)
     from .builder import build_fmu
-    return build_fmu(name, make(), source, dest, check, start, engine=engine)
+    return build_fmu(name, make(), source, dest, check, start, engine=engine,
+                     engine_platforms=engine_platforms)

@@ -3,7 +3,7 @@
 ::
 
     prsm-fmu-build [PRSM1 PRSM2 PRSM3 | --all] [--native [--platform P ...] [--fmi-version V]]
-                   [--engine native|python] [--dest DIR] [--no-validate]
+                   [--engine native|python] [--engine-platform P ...] [--dest DIR] [--no-validate]
     prsm-fmu-build --preset NAME --name ID [--native] [--engine native|python] [--dest DIR]
 
 ``--native`` builds ``<name>-native.fmu`` instead: the kinematic, quasi-static and dynamic
@@ -25,7 +25,7 @@ from prsm_fmu.command import run_command
 from prsm_fmu.extras import require
 
 from .mechanisms import FMUS
-from .platforms import FMI2_PLATFORMS
+from .platforms import FMI2_PLATFORMS, PYTHONFMU_PLATFORMS
 
 DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, pythonfmu) into "
                "DIR: PRSM2 by default, any of the standard FMUs by name or all with --all, or "
@@ -55,6 +55,10 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--native", action="store_true",
                     help="build the native C FMU <name>-native.fmu (kinematic, quasi-static and "
                          "dynamic levels; needs ziglang) instead of the Python one")
+    ap.add_argument("--engine-platform", action="append", choices=PYTHONFMU_PLATFORMS,
+                    metavar="P", help="also pack the Python FMU's engine for platform P, of "
+                    f"{', '.join(PYTHONFMU_PLATFORMS)} (cross-compiled with Zig; a machine's "
+                    "first win64 build compiles Zig's Windows runtime, minutes); repeatable")
     ap.add_argument("--engine", choices=("native", "python"), default="native",
                     help="what computes the physics of the Python FMU: native (default) packs "
                          "the compiled engine for this platform (needs gcc to build; the "
@@ -156,7 +160,8 @@ def _main(argv: list[str] | None) -> int:
                                         plats)]
             else:
                 targets = [build_fmu(args.name, params, args.preset, args.dest, check, start,
-                                     engine=args.engine == "native")]
+                                     engine=args.engine == "native",
+                                     engine_platforms=tuple(args.engine_platform or ()))]
         else:
             unknown = [n for n in args.names if n not in FMUS]
             if unknown:
@@ -164,7 +169,8 @@ def _main(argv: list[str] | None) -> int:
                          f"must be one of {', '.join(FMUS)} (or use --preset)")
             names = list(FMUS) if args.all else (args.names or ["PRSM2"])
             targets = [build_named(n, args.dest, check, start, native=args.native,
-                                   engine=args.engine == "native", targets=plats)
+                                   engine=args.engine == "native", targets=plats,
+                                   engine_platforms=tuple(args.engine_platform or ()))
                        for n in names]
         if args.native and "3" in versions:
             targets = _with_fmi3(targets, plats, check, keep_fmi2="2" in versions)

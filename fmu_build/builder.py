@@ -134,7 +134,8 @@ def validate(fmu: Path) -> list[str]:
 
 
 def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",
-              check: bool = True, start: dict | None = None, engine: bool = True) -> Path:
+              check: bool = True, start: dict | None = None, engine: bool = True,
+              engine_platforms: tuple[str, ...] | None = None) -> Path:
     """Build ``<dest>/<name>.fmu`` from ``params``.
 
     Parameters
@@ -155,6 +156,8 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
     engine : bool
         Pack the compiled engine for this platform (:mod:`fmu_build.packing`; without gcc the
         FMU is built without it, said on stderr); False: the FMU runs the Python model.
+    engine_platforms : tuple of str, optional
+        Further platforms to pack the engine for (``win64``: cross-compiled with Zig).
 
     Returns
     -------
@@ -178,7 +181,7 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
         project.append(packing.stage_start_values(staged, start_values(params, start)))
         if engine:
             try:
-                project += packing.stage_engine(staged, params)
+                project += packing.stage_engine(staged, params, engine_platforms)
             except BuildError as exc:       # no gcc: the FMU runs the Python model, and says so
                 print(f"fmu_build: {name}.fmu without the compiled engine (it runs the Python "
                       f"model): {exc}", file=sys.stderr)

@@ -101,12 +101,16 @@ def stage_runtime(dest: Path) -> list[Path]:
     return [dest / "prsm_fmu", interface]
 
 
-def stage_engine(dest: Path, params: MechanismParams) -> list[Path]:
-    """Build the engine for ``params``' geometry into ``dest/binaries/<platform>/`` for every
-    platform pythonfmu ships a wrapper for (:data:`fmu_build.platforms.PYTHONFMU_PLATFORMS`:
-    cross-compiled with Zig's C compiler and checked, :mod:`fmu_build.engine_library`), and
-    describe it in ``dest/prsm_engine.json``; the project files created.  Without ziglang, this
-    platform's library is compiled with gcc instead (and the others are left out).
+def stage_engine(dest: Path, params: MechanismParams,
+                 platforms: tuple[str, ...] | None = None) -> list[Path]:
+    """Build the engine for ``params``' geometry into ``dest/binaries/<platform>/`` for this
+    platform and ``platforms`` (of :data:`fmu_build.platforms.PYTHONFMU_PLATFORMS`, the
+    platforms pythonfmu ships a wrapper for: cross-compiled with Zig's C compiler and checked,
+    :mod:`fmu_build.engine_library`), and describe it in ``dest/prsm_engine.json``; the project
+    files created.  Without ziglang, this platform's library is compiled with gcc instead (and
+    the others are left out).  Only this platform by default: a machine's first Windows build
+    also compiles Zig's Windows C runtime (minutes), which ``prsm-ema run``'s automatic build
+    should not wait for.
 
     Raises
     ------
@@ -120,7 +124,8 @@ def stage_engine(dest: Path, params: MechanismParams) -> list[Path]:
 
     here = platform_folder()
     built = []
-    for plat in PYTHONFMU_PLATFORMS:
+    wanted = dict.fromkeys((here, *(platforms or ())))
+    for plat in (p for p in PYTHONFMU_PLATFORMS if p in wanted):
         try:
             built.append(build_engine_library(params, plat, dest / "binaries" / plat))
         except BuildError:
