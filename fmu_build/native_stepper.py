@@ -25,7 +25,8 @@ from typing import Any
 
 from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
 
-__all__ = ["NativeStepper", "native_library", "load_library", "LIB_SOURCES"]
+__all__ = ["NativeStepper", "native_library", "load_library", "library_output_names",
+           "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
 LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_api.c")
@@ -103,8 +104,20 @@ def load_library(path: str) -> ctypes.CDLL:
     dll.prsm_api_free.argtypes = [vp]
     dll.prsm_api_set_band.argtypes = [vp, ctypes.c_int]
     dll.prsm_api_undo_advance.argtypes = [vp]
+    if hasattr(dll, "prsm_api_outputs"):     # (an engine library packed before they were added)
+        dll.prsm_api_output_name.restype = ctypes.c_char_p
+        dll.prsm_api_output_name.argtypes = [ctypes.c_int]
+        dll.prsm_api_outputs.argtypes = [vp, ctypes.c_double, dbl, dbl, dbl]
     _loaded[path] = dll
     return dll
+
+
+def library_output_names(lib: ctypes.CDLL) -> tuple[str, ...]:
+    """The names of the outputs ``prsm_api_outputs`` of ``lib`` writes, in its order (the C's
+    tables, generated from :func:`fmu_build.native.api_outputs`); () for a library without it."""
+    if not hasattr(lib, "prsm_api_outputs"):
+        return ()
+    return tuple(lib.prsm_api_output_name(i).decode() for i in range(lib.prsm_api_n_outputs()))
 
 
 class NativeStepper(Stepper):
@@ -189,6 +202,30 @@ class NativeStepper(Stepper):
         self._stats = (ctypes.c_int * 3)()
         self._msg = msg
         self._memory_size = lib.prsm_api_memory_size()
+        #: the names of the outputs :meth:`outputs` computes, in the C's order: () where the
+        #: library has no prsm_api_outputs, and for the speed drive (the C's outputs read u[0]
+        #: as the motor torque: the torque drive's, the FMU's)
+        self.output_names: tuple[str, ...] = (library_output_names(lib)
+                                              if model.drive != "speed" else ())
+
+    def outputs(self, t: float, x: list[float], u: tuple) -> dict[str, float]:
+        """The C model's outputs at ``x`` with inputs ``u`` (those of :attr:`output_names`,
+        equal to the model's ``outputs`` bit for bit).
+
+        Raises
+        ------
+        ValueError
+            When the library has no ``prsm_api_outputs``.
+        """
+        names = self.output_names
+        if not names:
+            raise ValueError("the engine computes no outputs here (a library without "
+                             "prsm_api_outputs, or the speed drive)")
+        out = (ctypes.c_double * len(names))()
+        self._x[:] = x
+        self._u[0], self._u[1] = u[0], u[1]
+        self._lib.prsm_api_outputs(self._handle, t, self._x, self._u, out)
+        return dict(zip(names, out[:]))
 
     def advance(self, t: float, x: list[float], u: tuple, h: float) -> tuple[list[float], StepStats]:
         rows, stats = self.advance_many(t, x, u, h, 1)

@@ -253,5 +253,37 @@ def _engine_class() -> type:
             stats = StepStats(rhs_calls=counts[0], substeps=counts[1], rejected=counts[2])
             return self._row[:], stats
 
+        def output_reader(self, names: tuple[str, ...]):
+            """A function ``(t, x, u) -> list`` of the values of the outputs ``names`` at
+            state ``x`` with inputs ``u``, computed by the C in one call
+            (``prsm_api_outputs``) into preallocated arrays, equal to the model's
+            ``outputs`` bit for bit (tests/test_engine_outputs.py); None when the C does not
+            compute every one of them (or the library has no prsm_api_outputs)."""
+            position = {name: i for i, name in enumerate(self.output_names)}
+            if not names or any(name not in position for name in names):
+                return None
+            lib = self._lib
+            call = type(lib.prsm_api_outputs)(("prsm_api_outputs", lib))
+            call.restype = None
+            out = (ctypes.c_double * len(position))()
+            xi, ui, handle, double = self._x, self._u, self._handle, self._double
+            index = [position[name] for name in names]
+
+            if index == list(range(len(position))):
+                def pick(values):
+                    return values
+            else:
+                def pick(values):
+                    return [values[i] for i in index]
+
+            def read(t: float, x: list[float], u: tuple) -> list[float]:
+                xi[:] = x
+                ui[0] = u[0]
+                ui[1] = u[1]
+                call(handle, double(t), xi, ui, out)
+                return pick(out[:])
+
+            return read
+
     _ENGINE_CLASS.append(EngineStepper)
     return EngineStepper

@@ -531,6 +531,8 @@ class PRSMSlave(Fmi2Slave):
         #: value reference of an output that is a state -> its index in the state vector
         #: (``screw_speed``, ``screw_angle``: fmi2GetReal of those alone reads the state)
         self._state_outputs: dict[int, int] = {}
+        #: the engine's outputs in C (EngineStepper.output_reader), or None: Model.outputs
+        self._engine_outputs = None
         self._config: tuple = ()
         self._init_error: str | None = None
         self._y: list[float] | None = None
@@ -792,6 +794,13 @@ class PRSMSlave(Fmi2Slave):
         return {vr: names.index(self._out_names[i]) for vr, i in self._out_index.items()
                 if self._out_names[i] in names}
 
+    def _engine_output_reader(self, stepper):
+        """The engine's outputs in C for ``stepper`` (EngineStepper.output_reader of the FMU's
+        output names), or None: the Python reference or a C that does not compute them all
+        (then Model.outputs computes them, for this instance)."""
+        reader = getattr(stepper, "output_reader", None) if is_engine(stepper) else None
+        return reader(self._out_names) if reader is not None else None
+
     def _config_key(self) -> tuple:
         return tuple(self._par[n] for n in self._par_names)
 
@@ -809,7 +818,11 @@ class PRSMSlave(Fmi2Slave):
             if model is None:
                 model, _, x, _, _ = self._build()
                 u = tuple(self._u)
-            values = [float(v) for v in self._pick_outputs(model.outputs(self._t, x, u))]
+                values = [float(v) for v in self._pick_outputs(model.outputs(self._t, x, u))]
+            elif self._engine_outputs is not None:
+                values = self._engine_outputs(self._t, x, u)
+            else:
+                values = [float(v) for v in self._pick_outputs(model.outputs(self._t, x, u))]
         except Exception as exc:  # noqa: BLE001 - an exception here would be fmi2Fatal
             self.log(f"fmi2GetReal: the outputs cannot be computed (NaN): {exc}",
                      Fmi2Status.error)
@@ -875,6 +888,9 @@ class PRSMSlave(Fmi2Slave):
         self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
         self._level = _fixed_level(model)
         self._state_outputs = self._states_read_as_outputs(model)
+        # the compiled engine computes the outputs in C (one call), where it computes all
+        # of them; else (and with the Python reference) Model.outputs
+        self._engine_outputs = self._engine_output_reader(stepper)
         self._u_held = (self._u[0], self._u[1])
         self._config = self._config_key()
         self._stats = (0, 0, active_level(model))
@@ -1008,6 +1024,8 @@ class PRSMSlave(Fmi2Slave):
         if model is not self._model:
             self._level = None if model is None else _fixed_level(model)
             self._state_outputs = {} if model is None else self._states_read_as_outputs(model)
+        if stepper is not self._stepper:
+            self._engine_outputs = self._engine_output_reader(stepper)
         self._model, self._stepper = model, stepper
         self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
         self._config = config if stepper is not None else ()

@@ -172,10 +172,11 @@ def test_engine_library_for_pythonfmus_platforms(platform, tmp_path):
     make, _ = FMUS["PRSM2"]
     lib = build_engine_library(make(), platform, tmp_path)
     (s,) = binary_check.inspect(lib).slices
-    # the functions prsm_api.c defines (read there by hand): 11
+    # functions prsm_api.c defines (read there by hand)
     api = ("prsm_api_n_reals prsm_api_n_ints prsm_api_new prsm_api_set_tolerances "
            "prsm_api_n_states prsm_api_advance_many prsm_api_rhs prsm_api_memory_size "
-           "prsm_api_get_memory prsm_api_set_memory prsm_api_free").split()
+           "prsm_api_get_memory prsm_api_set_memory prsm_api_free prsm_api_n_outputs "
+           "prsm_api_output_name prsm_api_outputs").split()
     assert not [f for f in api if f not in s.exports]
     if platform == "linux64":
         import ctypes

@@ -160,3 +160,35 @@ void prsm_api_set_memory(void *handle, const unsigned char *in) {
 }
 
 void prsm_api_free(void *handle) { free(handle); }
+
+/* ---- outputs ---------------------------------------------------------------------------------- */
+#include "prsm_quantity.h"
+
+static const char *const API_OUTPUT_NAMES[PRSM_API_N_OUTPUTS] = PRSM_API_OUTPUT_NAMES;
+static const int API_OUTPUT_Q[PRSM_API_N_OUTPUTS] = PRSM_API_OUTPUT_Q;
+static const int API_OUTPUT_STAGE[PRSM_API_N_OUTPUTS] = PRSM_API_OUTPUT_STAGE;
+
+/* Number of doubles prsm_api_outputs writes. */
+int prsm_api_n_outputs(void) { return PRSM_API_N_OUTPUTS; }
+
+/* The FMU output name of prsm_api_outputs' i-th value (0 <= i < prsm_api_n_outputs()), or NULL:
+ * the FMU's head outputs (screw_speed, screw_angle, ..., overall_efficiency), then per stage
+ * k = 1.. "stage[k].contact_force", normal_force, driven_torque, spline_friction, carrier_speed,
+ * carrier_speed_ratio; the order generated from fmu_build.native.api_outputs. */
+const char *prsm_api_output_name(int i) {
+    return i >= 0 && i < PRSM_API_N_OUTPUTS ? API_OUTPUT_NAMES[i] : NULL;
+}
+
+/* The outputs at state x with inputs u (Model.outputs at time t, which they do not depend on) into
+ * out[prsm_api_n_outputs()], in the order of prsm_api_output_name; the native FMU's values
+ * (prsm_fmi2.c), equal to the Python model's bit for bit (tests/test_engine_outputs.py). */
+void prsm_api_outputs(void *handle, double t, const double *x, const double *u, double *out) {
+    prsm_handle *h = (prsm_handle *)handle;
+    double xi[PRSM_NX_MAX] = {0.0};
+    (void)t;
+    memcpy(xi, x, sizeof(double) * (size_t)h->model.nx);
+    prsm_outputs o;
+    prsm_outputs_at(&h->model, xi, u, &o);
+    for (int i = 0; i < PRSM_API_N_OUTPUTS; i++)
+        out[i] = prsm_quantity(&h->model, xi, u, &o, API_OUTPUT_Q[i], API_OUTPUT_STAGE[i]);
+}

@@ -34,18 +34,10 @@
 
 #include "fmi2Functions.h"
 #include "prsm_model.h"
+#include "prsm_quantity.h"
 
 enum { T_REAL, T_INTEGER, T_BOOLEAN, T_STRING, T_ENUM };
 enum { K_INPUT, K_OUTPUT, K_COUNTER, K_PARAM, K_STRUCTURAL };
-enum {
-    Q_SCREW_SPEED, Q_SCREW_ANGLE, Q_SCREW_ACCELERATION, Q_SCREW_TORQUE, Q_ROD_POSITION,
-    Q_ROD_VELOCITY, Q_LOAD_FORCE, Q_CONTACT_FORCE, Q_NORMAL_FORCE, Q_DRIVEN_TORQUE,
-    Q_SPLINE_FRICTION, Q_CARRIER_SPEED, Q_CARRIER_SPEED_RATIO, Q_EFFICIENCY, Q_FRICTION_POWER,
-    Q_INPUT_POWER, Q_OUTPUT_POWER, Q_INPUT_WORK, Q_OUTPUT_WORK, Q_FRICTION_WORK,
-    Q_KINETIC_ENERGY, Q_FRICTION_POWER_COULOMB, Q_FRICTION_POWER_VISCOUS,
-    Q_FRICTION_POWER_DIFFERENTIAL, Q_FRICTION_POWER_JOINTS, Q_SCREW_FRICTION_TORQUE,
-    Q_OVERALL_EFFICIENCY, Q_CARRIER_ACCELERATION
-};
 enum { C_RHS_CALLS, C_SUBSTEPS, C_FIDELITY, C_CONTACT };
 
 typedef struct {
@@ -400,52 +392,8 @@ static void compute_outputs(component *c) {
     }
     prsm_outputs o;
     prsm_outputs_at(m, x, u, &o);
-    double omega = x[1], load = u[1], c_out = m->c_out;
-    int ie = m->ie;
-    for (int i = 0; i < N_OUT_REAL; i++) {
-        int k = OUT_STAGE[i];
-        double v;
-        switch (OUT_QUANTITY[i]) {
-        case Q_SCREW_SPEED: v = omega; break;
-        case Q_SCREW_ANGLE: v = x[0]; break;
-        case Q_SCREW_ACCELERATION: v = o.alpha; break;
-        case Q_SCREW_TORQUE: v = o.motor; break;
-        case Q_ROD_POSITION: v = c_out * x[0]; break;
-        case Q_ROD_VELOCITY: v = c_out * omega; break;
-        case Q_LOAD_FORCE: v = load; break;
-        case Q_CONTACT_FORCE: v = o.contact_force[k]; break;
-        case Q_NORMAL_FORCE: v = o.normal_force[k]; break;
-        case Q_DRIVEN_TORQUE: v = o.driven_torque[k]; break;
-        case Q_SPLINE_FRICTION: v = o.spline_friction[k]; break;
-        case Q_CARRIER_SPEED: v = o.carrier_speed[k]; break;
-        case Q_CARRIER_SPEED_RATIO: v = o.carrier_speed_ratio[k]; break;
-        case Q_EFFICIENCY: v = o.efficiency; break;
-        case Q_FRICTION_POWER: v = o.friction_power; break;
-        case Q_INPUT_POWER: v = o.motor * omega; break;
-        case Q_OUTPUT_POWER: v = load * (c_out * omega); break;
-        case Q_INPUT_WORK: v = x[ie]; break;
-        case Q_OUTPUT_WORK: v = x[ie + 1]; break;
-        case Q_FRICTION_WORK: v = x[ie + 2]; break;
-        case Q_FRICTION_POWER_COULOMB: v = o.p_coulomb; break;
-        case Q_FRICTION_POWER_VISCOUS: v = o.p_viscous; break;
-        case Q_FRICTION_POWER_DIFFERENTIAL: v = o.p_differential; break;
-        case Q_FRICTION_POWER_JOINTS: v = o.p_joints; break;
-        case Q_SCREW_FRICTION_TORQUE:
-            v = o.motor - load * c_out - m->equivalent_inertia * o.alpha; break;
-        case Q_OVERALL_EFFICIENCY: v = x[ie] > 0.0 ? x[ie + 1] / x[ie] : 0.0; break;
-        case Q_CARRIER_ACCELERATION:     /* the carrier state's derivative (prsm_fmi2_me.c) */
-            if (m->dynamic) {
-                double dx[PRSM_NX_MAX] = {0.0};
-                prsm_rhs(m, x, u, dx);
-                v = dx[2 + k];
-            } else {
-                v = m->st[k].zeta * o.alpha;
-            }
-            break;
-        default: v = o.kinetic_energy; break;
-        }
-        c->y[i] = v;
-    }
+    for (int i = 0; i < N_OUT_REAL; i++)
+        c->y[i] = prsm_quantity(m, x, u, &o, OUT_QUANTITY[i], OUT_STAGE[i]);
     if (m == &c->model) c->y_valid = 1;
 }
 
