@@ -224,10 +224,6 @@ def _engine_class() -> type:
     from .steppers.base import StepFailure, StepStats
 
     class EngineStepper(NativeStepper):
-        #: the C updates its memory only when an advance succeeds (prsm_model.h): a refused
-        #: step leaves it as it was, so the caller need not save and restore it
-        keeps_memory_on_failure = True
-
         def __init__(self, *args: Any, **kwargs: Any) -> None:
             super().__init__(*args, **kwargs)
             self._row = (ctypes.c_double * self.n_states)()

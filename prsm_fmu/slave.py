@@ -526,7 +526,6 @@ class PRSMSlave(Fmi2Slave):
         self._stats = (0, 0, 0)
         self._model = None
         self._stepper = None
-        self._memory_kept = False
         self._level: int | None = None          # the model's level code, if it never changes
         #: value reference of an output that is a state -> its index in the state vector
         #: (``screw_speed``, ``screw_angle``: fmi2GetReal of those alone reads the state)
@@ -885,7 +884,6 @@ class PRSMSlave(Fmi2Slave):
             self.log(f"the Python reference model runs, not the compiled engine: {why}",
                      Fmi2Status.ok)
         self._model, self._stepper, self._x = model, stepper, x0
-        self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
         self._level = _fixed_level(model)
         self._state_outputs = self._states_read_as_outputs(model)
         # the compiled engine computes the outputs in C (one call), where it computes all
@@ -928,29 +926,29 @@ class PRSMSlave(Fmi2Slave):
         if why is not None:
             return self._refuse(why)
         stepper = self._stepper
-        memory = None if self._memory_kept else stepper.get_memory()
+        # a refused step leaves the stepper's memory as it was: the engine takes its last
+        # advance back itself (undo_advance: no copy per step), a Python stepper gets a copy
+        undo = getattr(stepper, "undo_advance", None)
+        if undo is None:
+            memory = stepper.get_memory()
+            undo = lambda: stepper.set_memory(memory)  # noqa: E731 - only on a refusal
         try:
             x, stats = stepper.advance(current_time, self._x, u, h)
         except Exception as exc:  # noqa: BLE001 - StepFailure; anything else would be fmi2Fatal
-            if memory is not None:
-                stepper.set_memory(memory)
+            undo()
             cause = self._model.contact_diagnosis(self._x, u)
             if cause is not None:         # contact_status reads 1 here
                 return self._refuse(cause)
             what = str(exc) if isinstance(exc, StepFailure) else f"{type(exc).__name__}: {exc}"
             return self._refuse(f"integration failed: {what}")
         if not all(map(math.isfinite, x)):     # (the engine checks its states itself)
-            if memory is not None:
-                stepper.set_memory(memory)
+            undo()
             cause = self._model.contact_diagnosis(self._x, u)
             return self._refuse(cause or "integration failed: the stepper returned a non-finite "
                                 "state")
         why = state_violation(x)
         if why is not None:          # the outputs of that state could overflow: docs/fmu.md
-            if memory is not None:
-                stepper.set_memory(memory)
-            else:                    # the engine kept no copy: it takes its advance back
-                stepper.undo_advance()
+            undo()
             return self._refuse(f"the step would end out of the state's bounds: {why}")
         self._x = x
         self._t = current_time + h
@@ -1027,7 +1025,6 @@ class PRSMSlave(Fmi2Slave):
         if stepper is not self._stepper:
             self._engine_outputs = self._engine_output_reader(stepper)
         self._model, self._stepper = model, stepper
-        self._memory_kept = getattr(stepper, "keeps_memory_on_failure", False)
         self._config = config if stepper is not None else ()
         self._u[0], self._u[1] = f["inputs"]
         self._phase = f["phase"]
