@@ -17,11 +17,12 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from prsm_fmu.engine import LIBRARY_STEM
 from prsm_fmu.params import MechanismParams
 
 from . import native, platforms
 from .builder import BuildError
-from .native_stepper import LIB_SOURCES
+from .native_stepper import LIB_SOURCES, library_sources
 
 __all__ = ["build_engine_library", "engine_exports", "engine_library_name"]
 
@@ -39,7 +40,7 @@ def engine_library_name(platform: str) -> str:
     if platform not in platforms.PLATFORMS:
         raise BuildError(f"platform {platform!r} is not allowed: must be one of "
                          f"{', '.join(platforms.PLATFORMS)}")
-    return "prsm_engine" + platforms.PLATFORMS[platform].suffix
+    return LIBRARY_STEM + platforms.PLATFORMS[platform].suffix
 
 
 def build_engine_library(params: MechanismParams, platform: str, dest: str | Path) -> Path:
@@ -71,9 +72,8 @@ def build_engine_library(params: MechanismParams, platform: str, dest: str | Pat
     params = params.validate()
     with tempfile.TemporaryDirectory(prefix="prsm_engine_") as tmp:
         src = Path(tmp)
-        for f in LIB_SOURCES + native.HEADERS:
-            shutil.copy(native.SOURCE_DIR / f, src / f)
-        (src / "prsm_constants.h").write_text(native.constants_header(params), encoding="utf-8")
+        for f, data in library_sources(params).items():
+            (src / f).write_bytes(data)
         platforms.compile_for(platform, src, LIB_SOURCES, src / out.name, engine_exports())
         out.parent.mkdir(parents=True, exist_ok=True)
         shutil.move(str(src / out.name), out)

@@ -26,7 +26,7 @@ import zipfile
 from pathlib import Path
 from xml.dom.minidom import parseString
 
-from . import platforms
+from . import native, platforms
 from .builder import BuildError
 from .native import N_EVENT_INDICATORS, SOURCES
 
@@ -144,15 +144,6 @@ def fmi3_model_description(md2: bytes) -> tuple[bytes, int]:
     return xml, ei0
 
 
-def _fmi3_headers() -> Path:
-    import fmpy
-
-    found = sorted(Path(fmpy.__file__).parent.rglob("fmi3Functions.h"))
-    if not found:
-        raise BuildError("fmpy ships no fmi3Functions.h (the FMI 3.0 headers)")
-    return found[0].parent
-
-
 def build_native_fmi3(fmu2: str | Path, dest: str | Path | None = None, check: bool = True,
                       targets: tuple[str, ...] = platforms.FMI2_PLATFORMS) -> Path:
     """Build ``<name>-native-fmi3.fmu`` from the FMI 2.0 native FMU ``fmu2`` (module docstring).
@@ -192,9 +183,10 @@ def build_native_fmi3(fmu2: str | Path, dest: str | Path | None = None, check: b
             for n in z.namelist():
                 if n.startswith("sources/"):
                     (src / Path(n).name).write_bytes(z.read(n))
+        headers = native._fmi_headers("fmi3Functions.h", "3.0")
         for f in FMI3_HEADERS:
-            shutil.copy(_fmi3_headers() / f, src / f)
-        shutil.copy(Path(__file__).resolve().parent / "native" / "prsm_fmi3.c", src / "prsm_fmi3.c")
+            shutil.copy(headers / f, src / f)
+        shutil.copy(native.SOURCE_DIR / "prsm_fmi3.c", src / "prsm_fmi3.c")
         md3, ei0 = fmi3_model_description(md2)
         ident = ET.fromstring(md2).find("CoSimulation").get("modelIdentifier")
         libs = {}

@@ -177,8 +177,6 @@ ME_STATES = (("screw_angle", "screw_speed"), ("screw_speed", "screw_acceleration
 N_EVENT_INDICATORS = 4
 _COUNTERS = {"step_rhs_calls": "C_RHS_CALLS", "step_substeps": "C_SUBSTEPS",
              "step_fidelity": "C_FIDELITY", "contact_status": "C_CONTACT"}
-#: stage fields that only scale a term the native FMU leaves out (pinned to their start value)
-_SCALE_OF_ABSENT_TERM: tuple = ()
 _STAGE_NAME = re.compile(r"^stage\[(\d+)\]\.(\w+)$")
 _TYPE_CODE = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN",
               "String": "T_STRING", "Enumeration": "T_ENUM"}
@@ -409,9 +407,7 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
                 if (m and field in _STAGE_PARAMS) or v.name in _SCALAR_PARAMS:
                     raise BuildError(f"parameter {v.name!r} has type {v.type}, not the one the "
                                      "native FMU reads")
-                # threads_per_roller only scales the viscous term, pinned to 0 with mu_viscous:
-                # any start value is the absent term's (and stays pinned to it)
-                if v.value() not in (0, 0.0, False, "") and field not in _SCALE_OF_ABSENT_TERM:
+                if v.value() not in (0, 0.0, False, ""):
                     raise BuildError(
                         f"parameter {v.name!r} = {v.value()!r} is not modelled by the native FMU "
                         "and not zero in this preset: the native FMU would run without it; "
@@ -572,14 +568,16 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     return parseString(ET.tostring(root, encoding="utf-8")).toprettyxml(indent="  ", encoding="UTF-8")
 
 
-def _fmi_headers() -> Path:
+def _fmi_headers(header: str = "fmi2Functions.h", version: str = "2.0") -> Path:
+    """The folder of fmpy's copy of the FMI ``version`` headers (the one holding ``header``)."""
     try:
         import fmpy
     except ImportError as exc:
-        raise BuildError(f"the FMI 2.0 headers come from fmpy ({exc}): pip install -e \".[fmu]\"") from None
-    found = sorted(Path(fmpy.__file__).parent.rglob("fmi2Functions.h"))
+        raise BuildError(f"the FMI {version} headers come from fmpy ({exc}): pip install -e \".[fmu]\"") from None
+    found = sorted(Path(fmpy.__file__).parent.rglob(header))
     if not found:
-        raise BuildError("fmpy ships no fmi2Functions.h")
+        raise BuildError(f"fmpy ships no {header}" + (f" (the FMI {version} headers)"
+                                                      if version != "2.0" else ""))
     return found[0].parent
 
 
@@ -679,11 +677,13 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         src.mkdir()
         for f in SOURCES + HEADERS + INCLUDED:
             shutil.copy(SOURCE_DIR / f, src / f)
+        headers = _fmi_headers()
         for f in FMI_HEADERS:
-            shutil.copy(_fmi_headers() / f, src / f)
-        constants = constants_header(params) + ranges_header(params)
-        (src / "prsm_constants.h").write_text(constants_header(params), encoding="utf-8")
-        (src / "prsm_params_gen.h").write_text(ranges_header(params), encoding="utf-8")
+            shutil.copy(headers / f, src / f)
+        geometry, ranges = constants_header(params), ranges_header(params)
+        constants = geometry + ranges
+        (src / "prsm_constants.h").write_text(geometry, encoding="utf-8")
+        (src / "prsm_params_gen.h").write_text(ranges, encoding="utf-8")
         stable = re.sub(rb'(guid|generationDateAndTime|generationTool)="[^"]*"', b"", md)
         digest = hashlib.sha256(stable + constants.encode()
                                 + b"".join((SOURCE_DIR / f).read_bytes()
@@ -694,10 +694,10 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         (src / "README.txt").write_text(SOURCES_README.format(id=identifier, sources=" ".join(SOURCES)), encoding="utf-8")
         native_md = native_model_description(md, identifier, guid)
         libs = {}
+        exports = fmi2_functions(native_md)
         for plat in targets:
             rel = f"binaries/{plat}/{identifier}{platforms.PLATFORMS[plat].suffix}"
-            libs[rel] = platforms.compile_for(plat, src, SOURCES, tmp / rel,
-                                              fmi2_functions(native_md))
+            libs[rel] = platforms.compile_for(plat, src, SOURCES, tmp / rel, exports)
         fmu = tmp / f"{name}-native.fmu"
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", native_md)

@@ -71,10 +71,17 @@ def library_file(params) -> Path:
     """
     from . import native     # the build tools: not needed where a library is only loaded
 
-    constants = native.constants_header(params)
+    return native.cached_library("prsm", library_sources(params), LIB_SOURCES)
+
+
+def library_sources(params) -> dict[str, bytes]:
+    """The engine library's files for ``params``' geometry: the C sources and headers, and
+    ``prsm_constants.h`` generated from the parameters (fmu_build.native.constants_header)."""
+    from . import native
+
     files = {f: (native.SOURCE_DIR / f).read_bytes() for f in LIB_SOURCES + native.HEADERS}
-    files["prsm_constants.h"] = constants.encode()
-    return native.cached_library("prsm", files, LIB_SOURCES)
+    files["prsm_constants.h"] = native.constants_header(params).encode()
+    return files
 
 
 def load_library(path: str) -> ctypes.CDLL:
