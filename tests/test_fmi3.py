@@ -18,11 +18,9 @@ import pytest
 
 fmpy = pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")
-try:
-    import ziglang  # noqa: F401
-except ImportError:
-    pytest.skip("ziglang is not installed (pip install -e \".[fmu]\"): the native FMU's "
-                "binaries are compiled with its C compiler", allow_module_level=True)
+from zig_skip import skip_without_ziglang  # noqa: E402
+
+skip_without_ziglang()
 if sys.platform != "linux":
     pytest.skip("the tests run the native FMU's Linux binary", allow_module_level=True)
 

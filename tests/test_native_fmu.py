@@ -9,7 +9,6 @@ rules for refused calls, and the FMU's own outputs before a refused call or a sa
 from __future__ import annotations
 
 import functools
-import importlib.util
 import math
 import os
 import random
@@ -33,6 +32,7 @@ from conftest import shared_build  # noqa: E402
 from test_fmu import OK, DISCARD, Host, built_fmus, max_relative_difference, subprocess_env  # noqa: E402
 from test_fmu_c_host import STEPS as HOST_STEPS, c_host  # noqa: E402,F401 - fixture
 from text_numbers import number_after  # noqa: E402
+from zig_skip import skip_without_ziglang  # noqa: E402
 
 #: the standard FMUs, PRSM1 (the friction-torque article's preset, with its viscous and
 #: differential-sliding terms) included
@@ -67,9 +67,7 @@ def built_native() -> dict[str, Path]:
 def native() -> dict[str, Path]:
     if sys.platform != "linux":
         pytest.skip("the native FMU is built here for Linux only")
-    if importlib.util.find_spec("ziglang") is None:
-        pytest.skip("ziglang is not installed (pip install -e \".[fmu]\"): the native FMU's "
-                    "binaries are compiled with its C compiler")
+    skip_without_ziglang(module_level=False)
     return built_native()
 
 

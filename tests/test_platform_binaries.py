@@ -24,12 +24,10 @@ pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")
 if shutil.which("true") is None:      # pragma: no cover - a POSIX machine is assumed below
     pytest.skip("needs a POSIX machine", allow_module_level=True)
-try:
-    import ziglang  # noqa: F401
-except ImportError:
-    pytest.skip("ziglang is not installed (pip install -e \".[fmu]\"): the binaries for "
-                "win64, darwin64 and glibc 2.17 are cross-compiled with its C compiler",
-                allow_module_level=True)
+from zig_skip import skip_without_ziglang  # noqa: E402
+
+skip_without_ziglang("the binaries for win64, darwin64 and glibc 2.17 are cross-compiled with "
+                     "its C compiler")
 
 from fmu_build import binary_check  # noqa: E402
 from fmu_build.builder import BuildError  # noqa: E402
