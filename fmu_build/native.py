@@ -54,8 +54,7 @@ from prsm_fmu.atomic import atomic_path
 from prsm_fmu.slave import TIME_MATCH
 from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.models.base import STANDSTILL_SPEED
-from prsm_fmu.params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
-                             MechanismParams)
+from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
 from prsm_fmu.steppers.options import TOLERANCE_FACTOR
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
@@ -278,11 +277,6 @@ static const double PRSM_ROS_M[4] = {{{", ".join(_hex(v) for v in _ROS_M)}}};
 static const double PRSM_ROS_E[4] = {{{", ".join(_hex(v) for v in _ROS_E)}}};
 static const double PRSM_ROS_WQ[4] = {{{", ".join(_hex(v) for v in _ROS_WQ)}}};
 static const double PRSM_ROS_EQ[4] = {{{", ".join(_hex(v) for v in _ROS_EQ)}}};
-
-/* the bounds of the friction-torque article's terms (prsm_fmu.params) */
-#define PRSM_MAX_MU_VISCOUS {_hex(float(MAX_MU_VISCOUS))}
-#define PRSM_MAX_MU_DIFFERENTIAL {_hex(float(MAX_MU_DIFFERENTIAL))}
-#define PRSM_MAX_THREADS_PER_ROLLER {int(MAX_THREADS_PER_ROLLER)}
 
 /* the friction band's exponential step (prsm_fmu.steppers.band): sqrt(eps) of the difference
    increment; Gauss-Legendre nodes on [-1, 1] and weights, 5 and 3 points */

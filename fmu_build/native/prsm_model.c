@@ -308,7 +308,7 @@ static double solve(const prsm_model *m, const double *x, double load, double to
  * are states there, slaved to the screw otherwise; an extra loss at the kinematic level only) */
 static void rhs(const prsm_model *m, const double *x, const double *u, double *dx) {
     double load = u[1], omega = x[1];
-    double loss = m->kinematic ? extra_loss(m, omega, load) : 0.0;
+    double loss = extra_loss(m, omega, load);
     double motor = u[0];
     double wps[NS];
     coef_cache cache;

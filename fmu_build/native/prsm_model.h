@@ -76,9 +76,9 @@ typedef struct {
     int n_rollers, carriers;
 } prsm_stage_values;
 
-/* friction laws with a sliding velocity (Mechanism.sliding_velocities): per stage two thread
- * flanks, the spline and the bearing; three components each at most */
-/* per stage: both flanks' slip and differential sliding, the spline, the bearing face */
+/* friction laws with a sliding velocity (Mechanism.sliding_velocities): per stage both thread
+ * flanks' slip and differential sliding, the spline and the bearing face; three components
+ * each at most */
 #define PRSM_MAX_LAWS (6 * PRSM_N_STAGES)
 #define PRSM_SLIP_DIM 3
 
