@@ -46,7 +46,7 @@ import numpy as np
 
 from . import presets as _presets
 from .arguments import (ArgumentParser, existing_dir, existing_file, finite_float, float_in,
-                        int_in, nonzero_float, one_line, positive_float, writable_dir)
+                        int_in, one_line, positive_float, writable_dir)
 from .atomic import atomic_path
 from .command import run_command
 from .engine import ENGINE_ENV, ENGINES

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-from .engine import ENGINE_METHOD, check_engine, default_engine, engine_stepper
+from .engine import check_engine, default_engine, engine_stepper
 from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
@@ -131,9 +131,6 @@ ATOL_FACTOR = 1e-2
 RADAU_RHS_PER_STEP = 30
 
 
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
 
 def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[float, float],
               engine: str | None = None, library_path: str | None = None,
@@ -153,8 +150,8 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     engine : {"native", "python"}, optional
         Default: :func:`prsm_fmu.engine.default_engine` (``native`` unless the environment
         variable ``PRSM_FMU_ENGINE`` says otherwise).  ``native``: the compiled engine steps the model wherever it can (:mod:`prsm_fmu.engine`;
-        with ``stepper = default`` it runs its own method of the level, e.g.
-        ``closed_form_explicit`` at the quasi-static level); elsewhere, and with ``python``,
+        with ``stepper = default`` it runs its method of the level, the Python default, e.g.
+        ``closed_form`` at the quasi-static level); elsewhere, and with ``python``,
         the Python stepper (``stepper.engine_fallback`` says why, for ``native``).
     library_path : str, optional
         The engine library to load (an FMU's packed one); default: compiled for ``params``.
@@ -226,8 +223,6 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         stepper = make_stepper(name, model, **opts)
         if why is not None:
             stepper.engine_fallback = why
-    else:
-        name = ENGINE_METHOD.get(level, name) if asked == "default" else asked
     x0 = model.initial_state(tuple(inputs), screw_speed=solver["initial_screw_speed"],
                              screw_angle=solver["initial_screw_angle"],
                              carrier_ratio=None if solver["initial_carrier_equilibrium"] else 0.0)

@@ -39,16 +39,16 @@ DEFAULT_ENGINE = "native"
 #: (Dask workers, FMUs loaded in it) where no ``engine`` argument is given; the command lines'
 #: ``--engine`` sets it
 ENGINE_ENV = "PRSM_FMU_ENGINE"
-#: per level, the Python stepper the engine translates operation for operation (equal states
-#: bit for bit, tests/test_engine.py); ``default`` means this stepper when the engine runs.  A
-#: level not listed (``auto``) is offered to the engine with ``default`` and it decides.
-ENGINE_METHOD = {"kinematic": "closed_form", "quasi-static": "closed_form",
-                 "dynamic": "rosenbrock"}
-#: per level, every Python stepper the engine translates (the level's method first); any other
+#: per level, every Python stepper the engine translates operation for operation (equal
+#: states bit for bit, tests/test_engine_differential.py), the level's method first; any other
 #: stepper runs in Python
 ENGINE_STEPPERS = {"kinematic": ("closed_form", "closed_form_explicit"),
                    "quasi-static": ("closed_form", "closed_form_explicit"),
                    "dynamic": ("rosenbrock",)}
+#: per level, the engine's method: what ``default`` means where the engine runs (the Python
+#: default of the level, simulate.DEFAULT_STEPPER).  A level not listed (``auto``) is offered
+#: to the engine with ``default`` and it decides.
+ENGINE_METHOD = {level: steppers[0] for level, steppers in ENGINE_STEPPERS.items()}
 #: the library's file name in an FMU's ``resources/binaries/<platform>/``
 LIBRARY_STEM = "prsm_engine"
 

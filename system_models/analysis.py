@@ -418,8 +418,12 @@ def evaluate(res: Result, checks: list[dict[str, Any]], context: dict[str, Any])
     MechanismParams as simulated).  Every run is also checked for non-finite outputs."""
     out = []
     # NaN is allowed where an output is undefined: the efficiency where no power flows
-    bad = [n for n in res.names()
-           if not all(math.isfinite(v) or undefined_allowed(n, v) for v in map(float, res[n]))]
+    bad = []
+    for n in res.names():
+        a = np.asarray(res[n], dtype=float)
+        ok = np.isfinite(a) | np.isnan(a) if undefined_allowed(n, math.nan) else np.isfinite(a)
+        if not ok.all():
+            bad.append(n)
     out.append(CheckResult("finite", "all outputs", not bad, {"non_finite": float(len(bad))}, {},
                            "every output finite (the efficiency NaN where no power flows)"
                            if not bad else f"non-finite: {', '.join(bad[:5])}"))

@@ -68,9 +68,7 @@ class Case:
         """The tube of ``output``: overrides of ``[case.X.outputs."name"]`` first."""
         o = self.outputs.get(output, {})
         frac = float(o.get("abs_frac", self.abs_frac))
-        # NaN: the efficiency where no power flows (undefined, not a value to scale by)
-        finite = np.abs(baseline[np.isfinite(baseline)])
-        scale = float(np.max(finite)) if finite.size else 0.0
+        scale = largest_finite(baseline)
         a = frac * scale if scale > 0.0 else frac
         return Tolerance(abs=a, rel=float(o.get("rel", self.rel)), dt=float(o.get("dt", self.dt)))
 
@@ -326,10 +324,17 @@ def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
     return out
 
 
-def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None):
+def largest_finite(values: np.ndarray) -> float:
+    """max |value| over the finite values (0.0 if none): the scale of an output, whose NaN
+    samples (the efficiency where no power flows) are undefined, not values to scale by."""
+    finite = np.abs(values[np.isfinite(values)])
+    return float(np.max(finite)) if finite.size else 0.0
+
+
+def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None, progress=None):
     """One case's Result, or the message of its failure (a string), in whatever process."""
     try:
-        return simulate_case(case, fmu, parameters=parameters)
+        return simulate_case(case, fmu, parameters=parameters, progress=progress)
     except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
         return str(exc) or type(exc).__name__
 
@@ -341,7 +346,11 @@ def _run_cases(cases: list[Case], fmu: Path, parameters: dict[str, Any] | None,
     the serial run does), else one after the other in this process."""
     n = min(workers if workers is not None else (os.cpu_count() or 1), len(cases))
     if n <= 1:
-        return [_run_case(c, fmu, parameters) for c in cases]
+        # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
+        # FMU's fatal error, recorded as a failing case, and the next case would run)
+        with deferred_interrupt() as interrupted:
+            return [_run_case(c, fmu, parameters, lambda t, t_end: interrupted())
+                    for c in cases]
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
@@ -398,13 +407,13 @@ def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None)
         added = [n for n in names if n not in old[c.name].values]
         if not moved and not added:
             worst = max(cr.results, key=lambda r: r.max_abs_diff
-                        / (float(np.max(np.abs(old[c.name].values[r.name]))) or 1.0))
-            scale = float(np.max(np.abs(old[c.name].values[worst.name]))) or 1.0
+                        / (largest_finite(old[c.name].values[r.name]) or 1.0))
+            scale = largest_finite(old[c.name].values[worst.name]) or 1.0
             lines += [f"Unchanged within the tube: largest |Δ|/max|y| = "
                       f"{worst.max_abs_diff / scale:.2e} ({worst.name}).", ""]
             continue
         for r in moved:
-            scale = float(np.max(np.abs(old[c.name].values[r.name]))) or 1.0
+            scale = largest_finite(old[c.name].values[r.name]) or 1.0
             lines.append(f"- **{r.name}** left the old tube: |Δ|/max|y| = "
                          f"{r.max_abs_diff / scale:.2e}, first at t = {r.first_out:g} s, "
                          f"largest excess {r.excess:.3g} {cr.units.get(r.name, '')} at "

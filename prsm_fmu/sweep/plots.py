@@ -19,7 +19,6 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..atomic import atomic_path
 
 from ..units import (DIMENSIONLESS, METRE, METRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
                      NEWTON_SECOND_PER_METRE, RADIAN_PER_SECOND, SECOND, WATT, label, unit_of)
