@@ -259,21 +259,18 @@ def _run_and_write(args, ap, scene, fmu_path, retry, workers,
               f"+ residual {e['residual']:.3g} J ({e['relative_residual']:.3g} relative)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    if args.no_plots:
-        files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
-    elif workers is not None and workers.pool is not None:
+    drawing, drawn = None, []
+    if not args.no_plots and workers is not None and workers.pool is not None:
         # the figures are drawn in the workers while this process writes the CSV
         import threading
 
-        drawn: list = []
-        t = threading.Thread(target=lambda: drawn.append(_plots(run, out, workers)))
-        t.start()
-        files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
-        t.join()
+        drawing = threading.Thread(target=lambda: drawn.append(_plots(run, out, workers)))
+        drawing.start()
+    files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
+    if drawing is not None:
+        drawing.join()
+    if not args.no_plots:
         files += drawn[0] if drawn else _plots(run, out)
-    else:
-        files = [write_csv(run.result, out / f"{scene.name}.csv", scene.outputs)]
-        files += _plots(run, out)
     files.append(write_summary(out / f"{scene.name}_summary.json", s))
     print("wrote " + ", ".join(str(f) for f in files))
     print("all checks passed" if run.passed else "SOME CHECKS FAILED")
