@@ -23,13 +23,14 @@ import math
 from pathlib import Path
 from typing import Any
 
+from prsm_fmu import geometry
 from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
 
 __all__ = ["NativeStepper", "native_library", "load_library", "library_output_names",
-           "LIB_SOURCES"]
+           "contact_solver", "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
-LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_api.c")
+LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_api.c")
 _STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
                 "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
 _LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
@@ -111,12 +112,35 @@ def load_library(path: str) -> ctypes.CDLL:
     dll.prsm_api_free.argtypes = [vp]
     dll.prsm_api_set_band.argtypes = [vp, ctypes.c_int]
     dll.prsm_api_undo_advance.argtypes = [vp]
+    if hasattr(dll, "prsm_api_contact_geometry"):   # (and these)
+        dll.prsm_api_contact_geometry.restype = ctypes.c_int
+        dll.prsm_api_contact_geometry.argtypes = [ctypes.c_double, ctypes.c_double,
+                                                  ctypes.c_double, ctypes.c_int,
+                                                  ctypes.c_double, dbl]
+        geometry.use_compiled_solver(contact_solver(dll))
     if hasattr(dll, "prsm_api_outputs"):     # (an engine library packed before they were added)
         dll.prsm_api_output_name.restype = ctypes.c_char_p
         dll.prsm_api_output_name.argtypes = [ctypes.c_int]
         dll.prsm_api_outputs.argtypes = [vp, ctypes.c_double, dbl, dbl, dbl]
     _loaded[path] = dll
     return dll
+
+
+def contact_solver(lib: ctypes.CDLL):
+    """``lib``'s contact-geometry solver (``prsm_api_contact_geometry``) as a function
+    ``(r_s [m], r_r [m], lead [m], n_s, beta [rad]) -> tuple`` of the 13 values of
+    :func:`prsm_fmu.geometry._newton_contact`, which it equals bit for bit; None for a library
+    without it."""
+    if not hasattr(lib, "prsm_api_contact_geometry"):
+        return None
+    call, n = lib.prsm_api_contact_geometry, lib.prsm_api_n_contact()
+
+    def solve(r_s: float, r_r: float, lead: float, n_s: int, beta: float) -> tuple:
+        out = (ctypes.c_double * n)()
+        call(r_s, r_r, lead, n_s, beta, out)
+        return tuple(out)
+
+    return solve
 
 
 def library_output_names(lib: ctypes.CDLL) -> tuple[str, ...]:

@@ -192,3 +192,23 @@ void prsm_api_outputs(void *handle, double t, const double *x, const double *u, 
     for (int i = 0; i < PRSM_API_N_OUTPUTS; i++)
         out[i] = prsm_quantity(&h->model, xi, u, &o, API_OUTPUT_Q[i], API_OUTPUT_STAGE[i]);
 }
+
+/* ---- contact geometry --------------------------------------------------------------------- */
+#include "prsm_geometry.h"
+
+/* Number of doubles prsm_api_contact_geometry writes. */
+int prsm_api_n_contact(void) { return PRSM_CONTACT_OUT; }
+
+/* The screw-roller contact of a stage on its "+" flank (prsm_contact_solve: the engine's own
+ * solver, equal bit for bit to prsm_fmu.geometry._newton_contact) from the screw radius r_s [m],
+ * roller radius r_r [m], screw lead [m], screw starts n_s and flank angle beta [rad], into
+ * out[prsm_api_n_contact()]: point (x, y, z) [m], unit normal, (rho, psi, rho_r, psi_r, z_r), the
+ * largest scaled residual and the iterations.  Returns 1 if it is a contact near the pitch point
+ * (prsm_contact_near), else 0. */
+int prsm_api_contact_geometry(double r_s, double r_r, double lead, int n_s, double beta,
+                              double *out) {
+    double o[PRSM_CONTACT_OUT];
+    prsm_contact_solve(r_s, r_r, lead, n_s, beta, o);
+    memcpy(out, o, sizeof o);
+    return prsm_contact_near(r_s, r_r, beta, o);
+}
