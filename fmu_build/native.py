@@ -15,11 +15,10 @@ What this module does:
    not know (an output or input), or the parameter is accepted only at its start value zero
    (a parameter, e.g. a new friction term, that the C does not model: setting it refuses
    initialization with a logged fmi2Error rather than being silently ignored);
-2. computes the geometry-derived constants with the Python package (contact points, normals,
-   slip Jacobians of both flanks, c_k, the carrier ratios ζ) and writes them, with the
-   Dormand-Prince and ROS34PW2 tableaux of :mod:`prsm_fmu.steppers.tableaux`, into
-   ``prsm_constants.h`` as exact (hexadecimal) double literals, and the variable table into
-   ``prsm_variables.h``;
+2. writes the preset's geometry (the C solves the contact from it at initialization,
+   ``prsm_geometry.c``), with the Dormand-Prince and ROS34PW2 tableaux of
+   :mod:`prsm_fmu.steppers.tableaux`, into ``prsm_constants.h`` as exact (hexadecimal) double
+   literals, and the variable table into ``prsm_variables.h``;
 3. marks the parameters the constants are computed from as structural: causality ``local``,
    variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
    ``parameter``, variability ``fixed`` (settable before ``exitInitializationMode``);
@@ -45,14 +44,12 @@ import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 import zipfile
-from dataclasses import replace
 from pathlib import Path
 from xml.dom.minidom import parseString
 
 import prsm_fmu
 from prsm_fmu.atomic import atomic_path
 from prsm_fmu.slave import TIME_MATCH
-from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
@@ -65,6 +62,7 @@ from prsm_fmu.steppers.base import _SQRT_EPS
 from . import model_description, platforms
 from .builder import BuildError, build_fmu, validate
 from .native_ranges import ranges_header
+from .native_stepper import GEOMETRY_REALS
 
 __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
            "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
@@ -116,6 +114,7 @@ def fmi2_functions(md: bytes) -> tuple[str, ...]:
 #: per-stage parameters the contact geometry is computed from: constants of the native FMU
 STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
               "flank_angle")
+
 
 #: parameters the C reads: name (per stage: field) -> allowed FMI types
 _STAGE_PARAMS = {"screw_mass": "Real", "nut_mass": "Real", "roller_mass": "Real",
@@ -210,20 +209,13 @@ def _c_string(s: str) -> str:
 
 
 def constants_header(params: MechanismParams) -> str:
-    """``prsm_constants.h``: geometry-derived constants of ``params`` and the DP5(4) tableau."""
-    # the geometry's constants do not depend on friction; without it the Mechanism accepts a
-    # screw-roller coefficient at or beyond the self-locking limit, which the kinematic level
-    # (no contact friction) runs and the C refuses at the other levels itself
-    mech = Mechanism(replace(params, mu_screw_roller=0.0), "equilibrium")
-    flanks, consts, radii = [], [], []
-    for st, s in zip(params.stages, mech.stages):
-        radii.append("    {" + ", ".join(_hex(fl.radius) for fl in s.flanks) + "}")
-        flanks.append("    {" + ", ".join("{" + ", ".join(_hex(v) for v in fl.consts) + "}"
-                                             for fl in s.flanks) + "}")
-        values = (s.c, s.c_prev, s.zeta_geometric, s.zeta_ideal, s.spline_speed_factor,
-                  s.min_normal_z, (st.screw_radius + st.roller_radius) ** 2,
-                  float((st.screw_starts - 1) ** 2))
-        consts.append("    {" + ", ".join(_hex(v) for v in values) + "}")
+    """``prsm_constants.h``: the built-in geometry of ``params`` (the engine solves the contact
+    from it, or from the geometry it is given), the steppers' tableaux and the outputs' order."""
+    # the built-in geometry (prsm_api_new's; the FMU's start values): the engine solves the
+    # contact from it when a model is made (prsm_geometry.c)
+    geometry = ",\n".join("    {" + ", ".join(_hex(getattr(st, f)) for f in GEOMETRY_REALS) + "}"
+                           for st in params.stages)
+    starts = ", ".join(str(int(st.screw_starts)) for st in params.stages)
     _, a, b, _ = EXPLICIT_TABLEAUS[5]
     rows = ["    {" + ", ".join(_hex(v) for v in (list(a[i]) + [0.0] * 5)[:5]) + "}"
             for i in range(1, 6)]
@@ -231,8 +223,7 @@ def constants_header(params: MechanismParams) -> str:
     bhat = EXPLICIT_TABLEAUS[5][3]
     e = [b[i] - bhat[i] for i in range(7) if i != 1]     # as steppers.tableaux._DP_E
     sep = ",\n"
-    flanks_c, consts_c, rows_c = sep.join(flanks), sep.join(consts), sep.join(rows)
-    radii_c = sep.join(radii)
+    rows_c = sep.join(rows)
     api = api_outputs(params.n_stages)
     return f"""/* Generated by fmu_build.native from {params.name} ({params.source}). Do not edit.
  * prsm-fmu {prsm_fmu.__version__}; values are exact (C99 hexadecimal literals). */
@@ -244,22 +235,12 @@ def constants_header(params: MechanismParams) -> str:
 /* |screw speed| [rad/s] at or below which no power flows (prsm_fmu.models.base.STANDSTILL_SPEED) */
 #define PRSM_STANDSTILL_SPEED {_hex(STANDSTILL_SPEED)}
 
-/* per stage, flank "+" then "-": slip Jacobians a (x, y, z) and b (x, y), contact point (x, y),
-   axial normal n_z and [P x n]_z (prsm_fmu.mechanics._Flank.consts) */
-static const double PRSM_FLANKS[PRSM_N_STAGES][2][9] = {{
-{flanks_c}
+/* the built-in geometry, per stage: screw_radius, roller_radius, nut_radius, screw_lead [m],
+   flank_angle [rad] (fmu_build.native_stepper.GEOMETRY_REALS); and screw_starts */
+static const double PRSM_GEOMETRY[PRSM_N_STAGES][5] = {{
+{geometry}
 }};
-
-/* per stage, flank "+" then "-": the contact radius |P_xy| [m] (_Flank.radius) */
-static const double PRSM_FLANK_RADIUS[PRSM_N_STAGES][2] = {{
-{radii_c}
-}};
-
-/* per stage: c_k, c_(k-1) [m/rad], zeta* (quasi-static), r_S/(r_S + r_N) (kinematic), lead of
-   screw k-1 / 2 pi [m/rad], min |n_z|, (r_S + r_R)^2 [m2], (n_S - 1)^2 */
-static const double PRSM_STAGE_CONSTS[PRSM_N_STAGES][8] = {{
-{consts_c}
-}};
+static const int PRSM_SCREW_STARTS[PRSM_N_STAGES] = {{{starts}}};
 
 /* Dormand-Prince 5(4) (prsm_fmu.steppers.tableaux): a rows 2..6, b (stages 1, 3..6), b - b_hat */
 static const double PRSM_DP_A[5][5] = {{

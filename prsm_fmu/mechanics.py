@@ -62,8 +62,10 @@ class _Flank:
         self.consts = (ax, ay, az, bx, by, self.px, self.py, self.nz,
                        self.px * self.ny - self.py * self.nx)
         #: contact radius |P_xy| [m]: the screw's surface speed there, ω r, is the sliding speed
-        #: that regularises the differential-sliding torque's sign
-        self.radius = math.hypot(self.px, self.py)
+        #: that regularises the differential-sliding torque's sign (a square root, not
+        #: math.hypot, whose rounding libm's hypot does not share: the engine's
+        #: prsm_stage_contact computes it so)
+        self.radius = math.sqrt(self.px * self.px + self.py * self.py)
 
     def steady_ratio(self) -> float:
         """Carrier/screw speed ratio at which the slip has no component along b [-]."""

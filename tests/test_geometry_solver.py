@@ -28,7 +28,8 @@ N_CASES = 400
 SEED = 20261126
 
 
-def random_geometry(rng: random.Random, pitch_max: float = 0.6, beta: tuple[float, float] = (0.4, 1.2)
+def random_geometry(rng: random.Random, pitch_max: float = 0.6,
+                    beta: tuple[float, float] = (0.4, 1.2)
                     ) -> tuple[float, float, float, int, float]:
     """(r_S [m], r_R [m], L_S [m], n_S, β [rad]) inside prsm_fmu.param_ranges' bounds (lengths
     in (0, 1] m, starts 1..1000, β in (0, π/2)) around the papers' designs: r_S log-uniform in

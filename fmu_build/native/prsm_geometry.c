@@ -9,13 +9,11 @@
 #include <string.h>
 
 #include "prsm_geometry.h"
-#include "prsm_model.h"      /* prsm_fmt_num */
 
 #define PRSM_CONTACT_MAX_ITER 50
 #define PRSM_CONTACT_MAX_HALVINGS 30
 #define PRSM_CONTACT_DU 1e-7
 #define PRSM_CONTACT_TOL 1e-12
-#define PRSM_PI 3.141592653589793
 
 typedef struct {
     double r_s, r_r, a, ell, q, tan_b, big_r, z_r0, floor_h;
@@ -188,4 +186,50 @@ void prsm_contact_message(char *msg, int len, int k, double r_s, double r_r, dou
              "(screw_radius = %s m, roller_radius = %s m, screw_starts = %d) gives no "
              "screw-roller contact near the pitch point: the helix angle is too large for the "
              "flank angle (reduce screw_lead or increase flank_angle)", k, l, k, b, s, r, n_s);
+}
+
+/* _Flank.__init__ of a contact with point (x, y) [m] and unit normal n, on a stage with screw
+ * lead per radian ell [m/rad], roller axis distance c [m] and n_s starts
+ * (ContactGeometry.slip_jacobians) */
+static void flank(prsm_flank *fl, double x, double y, const double n[3], double ell, double c,
+                  int n_s) {
+    double ns = (double)n_s;
+    fl->ax = -y;
+    fl->ay = x;
+    fl->az = ell;
+    fl->bx = y - ns * y;
+    fl->by = -x + ns * (x - c);
+    fl->px = x;
+    fl->py = y;
+    fl->nz = n[2];
+    fl->pn = x * n[1] - y * n[0];
+    fl->radius = sqrt(x * x + y * y);
+}
+
+int prsm_stage_contact(int k, const prsm_stage_values *v, prsm_flank fl[2], double *zeta_geometric,
+                       double *min_normal_z, char *msg, int len) {
+    double out[PRSM_CONTACT_OUT];
+    double r_s = v->screw_radius, r_r = v->roller_radius, lead = v->screw_lead;
+    double beta = v->flank_angle;
+    int n_s = v->screw_starts;
+    if (!(n_s >= 1 && isfinite(r_s) && r_s > 0.0 && isfinite(r_r) && r_r > 0.0
+          && isfinite(lead) && lead > 0.0 && beta > 0.0 && beta < PRSM_PI / 2.0)) {
+        prsm_contact_message(msg, len, k + 1, r_s, r_r, lead, n_s, beta);
+        return -1;
+    }
+    prsm_contact_solve(r_s, r_r, lead, n_s, beta, out);
+    if (!prsm_contact_near(r_s, r_r, beta, out)) {
+        prsm_contact_message(msg, len, k + 1, r_s, r_r, lead, n_s, beta);
+        return -1;
+    }
+    double ell = lead / (2.0 * PRSM_PI), c = r_s + r_r;
+    /* the "-" flank: the rotation by pi about the x axis (ContactGeometry.mirrored) */
+    const double mirrored_n[3] = {out[3], -out[4], -out[5]};
+    flank(&fl[0], out[0], out[1], out + 3, ell, c, n_s);
+    flank(&fl[1], out[0], -out[1], mirrored_n, ell, c, n_s);
+    /* _Flank.steady_ratio of the "+" flank */
+    *zeta_geometric = -(fl[0].ax * fl[0].bx + fl[0].ay * fl[0].by)
+                      / (fl[0].bx * fl[0].bx + fl[0].by * fl[0].by);
+    *min_normal_z = pmin(fabs(fl[0].nz), fabs(fl[1].nz));
+    return 0;
 }

@@ -6,6 +6,8 @@
 #ifndef PRSM_GEOMETRY_H
 #define PRSM_GEOMETRY_H
 
+#include "prsm_model.h"
+
 /* number of doubles prsm_contact_solve writes: the contact point (x, y, z) [m], the unit normal
  * (x, y, z) [-], the solution (rho [m], psi [rad], rho_r [m], psi_r [rad], z_r [m]), the largest
  * scaled residual [-] and the Newton iterations taken */
@@ -31,5 +33,12 @@ int prsm_contact_near(double r_s, double r_r, double beta, const double out[PRSM
  * naming "stage[k]" (k from 1) and its geometry parameters. */
 void prsm_contact_message(char *msg, int len, int k, double r_s, double r_r, double lead, int n_s,
                           double beta);
+
+/* Stage k's (from 0) contact constants from its geometry v (mechanics._Stage and _Flank, operation
+ * for operation): both flanks ("+" first), the carriers' equilibrium ratio zeta* [-] and the
+ * smaller axial part of the two normals [-].  Returns 0, or -1 with prsm_contact_message in msg
+ * when the geometry gives no contact. */
+int prsm_stage_contact(int k, const prsm_stage_values *v, prsm_flank fl[2], double *zeta_geometric,
+                       double *min_normal_z, char *msg, int len);
 
 #endif
