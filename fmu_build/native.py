@@ -19,9 +19,9 @@ What this module does:
    ``prsm_geometry.c``), with the Dormand-Prince and ROS34PW2 tableaux of
    :mod:`prsm_fmu.steppers.tableaux`, into ``prsm_constants.h`` as exact (hexadecimal) double
    literals, and the variable table into ``prsm_variables.h``;
-3. marks the parameters the constants are computed from as structural: causality ``local``,
-   variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
-   ``parameter``, variability ``fixed`` (settable before ``exitInitializationMode``);
+3. keeps every parameter's causality ``parameter``, variability ``fixed`` (settable before
+   ``exitInitializationMode``), the geometry's (:data:`STRUCTURAL`) included: the C solves the
+   contact of the geometry set when it initializes;
 4. compiles the sources (``-std=c99 -O2 -fPIC -shared -ffp-contract=off``, libm only) with
    Zig's C compiler for every platform of :mod:`fmu_build.platforms` (``binaries/linux64``
    for glibc 2.17 and later, ``binaries/win64``, ``binaries/darwin64`` universal x86_64 +
@@ -64,7 +64,7 @@ from .builder import BuildError, build_fmu, validate
 from .native_ranges import ranges_header
 from .native_stepper import GEOMETRY_REALS
 
-__all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
+__all__ = ["build_native", "native_name", "NATIVE_LEVELS", "STRUCTURAL",
            "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
 
 #: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
@@ -111,7 +111,8 @@ def fmi2_functions(md: bytes) -> tuple[str, ...]:
         out += FMI2_MODEL_EXCHANGE
     return out
 
-#: per-stage parameters the contact geometry is computed from: constants of the native FMU
+#: per-stage parameters the contact geometry is computed from (the C solves it at initialization;
+#: what an engine library packed by an older build baked in, prsm_engine.json)
 STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
               "flank_angle")
 
@@ -120,7 +121,10 @@ STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "scre
 _STAGE_PARAMS = {"screw_mass": "Real", "nut_mass": "Real", "roller_mass": "Real",
                  "carrier_mass": "Real", "screw_inertia": "Real", "roller_inertia": "Real",
                  "carrier_inertia": "Real", "spline_radius": "Real", "bearing_radius": "Real",
-                 "n_rollers": "Integer", "carriers": "Integer", "threads_per_roller": "Integer"}
+                 "n_rollers": "Integer", "carriers": "Integer", "threads_per_roller": "Integer",
+                 # the geometry, whose contact prsm_model_init solves (prsm_geometry.c)
+                 "screw_radius": "Real", "roller_radius": "Real", "nut_radius": "Real",
+                 "screw_lead": "Real", "flank_angle": "Real", "screw_starts": "Integer"}
 _SCALAR_PARAMS = {"mu_screw_roller": ("Real",), "mu_spline": ("Real",),
                   "mu_nut_screw": ("Real",), "mu_viscous": ("Real",),
                   "mu_differential": ("Real",), "slip_velocity_scale": ("Real",),
@@ -178,17 +182,6 @@ _COUNTERS = {"step_rhs_calls": "C_RHS_CALLS", "step_substeps": "C_SUBSTEPS",
 _STAGE_NAME = re.compile(r"^stage\[(\d+)\]\.(\w+)$")
 _TYPE_CODE = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN",
               "String": "T_STRING", "Enumeration": "T_ENUM"}
-
-
-def structural_start(start: dict | None) -> str:
-    """Why ``start`` (parameter start values) cannot be built into a native FMU: it names a
-    structural parameter, whose value the contact geometry is built from; "" if it can."""
-    names = [k for k in (start or {}) if (m := _STAGE_NAME.match(k)) and m.group(2) in STRUCTURAL]
-    if not names:
-        return ""
-    return (f"--start {', '.join(names)}: not allowed with --native: must be a parameter that is "
-            f"not structural (the contact geometry is built in from {', '.join(STRUCTURAL)}); "
-            "build from a preset with that geometry, or the Python FMU")
 
 
 def native_name(name: str) -> str:
@@ -333,7 +326,6 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
     variables = [_Var(sv, enums) for sv in root.find("ModelVariables")]
     n = params.n_stages
     pools = {"Real": [], "Integer": [], "Boolean": [], "String": []}   # start values
-    struct_real, struct_int = [], []
     out_q, out_stage, counters = [], [], []
     rows, unmodelled = [], []
     index: dict[str, tuple[str, int, _Var]] = {}
@@ -363,12 +355,6 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
             rows.append((v, "K_COUNTER", len(counters)))
             counters.append(_COUNTERS[v.name])
         elif v.causality == "parameter":
-            if m and field in STRUCTURAL:
-                value = getattr(params.stages[stage - 1], field)
-                pool = struct_real if v.type == "Real" else struct_int
-                rows.append((v, "K_STRUCTURAL", len(pool)))
-                pool.append(value)
-                continue
             key = "Integer" if v.type == "Enumeration" else v.type
             if key not in pools:
                 raise BuildError(f"parameter {v.name!r} has type {v.type}, which the native FMU "
@@ -428,8 +414,6 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
     lines.append(arr([int(b) for b in pools["Boolean"]], "int", str, "PAR_BOOL_START", "N_PAR_BOOL"))
     lines.append(arr(pools["String"], "const char *const", _c_string, "PAR_STRING_START",
                      "N_PAR_STRING"))
-    lines.append(arr(struct_real, "double", _hex, "STRUCT_REAL", "N_STRUCT_REAL"))
-    lines.append(arr(struct_int, "int", str, "STRUCT_INT", "N_STRUCT_INT"))
     lines.append(arr(out_q, "int", str, "OUT_QUANTITY", "N_OUT_REAL"))
     lines.append(f"static const int OUT_STAGE[] = {{{', '.join(map(str, out_stage)) or '0'}}};")
     lines.append(arr(counters, "int", str, "COUNTER_QUANTITY", "N_COUNTERS"))
@@ -508,8 +492,8 @@ def _model_exchange(root: ET.Element, identifier: str) -> None:
 
 
 def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
-    """The native FMU's modelDescription.xml: the Python FMU's with its own identity, the
-    structural parameters as constants and the sources listed (module docstring, step 3)."""
+    """The native FMU's modelDescription.xml: the Python FMU's with its own identity and the
+    sources listed (module docstring, step 3)."""
     root = ET.fromstring(md)
     for elem in root.iter():
         if elem.text is not None and not elem.text.strip():
@@ -520,7 +504,7 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     root.set("guid", guid)
     root.set("generationTool", f"prsm-fmu fmu_build --native {prsm_fmu.__version__}")
     root.set("description", root.get("description", "") + "; native C FMU: kinematic, "
-             "quasi-static and dynamic levels, contact geometry built in")
+             "quasi-static and dynamic levels, contact geometry solved at initialization")
     cs = root.find("CoSimulation")
     for key, value in (("modelIdentifier", identifier), ("needsExecutionTool", "false"),
                        ("canHandleVariableCommunicationStepSize", "true"),
@@ -534,12 +518,6 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     for s in SOURCES:
         ET.SubElement(files, "File", name=s)
     _model_exchange(root, identifier)
-    for sv in root.find("ModelVariables"):
-        m = _STAGE_NAME.match(sv.get("name"))
-        if sv.get("causality") == "parameter" and m and m.group(2) in STRUCTURAL:
-            sv.set("causality", "local")
-            sv.set("variability", "constant")
-            sv.attrib.pop("initial", None)
     return parseString(ET.tostring(root, encoding="utf-8")).toprettyxml(indent="  ", encoding="UTF-8")
 
 
@@ -616,8 +594,8 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         Validate with fmpy and the project's modelDescription rules.
     start : dict, optional
         Parameter start values other than the preset's (``builder.start_values``: e.g.
-        ``fidelity = dynamic`` for hosts that cannot set an Enumeration); not the structural
-        ones, which the geometry is built from (use a preset with that geometry).
+        ``fidelity = dynamic`` for hosts that cannot set an Enumeration), the geometry's
+        included.
     targets : tuple of str
         The platforms built (keys of :data:`fmu_build.platforms.PLATFORMS`): all by default.
 
@@ -629,17 +607,13 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
     Raises
     ------
     BuildError
-        For a structural parameter in ``start``, what the C cannot build, or a binary unfit
-        for its platform (named).
+        For what the C cannot build, or a binary unfit for its platform (named).
     """
     params = params.validate()
     unknown = [t for t in targets if t not in platforms.PLATFORMS]
     if unknown or not targets:
         raise BuildError(f"platforms {unknown or targets!r} not allowed: must be one or more of "
                          f"{', '.join(platforms.PLATFORMS)}")
-    problem = structural_start(start)
-    if problem:
-        raise BuildError(problem)
     identifier = native_name(name)
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)

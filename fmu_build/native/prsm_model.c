@@ -504,7 +504,7 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
         s->c = (leads + v->screw_lead) / PRSM_TWO_PI;
         double spline_f = k > 0 ? cfg->stage[k - 1].screw_lead / PRSM_TWO_PI : 0.0;
         zeta_ideal[k] = v->screw_radius / (v->screw_radius + v->nut_radius);
-        double starts_1 = (double)((v->screw_starts - 1) * (v->screw_starts - 1));
+        double starts_1 = ((double)v->screw_starts - 1.0) * ((double)v->screw_starts - 1.0);
         double orbit2 = prsm_pow(v->screw_radius + v->roller_radius, 2.0);
         s->n_rollers = (double)v->n_rollers;
         s->m_assembly = v->nut_mass + (double)v->n_rollers * v->roller_mass
