@@ -47,10 +47,14 @@ _MSG = 600
 #: libraries loaded in this process, by source hash and by the parameters' repr
 _loaded: dict[str, ctypes.CDLL] = {}
 _by_params: dict[str, ctypes.CDLL] = {}
+#: per stage count, a loaded library that solves any geometry (NativeStepper passes the model's)
+_by_stages: dict[int, ctypes.CDLL] = {}
 
 
 def native_library(params) -> ctypes.CDLL:
-    """The C model of ``params``' geometry as a loaded shared library (built on first use).
+    """The C model for ``params`` as a loaded shared library: built on first use with ``params``'
+    geometry as its default, then reused in this process for every mechanism of as many stages
+    (the stepper passes each model's geometry, whose contact the C solves).
 
     Raises
     ------
@@ -60,8 +64,14 @@ def native_library(params) -> ctypes.CDLL:
     key = repr(params)
     if key in _by_params:
         return _by_params[key]
-    lib = library_file(params)
-    _by_params[key] = dll = load_library(str(lib))
+    # a library that solves the geometry it is given serves every mechanism with as many
+    # stages: another geometry compiles nothing
+    dll = _by_stages.get(params.n_stages)
+    if dll is None:
+        dll = load_library(str(library_file(params)))
+        if solves_geometry(dll):
+            _by_stages[params.n_stages] = dll
+    _by_params[key] = dll
     return dll
 
 
