@@ -7,12 +7,14 @@
   under a name of its own, which never shadows the ``fmu_build`` of a process that has one);
   not the FMU builders;
 * ``binaries/<platform>/prsm_engine.{so,dll}``: the compiled engine (the native FMU's C model
-  and steppers with the flat interface ``prsm_api.c``) for the build's geometry, for linux64
+  and steppers with the flat interface ``prsm_api.c``; it solves the contact of the geometry
+  each instance sets, the build's being its default), for linux64
   (glibc 2.17 and later) and win64, cross-compiled here with Zig's C compiler and checked (gcc
   for this platform alone where ziglang is missing), so that no compiler is needed where the
   FMU runs, and
-  ``prsm_engine.json``: the geometry parameters it was built with (an instance whose geometry
-  differs runs the Python model, logged);
+  ``prsm_engine.json``: the geometry parameters it was built with (read for a library of an
+  older build, which baked them in: an instance whose geometry differs then runs the Python
+  model, logged);
 * ``prsm_start_values.json``: the parameters' start values, read by every instance;
 * ``__pycache__/*.cpython-XY.pyc`` beside every packed Python file (:func:`add_bytecode`):
   its bytecode for the building interpreter's version, checked against the source's hash at

@@ -9,8 +9,9 @@ back to the same double, for p = 1..17), which C's ``printf`` reproduces charact
 character.
 
 A rule's bounds are constants, or a function of the stage's geometry (``n_rollers``: how many
-rollers fit; ``spline_radius`` while ``mu_spline > 0``: r_S/100 .. r_S), which the native FMU
-evaluates when it is built (the geometry is structural there), or another parameter's value
+rollers fit; ``spline_radius`` while ``mu_spline > 0``: r_S/100 .. r_S; ``FmuRule.derived``
+says which), which the native FMU evaluates from the geometry set at initialization, or another
+parameter's value
 (``substeps`` ≤ ``max_substeps``).  A rule may apply only while another parameter is > 0
 (``when``).
 """
