@@ -40,7 +40,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-
 from typing import Callable
 
 from .params import StageParams
