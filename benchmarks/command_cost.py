@@ -16,13 +16,16 @@ hits both alike.  Printed, each beside its goal:
    result repeated to that length, every column a real output): CPU of ``write_csv``, old / new
    — goal ≥ 10× [≥ 5×];
 4. the figures of that 0.25 s run (``write_plots``, matplotlib imported inside): CPU, old / new;
-5. the pythonfmu FMU's start-up, instantiate to the end of the first ``doStep`` (fmpy, in a
-   fresh process: imports included), old FMU / new FMU.
+5. the pythonfmu FMU's start-up to the end of the first ``doStep`` (fmpy, in a fresh process),
+   from ``import fmpy`` (imports included) and from ``instantiate`` (the FMU's own start-up:
+   its slave's imports, the model's set-up, the engine's load), old FMU / new FMU, and whether
+   scipy was imported by then (``--startup-only``: this alone).
 
 Not measured here (say so rather than guess): the sweep's scaling (``benchmarks/sweep_scaling.py``)
 and ``prsm-fmu regress`` (``--regress`` adds it: wall time, old / new).
 
-Run: ``python benchmarks/command_cost.py [--old 707572e] [--repeat 3] [--regress]``
+Run: ``python benchmarks/command_cost.py [--old 707572e] [--repeat 3] [--regress]
+[--startup-only]``
 (several minutes: the README command runs 2 × repeat times).
 """
 
@@ -137,13 +140,42 @@ md = read_model_description(path)
 unzip = extract(path)
 s = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
               modelIdentifier=md.coSimulation.modelIdentifier, instanceName="b")
+t1 = time.perf_counter()
 s.instantiate()
 s.setupExperiment(startTime=0.0)
 s.enterInitializationMode()
 s.exitInitializationMode()
 s.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
-print(time.perf_counter() - t0)
+t2 = time.perf_counter()
+print(t2 - t0, t2 - t1, int("scipy" in sys.modules))
 """
+
+
+def _startup(py: str, trees: dict[str, Path], work: dict[str, Path], repeat: int) -> None:
+    """5. the default FMU's start-up in fresh processes, old FMU (its tree) / new FMU: wall
+    time from ``import fmpy`` and from instantiate, both to the end of the first doStep, and
+    whether scipy was imported by then."""
+    def once(k: str) -> list[float]:
+        out = _child([py, "-c", _STARTUP, str(work[k] / "dist" / "PRSM2.fmu")], trees[k])[2]
+        return [float(v) for v in out.split()[-3:]]
+
+    r = _interleaved(repeat, {k: (lambda k=k: once(k)) for k in trees})
+    (o, oi), (w, wi) = ([_med(x[i] for x in r[k]) for i in (0, 1)] for k in ("old", "new"))
+    scipy = {k: "yes" if any(x[2] for x in r[k]) else "no" for k in trees}
+    print(f"5. pythonfmu FMU start-up, wall: import fmpy .. end of the first doStep: old {o:.2f} s, "
+          f"new {w:.2f} s, {o / w:.2f}x; instantiate .. end of the first doStep: old {oi:.3f} s, "
+          f"new {wi:.3f} s, {oi / wi:.2f}x; scipy imported: old {scipy['old']}, new "
+          f"{scipy['new']}")
+
+
+def _build_fmus(py: str, trees: dict[str, Path], tmp: Path) -> dict[str, Path]:
+    """Each tree's ``dist/PRSM2.fmu`` (the README command's), built before any clock."""
+    work = {k: tmp / f"run-{k}" for k in trees}
+    for k, tree in trees.items():
+        work[k].mkdir()
+        subprocess.run([py, "-m", "fmu_build", "PRSM2", "--dest", str(work[k] / "dist")],
+                       env=_env(tree), cwd=work[k], check=True, capture_output=True)
+    return work
 
 
 def main() -> None:
@@ -151,6 +183,8 @@ def main() -> None:
     ap.add_argument("--old", default="707572e", help="the commit to compare with")
     ap.add_argument("--repeat", type=int, default=3, help="repetitions of each (median counts)")
     ap.add_argument("--regress", action="store_true", help="also time prsm-fmu regress")
+    ap.add_argument("--startup-only", action="store_true",
+                    help="only 5., the FMU's start-up (a minute, not several)")
     args = ap.parse_args()
     py = sys.executable
     with tempfile.TemporaryDirectory(prefix="command_cost_") as tmp:
@@ -158,6 +192,9 @@ def main() -> None:
         trees = {"old": _old_tree(args.old, tmp), "new": ROOT}
         print(f"old: {args.old} (git archive into a temporary folder); new: {ROOT}; "
               f"median of {args.repeat} interleaved runs each, this machine, this run\n")
+        if args.startup_only:
+            _startup(py, trees, _build_fmus(py, trees, tmp), args.repeat + 2)
+            return
 
         # 1. prsm-ema list
         r = _interleaved(args.repeat + 2, {
@@ -168,12 +205,7 @@ def main() -> None:
         print(f"1. prsm-ema list, CPU: numpy import {n:.3f} s, old {o:.3f} s ({o / n:.2f}x numpy), "
               f"new {w:.3f} s ({w / n:.2f}x numpy)   goal <= 1x [<= 2x]")
 
-        # FMUs of each tree, built before any clock (the README command's dist/PRSM2.fmu)
-        work = {k: tmp / f"run-{k}" for k in trees}
-        for k, tree in trees.items():
-            work[k].mkdir()
-            subprocess.run([py, "-m", "fmu_build", "PRSM2", "--dest", str(work[k] / "dist")],
-                           env=_env(tree), cwd=work[k], check=True, capture_output=True)
+        work = _build_fmus(py, trees, tmp)
 
         # 2. the README's first command
         def readme(k: str) -> float:
@@ -216,13 +248,7 @@ def main() -> None:
         print(f"4. write_plots (7 figures, matplotlib import included): old {o:.2f} s, new {w:.2f} s "
               f"CPU, {o / w:.2f}x faster")
 
-        # 5. the FMU's start-up
-        r = _interleaved(args.repeat + 2, {k: (lambda k=k: float(_child(
-            [py, "-c", _STARTUP, str(work[k] / "dist" / "PRSM2.fmu")], trees[k])[2].split()[-1]))
-            for k in trees})
-        o, w = _med(r["old"]), _med(r["new"])
-        print(f"5. pythonfmu FMU start-up (import fmpy .. end of the first doStep), wall: old "
-              f"{o:.2f} s, new {w:.2f} s, {o / w:.2f}x")
+        _startup(py, trees, work, args.repeat + 2)
 
         if args.regress:
             r = _interleaved(args.repeat, {k: (lambda k=k: _child(

@@ -38,8 +38,7 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
                 targets: tuple[str, ...] | None = None,
                 engine_platforms: tuple[str, ...] | None = None):
     """Build one of the standard FMUs (``PRSM1``, ``PRSM2``, ``PRSM3``) into ``dest``
-    (``start``: parameter start values other than the preset's, see ``builder.start_values``;
-    for the native FMU not the structural ones).
+    (``start``: parameter start values other than the preset's, see ``builder.start_values``).
 
     ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
     levels, :mod:`fmu_build.native`) instead of the Python one; ``targets``: its platforms

@@ -114,7 +114,6 @@ def _main(argv: list[str] | None) -> int:
     # FMI headers
     require("pythonfmu", "fmpy", purpose="building an FMU")
     from . import BuildError, build_fmu, build_named, build_native
-    from .native import structural_start
 
     check = not args.no_validate
     try:
@@ -132,10 +131,6 @@ def _main(argv: list[str] | None) -> int:
         return 2
     plats = tuple(dict.fromkeys(args.platform)) if args.platform else FMI2_PLATFORMS
     versions = set(args.fmi_version or ["2", "3"])
-    problem = structural_start(start) if args.native else ""
-    if problem:
-        print(f"prsm-fmu-build: error: argument {problem}", file=sys.stderr)
-        return 2
     try:
         if args.preset:
             from prsm_fmu import presets

@@ -194,6 +194,7 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
         _rewrite_model_description(built, model_description.complete(xml, tool,
                                                                      type_definitions()))
         extra.add_baselines(built, name)         # extra/baselines (issue 6), PRSM2 only
+        packing.add_bytecode(built)              # no compiling at every start of the FMU
         if check:
             problems = validate(built)
             if problems:

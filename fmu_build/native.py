@@ -15,14 +15,13 @@ What this module does:
    not know (an output or input), or the parameter is accepted only at its start value zero
    (a parameter, e.g. a new friction term, that the C does not model: setting it refuses
    initialization with a logged fmi2Error rather than being silently ignored);
-2. computes the geometry-derived constants with the Python package (contact points, normals,
-   slip Jacobians of both flanks, c_k, the carrier ratios ζ) and writes them, with the
-   Dormand-Prince and ROS34PW2 tableaux of :mod:`prsm_fmu.steppers.tableaux`, into
-   ``prsm_constants.h`` as exact (hexadecimal) double literals, and the variable table into
-   ``prsm_variables.h``;
-3. marks the parameters the constants are computed from as structural: causality ``local``,
-   variability ``constant`` (:data:`STRUCTURAL`); every other parameter keeps causality
-   ``parameter``, variability ``fixed`` (settable before ``exitInitializationMode``);
+2. writes the preset's geometry (the C solves the contact from it at initialization,
+   ``prsm_geometry.c``), with the Dormand-Prince and ROS34PW2 tableaux of
+   :mod:`prsm_fmu.steppers.tableaux`, into ``prsm_constants.h`` as exact (hexadecimal) double
+   literals, and the variable table into ``prsm_variables.h``;
+3. keeps every parameter's causality ``parameter``, variability ``fixed`` (settable before
+   ``exitInitializationMode``), the geometry's (:data:`STRUCTURAL`) included: the C solves the
+   contact of the geometry set when it initializes;
 4. compiles the sources (``-std=c99 -O2 -fPIC -shared -ffp-contract=off``, libm only) with
    Zig's C compiler for every platform of :mod:`fmu_build.platforms` (``binaries/linux64``
    for glibc 2.17 and later, ``binaries/win64``, ``binaries/darwin64`` universal x86_64 +
@@ -45,14 +44,12 @@ import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 import zipfile
-from dataclasses import replace
 from pathlib import Path
 from xml.dom.minidom import parseString
 
 import prsm_fmu
 from prsm_fmu.atomic import atomic_path
 from prsm_fmu.slave import TIME_MATCH
-from prsm_fmu.mechanics import Mechanism
 from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
@@ -65,16 +62,17 @@ from prsm_fmu.steppers.base import _SQRT_EPS
 from . import model_description, platforms
 from .builder import BuildError, build_fmu, validate
 from .native_ranges import ranges_header
+from .native_stepper import GEOMETRY_REALS
 
-__all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
+__all__ = ["build_native", "native_name", "NATIVE_LEVELS", "STRUCTURAL",
            "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
 
 #: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
-HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_quantity.h")
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_fmi2_me.c")
+HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_geometry.h", "prsm_quantity.h")
 #: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
 INCLUDED = ("prsm_fmi2.c",)
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
@@ -113,15 +111,20 @@ def fmi2_functions(md: bytes) -> tuple[str, ...]:
         out += FMI2_MODEL_EXCHANGE
     return out
 
-#: per-stage parameters the contact geometry is computed from: constants of the native FMU
+#: per-stage parameters the contact geometry is computed from (the C solves it at initialization;
+#: what an engine library packed by an older build baked in, prsm_engine.json)
 STRUCTURAL = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
               "flank_angle")
+
 
 #: parameters the C reads: name (per stage: field) -> allowed FMI types
 _STAGE_PARAMS = {"screw_mass": "Real", "nut_mass": "Real", "roller_mass": "Real",
                  "carrier_mass": "Real", "screw_inertia": "Real", "roller_inertia": "Real",
                  "carrier_inertia": "Real", "spline_radius": "Real", "bearing_radius": "Real",
-                 "n_rollers": "Integer", "carriers": "Integer", "threads_per_roller": "Integer"}
+                 "n_rollers": "Integer", "carriers": "Integer", "threads_per_roller": "Integer",
+                 # the geometry, whose contact prsm_model_init solves (prsm_geometry.c)
+                 "screw_radius": "Real", "roller_radius": "Real", "nut_radius": "Real",
+                 "screw_lead": "Real", "flank_angle": "Real", "screw_starts": "Integer"}
 _SCALAR_PARAMS = {"mu_screw_roller": ("Real",), "mu_spline": ("Real",),
                   "mu_nut_screw": ("Real",), "mu_viscous": ("Real",),
                   "mu_differential": ("Real",), "slip_velocity_scale": ("Real",),
@@ -181,17 +184,6 @@ _TYPE_CODE = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN",
               "String": "T_STRING", "Enumeration": "T_ENUM"}
 
 
-def structural_start(start: dict | None) -> str:
-    """Why ``start`` (parameter start values) cannot be built into a native FMU: it names a
-    structural parameter, whose value the contact geometry is built from; "" if it can."""
-    names = [k for k in (start or {}) if (m := _STAGE_NAME.match(k)) and m.group(2) in STRUCTURAL]
-    if not names:
-        return ""
-    return (f"--start {', '.join(names)}: not allowed with --native: must be a parameter that is "
-            f"not structural (the contact geometry is built in from {', '.join(STRUCTURAL)}); "
-            "build from a preset with that geometry, or the Python FMU")
-
-
 def native_name(name: str) -> str:
     """The FMI modelIdentifier of the native FMU built as ``name`` (``PRSM2`` -> ``PRSM2_native``)."""
     return f"{name}_native"
@@ -210,20 +202,13 @@ def _c_string(s: str) -> str:
 
 
 def constants_header(params: MechanismParams) -> str:
-    """``prsm_constants.h``: geometry-derived constants of ``params`` and the DP5(4) tableau."""
-    # the geometry's constants do not depend on friction; without it the Mechanism accepts a
-    # screw-roller coefficient at or beyond the self-locking limit, which the kinematic level
-    # (no contact friction) runs and the C refuses at the other levels itself
-    mech = Mechanism(replace(params, mu_screw_roller=0.0), "equilibrium")
-    flanks, consts, radii = [], [], []
-    for st, s in zip(params.stages, mech.stages):
-        radii.append("    {" + ", ".join(_hex(fl.radius) for fl in s.flanks) + "}")
-        flanks.append("    {" + ", ".join("{" + ", ".join(_hex(v) for v in fl.consts) + "}"
-                                             for fl in s.flanks) + "}")
-        values = (s.c, s.c_prev, s.zeta_geometric, s.zeta_ideal, s.spline_speed_factor,
-                  s.min_normal_z, (st.screw_radius + st.roller_radius) ** 2,
-                  float((st.screw_starts - 1) ** 2))
-        consts.append("    {" + ", ".join(_hex(v) for v in values) + "}")
+    """``prsm_constants.h``: the built-in geometry of ``params`` (the engine solves the contact
+    from it, or from the geometry it is given), the steppers' tableaux and the outputs' order."""
+    # the built-in geometry (prsm_api_new's; the FMU's start values): the engine solves the
+    # contact from it when a model is made (prsm_geometry.c)
+    geometry = ",\n".join("    {" + ", ".join(_hex(getattr(st, f)) for f in GEOMETRY_REALS) + "}"
+                           for st in params.stages)
+    starts = ", ".join(str(int(st.screw_starts)) for st in params.stages)
     _, a, b, _ = EXPLICIT_TABLEAUS[5]
     rows = ["    {" + ", ".join(_hex(v) for v in (list(a[i]) + [0.0] * 5)[:5]) + "}"
             for i in range(1, 6)]
@@ -231,8 +216,7 @@ def constants_header(params: MechanismParams) -> str:
     bhat = EXPLICIT_TABLEAUS[5][3]
     e = [b[i] - bhat[i] for i in range(7) if i != 1]     # as steppers.tableaux._DP_E
     sep = ",\n"
-    flanks_c, consts_c, rows_c = sep.join(flanks), sep.join(consts), sep.join(rows)
-    radii_c = sep.join(radii)
+    rows_c = sep.join(rows)
     api = api_outputs(params.n_stages)
     return f"""/* Generated by fmu_build.native from {params.name} ({params.source}). Do not edit.
  * prsm-fmu {prsm_fmu.__version__}; values are exact (C99 hexadecimal literals). */
@@ -244,22 +228,12 @@ def constants_header(params: MechanismParams) -> str:
 /* |screw speed| [rad/s] at or below which no power flows (prsm_fmu.models.base.STANDSTILL_SPEED) */
 #define PRSM_STANDSTILL_SPEED {_hex(STANDSTILL_SPEED)}
 
-/* per stage, flank "+" then "-": slip Jacobians a (x, y, z) and b (x, y), contact point (x, y),
-   axial normal n_z and [P x n]_z (prsm_fmu.mechanics._Flank.consts) */
-static const double PRSM_FLANKS[PRSM_N_STAGES][2][9] = {{
-{flanks_c}
+/* the built-in geometry, per stage: screw_radius, roller_radius, nut_radius, screw_lead [m],
+   flank_angle [rad] (fmu_build.native_stepper.GEOMETRY_REALS); and screw_starts */
+static const double PRSM_GEOMETRY[PRSM_N_STAGES][5] = {{
+{geometry}
 }};
-
-/* per stage, flank "+" then "-": the contact radius |P_xy| [m] (_Flank.radius) */
-static const double PRSM_FLANK_RADIUS[PRSM_N_STAGES][2] = {{
-{radii_c}
-}};
-
-/* per stage: c_k, c_(k-1) [m/rad], zeta* (quasi-static), r_S/(r_S + r_N) (kinematic), lead of
-   screw k-1 / 2 pi [m/rad], min |n_z|, (r_S + r_R)^2 [m2], (n_S - 1)^2 */
-static const double PRSM_STAGE_CONSTS[PRSM_N_STAGES][8] = {{
-{consts_c}
-}};
+static const int PRSM_SCREW_STARTS[PRSM_N_STAGES] = {{{starts}}};
 
 /* Dormand-Prince 5(4) (prsm_fmu.steppers.tableaux): a rows 2..6, b (stages 1, 3..6), b - b_hat */
 static const double PRSM_DP_A[5][5] = {{
@@ -352,7 +326,6 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
     variables = [_Var(sv, enums) for sv in root.find("ModelVariables")]
     n = params.n_stages
     pools = {"Real": [], "Integer": [], "Boolean": [], "String": []}   # start values
-    struct_real, struct_int = [], []
     out_q, out_stage, counters = [], [], []
     rows, unmodelled = [], []
     index: dict[str, tuple[str, int, _Var]] = {}
@@ -382,12 +355,6 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
             rows.append((v, "K_COUNTER", len(counters)))
             counters.append(_COUNTERS[v.name])
         elif v.causality == "parameter":
-            if m and field in STRUCTURAL:
-                value = getattr(params.stages[stage - 1], field)
-                pool = struct_real if v.type == "Real" else struct_int
-                rows.append((v, "K_STRUCTURAL", len(pool)))
-                pool.append(value)
-                continue
             key = "Integer" if v.type == "Enumeration" else v.type
             if key not in pools:
                 raise BuildError(f"parameter {v.name!r} has type {v.type}, which the native FMU "
@@ -447,8 +414,6 @@ def variables_header(md: bytes, params: MechanismParams, identifier: str, guid: 
     lines.append(arr([int(b) for b in pools["Boolean"]], "int", str, "PAR_BOOL_START", "N_PAR_BOOL"))
     lines.append(arr(pools["String"], "const char *const", _c_string, "PAR_STRING_START",
                      "N_PAR_STRING"))
-    lines.append(arr(struct_real, "double", _hex, "STRUCT_REAL", "N_STRUCT_REAL"))
-    lines.append(arr(struct_int, "int", str, "STRUCT_INT", "N_STRUCT_INT"))
     lines.append(arr(out_q, "int", str, "OUT_QUANTITY", "N_OUT_REAL"))
     lines.append(f"static const int OUT_STAGE[] = {{{', '.join(map(str, out_stage)) or '0'}}};")
     lines.append(arr(counters, "int", str, "COUNTER_QUANTITY", "N_COUNTERS"))
@@ -527,8 +492,8 @@ def _model_exchange(root: ET.Element, identifier: str) -> None:
 
 
 def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
-    """The native FMU's modelDescription.xml: the Python FMU's with its own identity, the
-    structural parameters as constants and the sources listed (module docstring, step 3)."""
+    """The native FMU's modelDescription.xml: the Python FMU's with its own identity and the
+    sources listed (module docstring, step 3)."""
     root = ET.fromstring(md)
     for elem in root.iter():
         if elem.text is not None and not elem.text.strip():
@@ -539,7 +504,7 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     root.set("guid", guid)
     root.set("generationTool", f"prsm-fmu fmu_build --native {prsm_fmu.__version__}")
     root.set("description", root.get("description", "") + "; native C FMU: kinematic, "
-             "quasi-static and dynamic levels, contact geometry built in")
+             "quasi-static and dynamic levels, contact geometry solved at initialization")
     cs = root.find("CoSimulation")
     for key, value in (("modelIdentifier", identifier), ("needsExecutionTool", "false"),
                        ("canHandleVariableCommunicationStepSize", "true"),
@@ -553,12 +518,6 @@ def native_model_description(md: bytes, identifier: str, guid: str) -> bytes:
     for s in SOURCES:
         ET.SubElement(files, "File", name=s)
     _model_exchange(root, identifier)
-    for sv in root.find("ModelVariables"):
-        m = _STAGE_NAME.match(sv.get("name"))
-        if sv.get("causality") == "parameter" and m and m.group(2) in STRUCTURAL:
-            sv.set("causality", "local")
-            sv.set("variability", "constant")
-            sv.attrib.pop("initial", None)
     return parseString(ET.tostring(root, encoding="utf-8")).toprettyxml(indent="  ", encoding="UTF-8")
 
 
@@ -635,8 +594,8 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
         Validate with fmpy and the project's modelDescription rules.
     start : dict, optional
         Parameter start values other than the preset's (``builder.start_values``: e.g.
-        ``fidelity = dynamic`` for hosts that cannot set an Enumeration); not the structural
-        ones, which the geometry is built from (use a preset with that geometry).
+        ``fidelity = dynamic`` for hosts that cannot set an Enumeration), the geometry's
+        included.
     targets : tuple of str
         The platforms built (keys of :data:`fmu_build.platforms.PLATFORMS`): all by default.
 
@@ -648,17 +607,13 @@ def build_native(name: str, params: MechanismParams, preset: str, dest: str | Pa
     Raises
     ------
     BuildError
-        For a structural parameter in ``start``, what the C cannot build, or a binary unfit
-        for its platform (named).
+        For what the C cannot build, or a binary unfit for its platform (named).
     """
     params = params.validate()
     unknown = [t for t in targets if t not in platforms.PLATFORMS]
     if unknown or not targets:
         raise BuildError(f"platforms {unknown or targets!r} not allowed: must be one or more of "
                          f"{', '.join(platforms.PLATFORMS)}")
-    problem = structural_start(start)
-    if problem:
-        raise BuildError(problem)
     identifier = native_name(name)
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)

@@ -8,8 +8,9 @@ operation for operation, so that its states equal those of :func:`prsm_fmu.stepp
 (tests/test_native_stepper.py).  It is what the dynamic level costs without Python: the
 work-precision study times the Li et al. (2021) start-up with it.
 
-The C is compiled with gcc, with the geometry of the model's preset built in
-(:func:`fmu_build.native.constants_header`), into a shared library cached by the hash of its
+The C is compiled with gcc, with the geometry of the model's preset built in as its default
+(:func:`fmu_build.native.constants_header`; the stepper passes the model's own geometry, whose
+contact the C solves, ``prsm_geometry.c``), into a shared library cached by the hash of its
 sources in a directory of the user's own in the system's temporary directory; it exchanges only
 doubles and ints with Python (``prsm_api.c``, through ctypes).  Every friction term is modelled
 (Coulomb, the friction-torque article's viscous and differential-sliding terms, the joints);
@@ -23,15 +24,19 @@ import math
 from pathlib import Path
 from typing import Any
 
+from prsm_fmu import geometry
 from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
 
 __all__ = ["NativeStepper", "native_library", "load_library", "library_output_names",
-           "LIB_SOURCES"]
+           "contact_solver", "solves_geometry", "GEOMETRY_REALS", "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
-LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_api.c")
+LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_api.c")
 _STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
                 "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
+#: the geometry's real parameters per stage, in the order prsm_api_new_geometry reads them (and
+#: of the built-in PRSM_GEOMETRY rows); screw_starts is its integer one
+GEOMETRY_REALS = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "flank_angle")
 _LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
 #: the Python steppers the C translates, per level, and the band method of each (1: the
 #: exponential band step, 0: Dormand-Prince 5(4); None: the dynamic level's ROS34PW2)
@@ -42,10 +47,14 @@ _MSG = 600
 #: libraries loaded in this process, by source hash and by the parameters' repr
 _loaded: dict[str, ctypes.CDLL] = {}
 _by_params: dict[str, ctypes.CDLL] = {}
+#: per stage count, a loaded library that solves any geometry (NativeStepper passes the model's)
+_by_stages: dict[int, ctypes.CDLL] = {}
 
 
 def native_library(params) -> ctypes.CDLL:
-    """The C model of ``params``' geometry as a loaded shared library (built on first use).
+    """The C model for ``params`` as a loaded shared library: built on first use with ``params``'
+    geometry as its default, then reused in this process for every mechanism of as many stages
+    (the stepper passes each model's geometry, whose contact the C solves).
 
     Raises
     ------
@@ -55,8 +64,14 @@ def native_library(params) -> ctypes.CDLL:
     key = repr(params)
     if key in _by_params:
         return _by_params[key]
-    lib = library_file(params)
-    _by_params[key] = dll = load_library(str(lib))
+    # a library that solves the geometry it is given serves every mechanism with as many
+    # stages: another geometry compiles nothing
+    dll = _by_stages.get(params.n_stages)
+    if dll is None:
+        dll = load_library(str(library_file(params)))
+        if solves_geometry(dll):
+            _by_stages[params.n_stages] = dll
+    _by_params[key] = dll
     return dll
 
 
@@ -101,6 +116,10 @@ def load_library(path: str) -> ctypes.CDLL:
     dll.prsm_api_new.argtypes = [dbl, i32, ctypes.c_char_p, ctypes.c_int]
     dll.prsm_api_new_terms.restype = vp
     dll.prsm_api_new_terms.argtypes = [dbl, i32, dbl, i32, ctypes.c_char_p, ctypes.c_int]
+    if solves_geometry(dll):
+        dll.prsm_api_new_geometry.restype = vp
+        dll.prsm_api_new_geometry.argtypes = [dbl, i32, dbl, i32, dbl, i32, ctypes.c_char_p,
+                                              ctypes.c_int]
     dll.prsm_api_set_tolerances.argtypes = [vp, ctypes.c_double, ctypes.c_double]
     dll.prsm_api_n_states.argtypes = [vp]
     dll.prsm_api_advance_many.argtypes = [vp, ctypes.c_double, dbl, dbl, ctypes.c_double,
@@ -111,12 +130,41 @@ def load_library(path: str) -> ctypes.CDLL:
     dll.prsm_api_free.argtypes = [vp]
     dll.prsm_api_set_band.argtypes = [vp, ctypes.c_int]
     dll.prsm_api_undo_advance.argtypes = [vp]
+    if hasattr(dll, "prsm_api_contact_geometry"):   # (and these)
+        dll.prsm_api_contact_geometry.restype = ctypes.c_int
+        dll.prsm_api_contact_geometry.argtypes = [ctypes.c_double, ctypes.c_double,
+                                                  ctypes.c_double, ctypes.c_int,
+                                                  ctypes.c_double, dbl]
+        geometry.use_compiled_solver(contact_solver(dll))
     if hasattr(dll, "prsm_api_outputs"):     # (an engine library packed before they were added)
         dll.prsm_api_output_name.restype = ctypes.c_char_p
         dll.prsm_api_output_name.argtypes = [ctypes.c_int]
         dll.prsm_api_outputs.argtypes = [vp, ctypes.c_double, dbl, dbl, dbl]
     _loaded[path] = dll
     return dll
+
+
+def solves_geometry(lib: ctypes.CDLL) -> bool:
+    """Whether ``lib`` solves the contact geometry of any stage geometry it is given
+    (``prsm_api_new_geometry``); a library built before bakes its build's geometry in."""
+    return hasattr(lib, "prsm_api_new_geometry")
+
+
+def contact_solver(lib: ctypes.CDLL):
+    """``lib``'s contact-geometry solver (``prsm_api_contact_geometry``) as a function
+    ``(r_s [m], r_r [m], lead [m], n_s, beta [rad]) -> tuple`` of the 13 values of
+    :func:`prsm_fmu.geometry._newton_contact`, which it equals bit for bit; None for a library
+    without it."""
+    if not hasattr(lib, "prsm_api_contact_geometry"):
+        return None
+    call, n = lib.prsm_api_contact_geometry, lib.prsm_api_n_contact()
+
+    def solve(r_s: float, r_r: float, lead: float, n_s: int, beta: float) -> tuple:
+        out = (ctypes.c_double * n)()
+        call(r_s, r_r, lead, n_s, beta, out)
+        return tuple(out)
+
+    return solve
 
 
 def library_output_names(lib: ctypes.CDLL) -> tuple[str, ...]:
@@ -191,10 +239,17 @@ class NativeStepper(Stepper):
         msg = ctypes.create_string_buffer(_MSG)
         term_reals = [float(params.mu_viscous), float(params.mu_differential)]
         term_ints = [int(st.threads_per_roller) for st in params.stages]
-        handle = lib.prsm_api_new_terms((ctypes.c_double * len(reals))(*reals),
-                                        (ctypes.c_int * len(ints))(*ints),
-                                        (ctypes.c_double * 2)(*term_reals),
-                                        (ctypes.c_int * len(term_ints))(*term_ints), msg, _MSG)
+        args = [(ctypes.c_double * len(reals))(*reals), (ctypes.c_int * len(ints))(*ints),
+                (ctypes.c_double * 2)(*term_reals),
+                (ctypes.c_int * len(term_ints))(*term_ints)]
+        if solves_geometry(lib):
+            # the model's own geometry: the engine solves its contact (prsm_geometry.c)
+            geo = [float(getattr(st, f)) for st in params.stages for f in GEOMETRY_REALS]
+            starts = [int(st.screw_starts) for st in params.stages]
+            args += [(ctypes.c_double * len(geo))(*geo), (ctypes.c_int * len(starts))(*starts)]
+            handle = lib.prsm_api_new_geometry(*args, msg, _MSG)
+        else:       # a library packed before: the geometry it was built with
+            handle = lib.prsm_api_new_terms(*args, msg, _MSG)
         if not handle:
             raise ValueError(msg.value.decode())
         self._handle = ctypes.c_void_p(handle)

@@ -7,20 +7,32 @@
   under a name of its own, which never shadows the ``fmu_build`` of a process that has one);
   not the FMU builders;
 * ``binaries/<platform>/prsm_engine.{so,dll}``: the compiled engine (the native FMU's C model
-  and steppers with the flat interface ``prsm_api.c``) for the build's geometry, for linux64
+  and steppers with the flat interface ``prsm_api.c``; it solves the contact of the geometry
+  each instance sets, the build's being its default), for linux64
   (glibc 2.17 and later) and win64, cross-compiled here with Zig's C compiler and checked (gcc
   for this platform alone where ziglang is missing), so that no compiler is needed where the
   FMU runs, and
-  ``prsm_engine.json``: the geometry parameters it was built with (an instance whose geometry
-  differs runs the Python model, logged);
-* ``prsm_start_values.json``: the parameters' start values, read by every instance.
+  ``prsm_engine.json``: the geometry parameters it was built with (read for a library of an
+  older build, which baked them in: an instance whose geometry differs then runs the Python
+  model, logged);
+* ``prsm_start_values.json``: the parameters' start values, read by every instance;
+* ``__pycache__/*.cpython-XY.pyc`` beside every packed Python file (:func:`add_bytecode`):
+  its bytecode for the building interpreter's version, checked against the source's hash at
+  every import (``CHECKED_HASH``: a changed source is compiled anew, never run stale); a host
+  extracts the FMU into a fresh folder at every start, where Python would otherwise compile
+  every module again (0.4 s of the FMU's 0.7 s start-up, ``benchmarks/command_cost.py
+  --startup-only``).  Another Python version ignores them.
 """
 
 from __future__ import annotations
 
 import ast
+import importlib.util
 import json
+import py_compile
 import shutil
+import tempfile
+import zipfile
 from pathlib import Path
 
 import prsm_fmu
@@ -28,7 +40,8 @@ from prsm_fmu.engine import PACKED_INTERFACE, library_name, platform_folder
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.slave import ENGINE_FILE, START_VALUES_FILE
 
-__all__ = ["runtime_modules", "stage_runtime", "stage_engine", "stage_start_values"]
+__all__ = ["runtime_modules", "stage_runtime", "stage_engine", "stage_start_values",
+           "add_bytecode"]
 
 #: the modules the slave needs, besides what they import
 ROOTS = ("prsm_fmu.slave", "prsm_fmu.engine")
@@ -151,3 +164,33 @@ def stage_start_values(dest: Path, values: dict) -> Path:
     path = dest / START_VALUES_FILE
     path.write_text(json.dumps(values, indent=1), encoding="utf-8")
     return path
+
+
+def add_bytecode(fmu: Path) -> int:
+    """Add to the FMU zip ``fmu`` the bytecode of every ``resources/**.py`` it holds (the
+    slave, prsm_fmu, pythonfmu's package, the engine interface): ``__pycache__/<stem>.<tag>.pyc``
+    beside each, compiled by this interpreter with hash-checked invalidation.  Returns how many
+    were added.
+
+    Raises
+    ------
+    py_compile.PyCompileError
+        When a packed source does not compile (it could not run either).
+    """
+    with zipfile.ZipFile(fmu) as z:
+        sources = {n: z.read(n) for n in z.namelist()
+                   if n.startswith("resources/") and n.endswith(".py")}
+    with tempfile.TemporaryDirectory(prefix="prsm_pyc_") as tmp:
+        added = {}
+        for name, data in sources.items():
+            src = Path(tmp, name)
+            src.parent.mkdir(parents=True, exist_ok=True)
+            src.write_bytes(data)
+            pyc = Path(importlib.util.cache_from_source(str(src)))
+            py_compile.compile(str(src), cfile=str(pyc), dfile=name, doraise=True,
+                               invalidation_mode=py_compile.PycInvalidationMode.CHECKED_HASH)
+            added[pyc.relative_to(tmp).as_posix()] = pyc.read_bytes()
+    with zipfile.ZipFile(fmu, "a", compression=zipfile.ZIP_DEFLATED) as z:
+        for name, data in sorted(added.items()):
+            z.writestr(name, data)
+    return len(added)

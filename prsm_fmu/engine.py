@@ -12,8 +12,10 @@ with gcc on first use, cached).  The Python model and steppers stay the readable
 * the engine refuses the configuration on construction (a level, drive or friction term the C
   does not model: its own message says which);
 * the stepper asked for is not the engine's method at that level (:data:`ENGINE_METHOD`);
-* in an FMU, a geometry parameter differs from the value the packed library was built with
-  (the engine bakes the contact geometry in).
+* in an FMU whose packed library was built before the engine solved the contact geometry
+  itself (no ``prsm_api_new_geometry``), a geometry parameter differs from the value it was
+  built with.  A library of this version solves the contact of the geometry it is given
+  (``prsm_geometry.c``): geometry set at initialization runs in the engine.
 
 Each fallback carries its reason (:func:`fallback_reason`), which the FMU logs.  As the engine
 learns more (levels, friction terms), the doors widen by themselves: they try the engine first
@@ -29,7 +31,7 @@ from typing import Any
 
 __all__ = ["ENGINES", "DEFAULT_ENGINE", "ENGINE_ENV", "ENGINE_METHOD", "check_engine",
            "default_engine", "engine_stepper", "fallback_reason", "is_engine", "library_name",
-           "platform_folder"]
+           "library_solves_geometry", "platform_folder"]
 
 #: the engine choices: the compiled core, or the Python reference
 ENGINES = ("native", "python")
@@ -135,6 +137,16 @@ def _interface():
 
         return importlib.import_module(PACKED_INTERFACE)
     return native_stepper
+
+
+def library_solves_geometry(library_path: str) -> bool:
+    """Whether the engine library at ``library_path`` solves the contact geometry of the
+    geometry it is given (``prsm_api_new_geometry``); False if it does not load."""
+    try:
+        interface = _interface()
+        return bool(interface.solves_geometry(interface.load_library(library_path)))
+    except Exception:  # noqa: BLE001 - an older interface, a library that does not load
+        return False
 
 
 def _library(params, library_path: str | None):

@@ -40,8 +40,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-
-import numpy as np
+from typing import Callable
 
 from .params import StageParams
 
@@ -254,68 +253,162 @@ def _check_stage(stage: StageParams, name: str = "stage") -> None:
         raise ValueError(f"{name}.flank_angle = {beta!r} rad is out of range: must be in (0, pi/2)")
 
 
-def _solve_contact(r_s: float, r_r: float, lead: float, n_s: int,
-                   beta: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Solve S = Rr and n_S ∥ n_R near the pitch point.
+#: the Newton iteration's bounds and finite-difference step (prsm_geometry.c's PRSM_CONTACT_*)
+_MAX_ITER = 50
+_MAX_HALVINGS = 30
+_DU = 1e-7
+#: the compiled solver (prsm_api_contact_geometry of a loaded engine library), or None
+_compiled: list = []
 
-    Returns the contact point, the unit normal (z > 0), the solution
-    (ρ, ψ, ρ_r, ψ_r, z_r) and the largest scaled residual.
-    """
-    a = r_s + r_r
-    ell = lead / (2.0 * math.pi)
-    q = ell / n_s                      # roller lead per radian, p / (2π)
-    tan_b = math.tan(beta)
-    big_r = r_r / math.sin(beta)       # radius of the roller's axial profile arc
-    z_r0 = -q * math.pi - big_r * math.cos(beta)   # roller phase that puts ψ_r = π on z = 0
 
-    def unpack(u: np.ndarray) -> tuple[float, float, float, float, float]:
-        return (r_s * (1.0 + u[0]), u[1], r_r * (1.0 + u[2]), math.pi + u[3],
-                z_r0 + r_s * u[4])
+def use_compiled_solver(solve: Callable[[float, float, float, int, float], tuple] | None) -> None:
+    """Let :func:`contact_geometry` call ``solve`` (the engine library's
+    ``prsm_api_contact_geometry``, registered by :func:`fmu_build.native_stepper.load_library`)
+    instead of :func:`_newton_contact`, its readable reference; None: the reference again.
+    Both compute the same numbers bit for bit (tests/test_geometry_solver.py)."""
+    _compiled[:] = [solve] if solve is not None else []
 
-    def surfaces(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        rho, psi, rho_r, psi_r, z_r = unpack(u)
+
+class _ContactProblem:
+    """The five contact equations of a stage in the scaled unknowns u (0 at the pitch point):
+    ρ = r_S (1 + u0), ψ = u1, ρ_r = r_R (1 + u2), ψ_r = π + u3, z_r = z_r0 + r_S u4."""
+
+    def __init__(self, r_s: float, r_r: float, lead: float, n_s: int, beta: float) -> None:
+        self.r_s, self.r_r = r_s, r_r
+        self.a = r_s + r_r
+        self.ell = lead / (2.0 * math.pi)
+        self.q = self.ell / n_s              # roller lead per radian, p / (2π)
+        self.tan_b = math.tan(beta)
+        self.big_r = r_r / math.sin(beta)    # radius of the roller's axial profile arc
+        # the roller phase that puts ψ_r = π on z = 0
+        self.z_r0 = -self.q * math.pi - self.big_r * math.cos(beta)
+        self.floor_h = (1e-9 * self.big_r) * (1e-9 * self.big_r)
+
+    def unknowns(self, u: list[float]) -> list[float]:
+        """(ρ [m], ψ [rad], ρ_r [m], ψ_r [rad], z_r [m]) of the scaled unknowns ``u``."""
+        return [self.r_s * (1.0 + u[0]), u[1], self.r_r * (1.0 + u[2]), math.pi + u[3],
+                self.z_r0 + self.r_s * u[4]]
+
+    def evaluate(self, u: list[float]) -> tuple[list[float], Vector3, Vector3]:
+        """The residual (S − Rr)/r_S (3) and the unit normals' x, y difference (2), the screw
+        flank's point [m] and its unit normal (z > 0) at ``u``."""
+        rho, psi, rho_r, psi_r, z_r = self.unknowns(u)
         cp, sp = math.cos(psi), math.sin(psi)
         cr, sr = math.cos(psi_r), math.sin(psi_r)
-        h = math.sqrt(max(big_r * big_r - rho_r * rho_r, (1e-9 * big_r) ** 2))
-        p_s = np.array([rho * cp, rho * sp, ell * psi + (rho - r_s) * tan_b])
-        p_r = np.array([a + rho_r * cr, rho_r * sr, z_r + q * psi_r + h])
+        h2 = self.big_r * self.big_r - rho_r * rho_r
+        h = math.sqrt(h2 if h2 > self.floor_h else self.floor_h)
+        ell, q, tan_b, r_s = self.ell, self.q, self.tan_b, self.r_s
+        sx, sy, sz = rho * cp, rho * sp, ell * psi + (rho - r_s) * tan_b
+        rx, ry, rz = self.a + rho_r * cr, rho_r * sr, z_r + q * psi_r + h
         # ∂S/∂ρ × ∂S/∂ψ and ∂Rr/∂ρ_r × ∂Rr/∂ψ_r: both point towards +z
-        n_s_vec = np.array([ell * sp - rho * tan_b * cp, -rho * tan_b * sp - ell * cp, rho])
-        n_r_vec = np.array([q * sr + rho_r * rho_r * cr / h, rho_r * rho_r * sr / h - q * cr,
-                            rho_r])
-        return p_s, p_r, n_s_vec / np.linalg.norm(n_s_vec), n_r_vec / np.linalg.norm(n_r_vec)
-
-    def residual(u: np.ndarray) -> np.ndarray:
-        p_s, p_r, n_s_hat, n_r_hat = surfaces(u)
+        nsx = ell * sp - rho * tan_b * cp
+        nsy = -rho * tan_b * sp - ell * cp
+        nsz = rho
+        nrx = q * sr + rho_r * rho_r * cr / h
+        nry = rho_r * rho_r * sr / h - q * cr
+        nrz = rho_r
+        ns = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
+        nr = math.sqrt(nrx * nrx + nry * nry + nrz * nrz)
         # both unit normals have z > 0, so equal x and y components make them equal
-        return np.concatenate(((p_s - p_r) / r_s, (n_s_hat - n_r_hat)[:2]))
+        f = [(sx - rx) / r_s, (sy - ry) / r_s, (sz - rz) / r_s,
+             nsx / ns - nrx / nr, nsy / ns - nry / nr]
+        return f, (sx, sy, sz), (nsx / ns, nsy / ns, nsz / ns)
 
-    from scipy.optimize import root   # on demand: importing scipy.optimize costs ~0.8 s
 
-    sol = root(residual, np.zeros(5), method="hybr", options={"xtol": 1e-15})
-    u = sol.x
-    # a few Newton steps with a central-difference Jacobian polish to round-off
-    for _ in range(3):
-        f0 = residual(u)
-        if np.max(np.abs(f0)) < 1e-16 or not np.all(np.isfinite(f0)):
-            break
-        jac = np.empty((5, 5))
+def _max_abs(f: list[float]) -> float:
+    """Largest |f_i|, infinity if one is not finite."""
+    m = 0.0
+    for v in f:
+        if not math.isfinite(v):
+            return math.inf
+        if abs(v) > m:
+            m = abs(v)
+    return m
+
+
+def _solve5(jac: list[list[float]], f: list[float]) -> list[float] | None:
+    """d with J d = f (Gaussian elimination with partial pivoting, ``jac`` and ``f``
+    overwritten), or None if J is singular."""
+    for c in range(5):
+        piv = c
+        for r in range(c + 1, 5):
+            if abs(jac[r][c]) > abs(jac[piv][c]):
+                piv = r
+        if not abs(jac[piv][c]) > 0.0 or not math.isfinite(jac[piv][c]):
+            return None
+        if piv != c:
+            jac[c], jac[piv] = jac[piv], jac[c]
+            f[c], f[piv] = f[piv], f[c]
+        for r in range(c + 1, 5):
+            factor = jac[r][c] / jac[c][c]
+            for j in range(c, 5):
+                jac[r][j] = jac[r][j] - factor * jac[c][j]
+            f[r] = f[r] - factor * f[c]
+    d = [0.0] * 5
+    for r in range(4, -1, -1):
+        s = f[r]
+        for j in range(r + 1, 5):
+            s = s - jac[r][j] * d[j]
+        d[r] = s / jac[r][r]
+    return d
+
+
+def _newton_contact(r_s: float, r_r: float, lead: float, n_s: int,
+                    beta: float) -> tuple[float, ...]:
+    """Solve S = Rr and n_S ∥ n_R near the pitch point by damped Newton (the readable reference
+    of the engine's ``prsm_contact_solve``, prsm_geometry.c, operation for operation).
+
+    A central-difference Jacobian (step :data:`_DU` in the scaled unknowns), Gaussian
+    elimination with partial pivoting, and a line search that halves the step (at most
+    :data:`_MAX_HALVINGS` times) until the largest scaled residual decreases; it stops at
+    a residual ≤ 1e-16, at the round-off floor (no decrease) or after :data:`_MAX_ITER`
+    iterations, so its work is bounded whatever the input.
+
+    Returns
+    -------
+    tuple of float
+        The contact point (x, y, z) [m], the unit normal (x, y, z) (z > 0), the solution
+        (ρ, ψ, ρ_r, ψ_r, z_r), the largest scaled residual and the iterations taken: 13 values.
+    """
+    prob = _ContactProblem(r_s, r_r, lead, n_s, beta)
+    u = [0.0] * 5
+    f = prob.evaluate(u)[0]
+    fn = _max_abs(f)
+    it = 0
+    while it < _MAX_ITER and fn > 1e-16 and math.isfinite(fn):
+        jac = [[0.0] * 5 for _ in range(5)]
         for j in range(5):
-            du = np.zeros(5)
-            du[j] = 1e-7
-            jac[:, j] = (residual(u + du) - residual(u - du)) / 2e-7
-        try:
-            step = np.linalg.solve(jac, f0)
-        except np.linalg.LinAlgError:
+            up, um = list(u), list(u)
+            up[j] = u[j] + _DU
+            um[j] = u[j] - _DU
+            fp, fm = prob.evaluate(up)[0], prob.evaluate(um)[0]
+            for i in range(5):
+                jac[i][j] = (fp[i] - fm[i]) / (2.0 * _DU)
+        d = _solve5(jac, list(f))
+        if d is None:
             break
-        u_new = u - step
-        if np.max(np.abs(residual(u_new))) < np.max(np.abs(f0)):
-            u = u_new
+        it += 1
+        t = 1.0
+        for _ in range(_MAX_HALVINGS):
+            un = [u[i] - t * d[i] for i in range(5)]
+            fnew = prob.evaluate(un)[0]
+            nn = _max_abs(fnew)
+            if nn < fn:
+                u, f, fn = un, fnew, nn
+                break
+            t = 0.5 * t
         else:
-            break
-    p_s, _p_r, n_hat, _ = surfaces(u)
-    res = float(np.max(np.abs(residual(u)))) if np.all(np.isfinite(u)) else math.inf
-    return p_s, n_hat, np.array(unpack(u)), res
+            break               # at the round-off floor, or no descent
+    f, point, normal = prob.evaluate(u)
+    return (*point, *normal, *prob.unknowns(u), _max_abs(f), float(it))
+
+
+def _solve_contact(r_s: float, r_r: float, lead: float, n_s: int,
+                   beta: float) -> tuple[float, ...]:
+    """:func:`_newton_contact`'s 13 values, by the compiled solver when one is registered."""
+    if _compiled:
+        return _compiled[0](r_s, r_r, lead, n_s, beta)
+    return _newton_contact(r_s, r_r, lead, n_s, beta)
 
 
 @functools.lru_cache(maxsize=256)
@@ -323,8 +416,9 @@ def contact_geometry(stage: StageParams, name: str = "stage") -> ContactGeometry
     """Screw–roller contact point and normal of a stage, on the "+" flank.
 
     Solves the five equations "the screw flank and the roller flank share a point (3) and a
-    normal (2)" for (ρ, ψ, ρ_r, ψ_r, z_r) with :func:`scipy.optimize.root`, starting at the
-    pitch point (ψ = 0, ψ_r = π, ρ = r_S, ρ_r = r_R), to round-off accuracy.  The result is
+    normal (2)" for (ρ, ψ, ρ_r, ψ_r, z_r) by damped Newton (:func:`_newton_contact`, or the
+    engine's identical C when its library is loaded), starting at the pitch point (ψ = 0,
+    ψ_r = π, ρ = r_S, ρ_r = r_R), to round-off accuracy; no scipy.  The result is
     cached per (hashable, frozen) :class:`~prsm_fmu.params.StageParams`.
 
     Parameters
@@ -353,13 +447,13 @@ def contact_geometry(stage: StageParams, name: str = "stage") -> ContactGeometry
     lead, n_s, beta = float(stage.screw_lead), int(stage.screw_starts), float(stage.flank_angle)
     a = r_s + r_r
     try:
-        point, normal, (rho, psi, rho_r, psi_r, _z_r), res = _solve_contact(r_s, r_r, lead, n_s,
-                                                                            beta)
+        sol = _solve_contact(r_s, r_r, lead, n_s, beta)
         big_r = r_r / math.sin(beta)
     except ArithmeticError:      # e.g. a flank angle of 1e-300 rad: no contact to be found
-        point, res, big_r = np.full(3, np.nan), math.inf, math.nan
-        rho = psi = rho_r = psi_r = math.nan
-    near = (np.all(np.isfinite(point)) and res < _RESIDUAL_TOL
+        sol, big_r = (math.nan,) * 11 + (math.inf, 0.0), math.nan
+    point, normal = sol[0:3], sol[3:6]
+    rho, psi, rho_r, psi_r, res = sol[6], sol[7], sol[8], sol[9], sol[11]
+    near = (all(map(math.isfinite, point)) and res < _RESIDUAL_TOL
             and 0.0 < rho_r < big_r * (1.0 - 1e-9) and rho > 0.0
             and abs(psi) < math.pi / 2 and abs(psi_r - math.pi) < math.pi / 2
             and math.hypot(point[0] - r_s, point[1]) < r_r)

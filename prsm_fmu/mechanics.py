@@ -62,8 +62,10 @@ class _Flank:
         self.consts = (ax, ay, az, bx, by, self.px, self.py, self.nz,
                        self.px * self.ny - self.py * self.nx)
         #: contact radius |P_xy| [m]: the screw's surface speed there, ω r, is the sliding speed
-        #: that regularises the differential-sliding torque's sign
-        self.radius = math.hypot(self.px, self.py)
+        #: that regularises the differential-sliding torque's sign (a square root, not
+        #: math.hypot, whose rounding libm's hypot does not share: the engine's
+        #: prsm_stage_contact computes it so)
+        self.radius = math.sqrt(self.px * self.px + self.py * self.py)
 
     def steady_ratio(self) -> float:
         """Carrier/screw speed ratio at which the slip has no component along b [-]."""
@@ -83,8 +85,12 @@ class _Stage:
         leads = [s.screw_lead for s in params.stages]
         self.n_rollers = float(st.n_rollers)
         self.ell = st.screw_lead / TWO_PI
-        self.c = sum(leads[: k + 1]) / TWO_PI
-        self.c_prev = sum(leads[:k]) / TWO_PI
+        # added left to right (Python 3.12's sum() compensates; the engine's C adds plainly)
+        leads_below = 0.0
+        for lead in leads[:k]:
+            leads_below = leads_below + lead
+        self.c = (leads_below + leads[k]) / TWO_PI
+        self.c_prev = leads_below / TWO_PI
         self.m_assembly = st.nut_mass + st.n_rollers * st.roller_mass + st.carriers * st.carrier_mass
         self.m_screw = st.screw_mass if k > 0 else 0.0
         self.j_screw = st.screw_inertia

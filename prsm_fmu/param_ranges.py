@@ -9,8 +9,9 @@ back to the same double, for p = 1..17), which C's ``printf`` reproduces charact
 character.
 
 A rule's bounds are constants, or a function of the stage's geometry (``n_rollers``: how many
-rollers fit; ``spline_radius`` while ``mu_spline > 0``: r_S/100 .. r_S), which the native FMU
-evaluates when it is built (the geometry is structural there), or another parameter's value
+rollers fit; ``spline_radius`` while ``mu_spline > 0``: r_S/100 .. r_S; ``FmuRule.derived``
+says which), which the native FMU evaluates from the geometry set at initialization, or another
+parameter's value
 (``substeps`` ≤ ``max_substeps``).  A rule may apply only while another parameter is > 0
 (``when``).
 """
@@ -186,6 +187,11 @@ class FmuRule:
     hi: float | None = None
     hi_parameter: str | None = None
     when: str | None = None
+    #: how ``lo``/``hi`` follow from the stage's geometry, for an FMU whose geometry is set at
+    #: initialization (the native FMU evaluates them then): ``"max_rollers"`` (hi =
+    #: :func:`max_rollers` of the stage's radii) or ``"spline"`` (from
+    #: SPLINE_RADIUS_MIN_FRACTION × to 1 × the stage's screw radius); None: constant bounds
+    derived: str | None = None
 
 
 def spline_rule(k: int, screw_radius: float | None) -> FmuRule:
@@ -199,7 +205,7 @@ def spline_rule(k: int, screw_radius: float | None) -> FmuRule:
                    Range(0.0, 1.0, unit="m", note="while mu_spline > 0: from 0.01 x to 1 x the "
                          "screw radius; the internal spline teeth lie in the bore of the screw"),
                    lo=SPLINE_RADIUS_MIN_FRACTION * screw_radius, hi=screw_radius,
-                   when="mu_spline")
+                   when="mu_spline", derived="spline")
 
 
 def bearing_rule(k: int) -> FmuRule:
@@ -230,8 +236,9 @@ def fmu_rules(stages: tuple, geometry: Callable[[int], tuple[float, float]] | No
     for k in range(1, n + 1):
         r_s, r_r = geometry(k)
         for f, r in STAGE_RANGES.items():
-            hi = max_rollers(r_s, r_r) if f == "n_rollers" else None
-            rules.append(FmuRule(f"stage[{k}].{f}", r, hi=hi))
+            rolls = f == "n_rollers"
+            rules.append(FmuRule(f"stage[{k}].{f}", r, hi=max_rollers(r_s, r_r) if rolls else None,
+                                 derived="max_rollers" if rolls else None))
         if k > 1:
             rules.append(spline_rule(k, r_s))
         if k < n:

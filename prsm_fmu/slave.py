@@ -67,7 +67,8 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
 from .param_ranges import input_violation, state_violation
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
-from .engine import ENGINE_ENV, fallback_reason, is_engine, library_name, platform_folder
+from .engine import (ENGINE_ENV, fallback_reason, is_engine, library_name,
+                     library_solves_geometry, platform_folder)
 from .models.base import undefined_allowed
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
@@ -501,6 +502,9 @@ class PRSMSlave(Fmi2Slave):
         #: with, and why it cannot run here (None: it can)
         self._engine_path, self._engine_geometry, self._engine_missing = packed_engine(
             self.resources)
+        #: whether the packed library solves the contact of any geometry (None: not yet asked;
+        #: asked only when a geometry parameter differs from the library's build)
+        self._engine_solves_geometry: bool | None = None
         n = sum(1 for name in defaults if name.endswith(".screw_radius"))
         self.n_stages = n
         self._table = variable_table(n)
@@ -779,12 +783,16 @@ class PRSMSlave(Fmi2Slave):
         """Why the packed engine cannot run the current parameters (None: it can)."""
         if self._engine_missing:
             return self._engine_missing
-        for name, value in self._engine_geometry.items():
-            if self._par.get(name) != value:
-                return (f"{name} = {self._par.get(name)!r} differs from the value the engine "
-                        f"library was built with ({value!r}): the engine bakes the contact "
-                        "geometry in")
-        return None
+        changed = [name for name, value in self._engine_geometry.items()
+                   if self._par.get(name) != value]
+        if changed and self._engine_solves_geometry is None:
+            self._engine_solves_geometry = library_solves_geometry(self._engine_path)
+        if not changed or self._engine_solves_geometry:
+            return None
+        name = changed[0]
+        return (f"{name} = {self._par.get(name)!r} differs from the value the engine library was "
+                f"built with ({self._engine_geometry[name]!r}): this library bakes the contact "
+                "geometry in (rebuild the FMU: a library of this version solves it)")
 
     def _states_read_as_outputs(self, model) -> dict[int, int]:
         """Value reference -> state index of the Real outputs that are states of ``model``

@@ -151,9 +151,6 @@ CASES: list[tuple[str, list[str], str]] = [
     ("prsm-fmu-build", ["--preset", "recirculating_screw", "--name", "R", "--dest", OUT],
      "--preset"),
     ("prsm-fmu-build", ["--dest", FILE + "/sub"], "--dest"),
-    # the native FMU's geometry is built in: a structural start value is refused, named
-    ("prsm-fmu-build", ["--native", "--start", "stage[1].screw_lead=0.002", "--dest", OUT],
-     "stage[1].screw_lead"),
     # the native FMU's platforms: FMI 2.0 folder names of the ones built; only with --native
     ("prsm-fmu-build", ["--native", "--platform", "win32", "--dest", OUT], "--platform"),
     ("prsm-fmu-build", ["--platform", "win64", "--dest", OUT], "--platform"),

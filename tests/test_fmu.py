@@ -299,8 +299,17 @@ def test_model_description_has_units_bounds_variability_and_structure(fmus):
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
     with zipfile.ZipFile(fmus["PRSM3"]) as z:
         names = z.namelist()
+        pycs = {n: z.read(n)[:16] for n in names if "__pycache__" in n}
     assert "resources/prsm_fmu/models/dynamic.py" in names       # the physics is packed whole
-    assert not any("__pycache__" in n for n in names)
+    # bytecode only beside a packed source, for this interpreter, and checked against the
+    # source's hash at import (PEP 552: flags word 0b11 = hash-based, checked), never stale
+    tag = sys.implementation.cache_tag
+    sources = {n for n in names if n.startswith("resources/") and n.endswith(".py")}
+    assert pycs and len(pycs) == len(sources)
+    for n, head in pycs.items():
+        folder, _, file = n.rpartition("/__pycache__/")
+        assert file.endswith(f".{tag}.pyc") and f"{folder}/{file.split('.')[0]}.py" in sources, n
+        assert int.from_bytes(head[4:8], "little") == 0b11, n
 
 
 # ---- running it ---------------------------------------------------------------------------

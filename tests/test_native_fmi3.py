@@ -251,7 +251,7 @@ WRONG_CALLS = [
     pytest.param(lambda f, v: f.setFloat64([v["screw_speed"].valueReference], [1.0]),
                  "screw_speed", id="set-an-output"),
     pytest.param(lambda f, v: f.setFloat64([v["stage[1].screw_lead"].valueReference], [0.02]),
-                 "structural", id="set-a-structural-parameter"),
+                 "stage[1].screw_lead", id="set-a-geometry-parameter-after-initialization"),
     pytest.param(lambda f, v: f.setFloat64([v["mu_screw_roller"].valueReference], [0.1]),
                  "mu_screw_roller", id="set-a-parameter-after-initialization"),
     pytest.param(lambda f, v: f.setFloat64([v["time"].valueReference], [1.0]), "time",

@@ -43,7 +43,8 @@ H = 1e-3
 #: friction band stepped by the scalar exponential step (prsm_band.c in C)
 PY_SAME_METHOD = {"stepper": "closed_form"}
 
-#: the per-stage parameters the contact geometry is computed from (structural in the native FMU)
+#: the per-stage parameters the contact geometry is computed from (the C solves it at
+#: initialization; tests/test_native_geometry.py)
 GEOMETRY = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_starts",
             "flank_angle")
 
@@ -137,9 +138,8 @@ def test_model_description_mirrors_the_python_fmu_and_validates(native, name):
     for v, p in zip(md.modelVariables, py.modelVariables):
         assert (v.name, v.valueReference, v.type, v.unit, v.description, v.start) == \
                (p.name, p.valueReference, p.type, p.unit, p.description, p.start)
-        structural = p.causality == "parameter" and v.name.split(".")[-1] in GEOMETRY
-        expected = ("local", "constant") if structural else (p.causality, p.variability)
-        assert (v.causality, v.variability) == expected, v.name
+        # the geometry too: tunable at initialization, its contact solved then
+        assert (v.causality, v.variability) == (p.causality, p.variability), v.name
     with zipfile.ZipFile(fmu) as z:
         names = set(z.namelist())
         listed = [f.get("name") for f in ET.fromstring(z.read("modelDescription.xml"))
@@ -336,7 +336,8 @@ def test_refused_calls_are_logged_and_change_nothing(native):
             with pytest.raises(FMICallException) as exc:
                 call()
             assert exc.value.status == ERROR and host.messages[-1][0] == ERROR
-        assert "Real" in host.messages[-4][1] and "structural" in host.messages[-2][1]
+        assert "Real" in host.messages[-4][1]
+        assert "'stage[1].screw_lead' is a fixed parameter" in host.messages[-2][1]
         host.fmu.setReal([vr_t], torque)           # the input as it was: the state is too
         assert host.get(names) == y0 and host.state_bytes() == before
         host.fmu.terminate()

@@ -9,8 +9,8 @@ numbers read back and compared as numbers);
 a real parameter's NaN and +infinity are refused alike.  PRSM3's case walks the rows PRSM2
 has not (stage 3's, and stage 2's bearing), to keep the suite's time.  Each message is read
 against the rule's fields, not against either FMU's output.  Exceptions, stated: the six geometry fields
-per stage are constants of the native FMU (skipped: changing one alone breaks the meshing
-conditions, so no value is "just inside"), and the parameters the native FMU does not model
+per stage (skipped: changing one alone breaks the meshing conditions, so no value is "just
+inside"; tests/test_native_geometry.py refuses geometry alike in both FMUs), and the parameters the native FMU does not model
 (``mu_viscous``, ``mu_differential``, ``threads_per_roller``) are refused there at any value
 but their start, naming that reason (their out-of-range values get the range message in both).
 ``pytest -s`` prints each case's verdict and the counts.

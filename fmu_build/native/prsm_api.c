@@ -21,6 +21,10 @@ int prsm_api_n_ints(void) { return 2 * PRSM_N_STAGES + 4; }
 int prsm_api_n_term_reals(void) { return 2; }
 int prsm_api_n_term_ints(void) { return PRSM_N_STAGES; }
 
+/* Number of doubles and ints prsm_api_new_geometry reads besides prsm_api_new_terms'. */
+int prsm_api_n_geometry_reals(void) { return 5 * PRSM_N_STAGES; }
+int prsm_api_n_geometry_ints(void) { return PRSM_N_STAGES; }
+
 static int refuse(char *msg, int len, const char *text) {
     strncpy(msg, text, (size_t)len - 1);
     msg[len - 1] = 0;
@@ -28,6 +32,9 @@ static int refuse(char *msg, int len, const char *text) {
 }
 
 /* A model with its stepper from
+ *   geo_reals (NULL: the built-in geometry, prsm_constants.h): per stage screw_radius,
+ *          roller_radius, nut_radius, screw_lead [m], flank_angle [rad];
+ *   geo_ints (NULL: the built-in): per stage screw_starts;
  *   reals: per stage screw_mass, nut_mass, roller_mass, carrier_mass [kg], screw_inertia,
  *          roller_inertia, carrier_inertia [kg m2], spline_radius, bearing_radius [m]; then
  *          mu_screw_roller, mu_spline, mu_nut_screw [-], slip_velocity_scale [m/s],
@@ -36,9 +43,11 @@ static int refuse(char *msg, int len, const char *text) {
  *          2 dynamic), the drive (0 torque, 1 speed), substeps (0: adaptive), max_substeps;
  *   term_reals (NULL: zeros): mu_viscous [N.s/m], mu_differential [m];
  *   term_ints (NULL: ones): per stage threads_per_roller.
- * Returns NULL with the reason in msg when a value is out of range. */
-void *prsm_api_new_terms(const double *reals, const int *ints, const double *term_reals,
-                         const int *term_ints, char *msg, int len) {
+ * The contact geometry is solved from the geometry (prsm_geometry.c).  Returns NULL with the
+ * reason in msg when a value is out of range or the geometry gives no contact. */
+void *prsm_api_new_geometry(const double *reals, const int *ints, const double *term_reals,
+                            const int *term_ints, const double *geo_reals, const int *geo_ints,
+                            char *msg, int len) {
     prsm_config cfg;
     memset(&cfg, 0, sizeof cfg);
     for (int k = 0; k < PRSM_N_STAGES; k++) {
@@ -50,6 +59,10 @@ void *prsm_api_new_terms(const double *reals, const int *ints, const double *ter
         v->n_rollers = ints[2 * k];
         v->carriers = ints[2 * k + 1];
         cfg.threads_per_roller[k] = term_ints ? term_ints[k] : 1;
+        const double *g = geo_reals ? geo_reals + 5 * k : PRSM_GEOMETRY[k];
+        v->screw_radius = g[0]; v->roller_radius = g[1]; v->nut_radius = g[2];
+        v->screw_lead = g[3]; v->flank_angle = g[4];
+        v->screw_starts = geo_ints ? geo_ints[k] : PRSM_SCREW_STARTS[k];
     }
     const double *r = reals + 9 * PRSM_N_STAGES;
     const int *i = ints + 2 * PRSM_N_STAGES;
@@ -79,6 +92,12 @@ void *prsm_api_new_terms(const double *reals, const int *ints, const double *ter
         return NULL;
     }
     return h;
+}
+
+/* prsm_api_new_geometry with the built-in geometry (prsm_constants.h). */
+void *prsm_api_new_terms(const double *reals, const int *ints, const double *term_reals,
+                         const int *term_ints, char *msg, int len) {
+    return prsm_api_new_geometry(reals, ints, term_reals, term_ints, NULL, NULL, msg, len);
 }
 
 /* prsm_api_new_terms with Coulomb friction only (no viscous or differential-sliding term). */
@@ -191,4 +210,24 @@ void prsm_api_outputs(void *handle, double t, const double *x, const double *u, 
     prsm_outputs_at(&h->model, xi, u, &o);
     for (int i = 0; i < PRSM_API_N_OUTPUTS; i++)
         out[i] = prsm_quantity(&h->model, xi, u, &o, API_OUTPUT_Q[i], API_OUTPUT_STAGE[i]);
+}
+
+/* ---- contact geometry --------------------------------------------------------------------- */
+#include "prsm_geometry.h"
+
+/* Number of doubles prsm_api_contact_geometry writes. */
+int prsm_api_n_contact(void) { return PRSM_CONTACT_OUT; }
+
+/* The screw-roller contact of a stage on its "+" flank (prsm_contact_solve: the engine's own
+ * solver, equal bit for bit to prsm_fmu.geometry._newton_contact) from the screw radius r_s [m],
+ * roller radius r_r [m], screw lead [m], screw starts n_s and flank angle beta [rad], into
+ * out[prsm_api_n_contact()]: point (x, y, z) [m], unit normal, (rho, psi, rho_r, psi_r, z_r), the
+ * largest scaled residual and the iterations.  Returns 1 if it is a contact near the pitch point
+ * (prsm_contact_near), else 0. */
+int prsm_api_contact_geometry(double r_s, double r_r, double lead, int n_s, double beta,
+                              double *out) {
+    double o[PRSM_CONTACT_OUT];
+    prsm_contact_solve(r_s, r_r, lead, n_s, beta, o);
+    memcpy(out, o, sizeof o);
+    return prsm_contact_near(r_s, r_r, beta, o);
 }

@@ -7,8 +7,8 @@
  * What a host sees (docs/fmu.md, "The native FMU"):
  *  - state machine: instantiated -> (setupExperiment) -> initialization mode -> stepping ->
  *    terminated; a call outside its state is refused with fmi2Error and a logged message;
- *  - parameters (causality parameter) can be set before exitInitializationMode; structural
- *    parameters (geometry: causality local, variability constant) cannot be set at all;
+ *  - parameters (causality parameter) can be set before exitInitializationMode, the geometry
+ *    included: exitInitializationMode solves its contact (prsm_geometry.c);
  *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
  *    in initialization mode) a value out of range (the rows of prsm_params_gen.h, generated from
  *    prsm_fmu/param_ranges.py: the Python FMU's rules and messages), fidelity auto, a stepper the
@@ -37,7 +37,7 @@
 #include "prsm_quantity.h"
 
 enum { T_REAL, T_INTEGER, T_BOOLEAN, T_STRING, T_ENUM };
-enum { K_INPUT, K_OUTPUT, K_COUNTER, K_PARAM, K_STRUCTURAL };
+enum { K_INPUT, K_OUTPUT, K_COUNTER, K_PARAM };
 enum { C_RHS_CALLS, C_SUBSTEPS, C_FIDELITY, C_CONTACT };
 
 typedef struct {
@@ -167,37 +167,53 @@ static int param_value(const snapshot *s, const char *name, double *value, int *
     return 1;
 }
 
-/* Range.check of every row in order (structural parameters are constants, checked when the
- * FMU was built); 0, or -1 and Range.message in msg */
+/* Range.check of every row in order (the bounds that follow from a stage's geometry evaluated
+ * from its current values: FmuRule.derived); 0, or -1 and Range.message in msg */
 static int check_ranges(const snapshot *s, char *msg, int len) {
     for (int i = 0; i < PRSM_N_RANGES; i++) {
         const prsm_range *r = &PRSM_RANGES[i];
-        double v, w, hi = r->hi;
+        double v, w, lo = r->lo, hi = r->hi;
         int is_int, w_int, has_hi = r->has_hi;
         if (!param_value(s, r->name, &v, &is_int)) continue;
         if (r->when && !(param_value(s, r->when, &w, &w_int) && w > 0.0)) continue;
+        if (r->derived) {       /* the stage's radii were checked by earlier rows */
+            double r_s, r_r;
+            char name[48];
+            snprintf(name, sizeof name, "stage[%d].screw_radius", r->stage);
+            if (!param_value(s, name, &r_s, &w_int)) continue;
+            if (r->derived == PRSM_DERIVED_MAX_ROLLERS) {
+                snprintf(name, sizeof name, "stage[%d].roller_radius", r->stage);
+                if (!param_value(s, name, &r_r, &w_int)) continue;
+                /* param_ranges.max_rollers: int(pi / asin(r_R / (r_S + r_R)) + 1e-9) */
+                hi = floor(PRSM_PI / asin(r_r / (r_s + r_r)) + 1e-9);
+            } else {
+                lo = PRSM_SPLINE_MIN_FRACTION * r_s;
+                hi = r_s;
+            }
+            has_hi = 1;
+        }
         if (r->hi_parameter) {
             if (!param_value(s, r->hi_parameter, &w, &w_int)) continue;
             hi = w;
             has_hi = 1;
         }
-        int ok = (r->integer ? is_int : !is_int) && isfinite(v) && v >= r->lo
-                 && !(r->lo_open && v == r->lo) && (!has_hi || v < hi || (v == hi && !r->hi_open));
+        int ok = (r->integer ? is_int : !is_int) && isfinite(v) && v >= lo
+                 && !(r->lo_open && v == lo) && (!has_hi || v < hi || (v == hi && !r->hi_open));
         if (ok) continue;
-        char val[40], lo[40], up[40];
+        char val[40], lo_s[40], up[400];
         if (is_int) snprintf(val, sizeof val, "%d", (int)v);
         else prsm_fmt_num(val, sizeof val, v);
-        if (r->integer) {
-            snprintf(lo, sizeof lo, "%d", (int)r->lo);
-            snprintf(up, sizeof up, "%d", (int)hi);
+        if (r->integer) {       /* integers held as doubles (a derived bound may pass INT_MAX) */
+            snprintf(lo_s, sizeof lo_s, "%.0f", lo);
+            snprintf(up, sizeof up, "%.0f", hi);
         } else {
-            prsm_fmt_num(lo, sizeof lo, r->lo);
+            prsm_fmt_num(lo_s, sizeof lo_s, lo);
             prsm_fmt_num(up, sizeof up, hi);
         }
         const char *sp = r->unit[0] ? " " : "";
         snprintf(msg, (size_t)len, "%s = %s%s%s is out of range: must be %s%s%s, %s%s%s%s%s%s%s",
                  r->name, val, sp, r->unit, r->integer ? "an integer in " : "in ",
-                 r->lo_open ? "(" : "[", lo, has_hi ? up : "inf",
+                 r->lo_open ? "(" : "[", lo_s, has_hi ? up : "inf",
                  !has_hi ? ")" : r->hi_open ? ")" : "]", sp, r->unit,
                  r->note[0] ? " (" : "", r->note, r->note[0] ? ")" : "");
         return -1;
@@ -259,10 +275,47 @@ static int state_violation(const double *x, int n, char *msg, int len) {
     return 0;
 }
 
+/* StageParams.validate's checks besides the table, stage by stage: the flank angle in (0, pi/2),
+ * r_N = r_S + 2 r_R and r_N = n_S r_R (relative PRSM_GEOMETRY_RTOL), its messages character for
+ * character; 0, or -1 with the message */
+static int check_geometry(const snapshot *s, char *msg, int len) {
+    for (int k = 0; k < PRSM_N_STAGES; k++) {
+        double beta = s->par_real[P_FLANK_ANGLE[k]], r_n = s->par_real[P_NUT_RADIUS[k]];
+        double r_s = s->par_real[P_SCREW_RADIUS[k]], r_r = s->par_real[P_ROLLER_RADIUS[k]];
+        int n_s = s->par_int[P_SCREW_STARTS[k]];
+        char a[40], b[40];
+        if (!(isfinite(beta) && 0.0 < beta && beta < PRSM_PI / 2.0)) {
+            prsm_fmt_num(a, sizeof a, beta);
+            snprintf(msg, (size_t)len, "stage[%d].flank_angle = %s rad is out of range: must be "
+                     "in (0, pi/2) rad, i.e. (0\u00b0, 90\u00b0)", k + 1, a);
+            return -1;
+        }
+        double fit = r_s + 2.0 * r_r, engaged = (double)n_s * r_r;
+        prsm_fmt_num(a, sizeof a, r_n);
+        if (fabs(r_n - fit) > PRSM_GEOMETRY_RTOL * fit) {
+            prsm_fmt_num(b, sizeof b, fit);
+            snprintf(msg, (size_t)len, "stage[%d].nut_radius = %s m is inconsistent with "
+                     "screw_radius + 2*roller_radius = %s m: must equal it (relative tolerance "
+                     "%g)", k + 1, a, b, PRSM_GEOMETRY_RTOL);
+            return -1;
+        }
+        if (fabs(r_n - engaged) > PRSM_GEOMETRY_RTOL * engaged) {
+            prsm_fmt_num(b, sizeof b, engaged);
+            snprintf(msg, (size_t)len, "stage[%d].nut_radius = %s m is inconsistent with the roller "
+                     "lead: a single-start roller of lead pitch = screw_lead/screw_starts stays "
+                     "engaged with the nut only if nut_radius = screw_starts*roller_radius = %s m "
+                     "(relative tolerance %g)", k + 1, a, b, PRSM_GEOMETRY_RTOL);
+            return -1;
+        }
+    }
+    return 0;
+}
+
 /* the model's configuration from the parameters; 0, or -1 with the reason */
 static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len) {
     memset(cfg, 0, sizeof *cfg);
     if (check_ranges(s, msg, len)) return -1;
+    if (check_geometry(s, msg, len)) return -1;
     for (int k = 0; k < PRSM_N_STAGES; k++) {
         prsm_stage_values *v = &cfg->stage[k];
         v->screw_mass = s->par_real[P_SCREW_MASS[k]];
@@ -277,6 +330,12 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
         v->n_rollers = s->par_int[P_N_ROLLERS[k]];
         v->carriers = s->par_int[P_CARRIERS[k]];
         cfg->threads_per_roller[k] = s->par_int[P_THREADS_PER_ROLLER[k]];
+        v->screw_radius = s->par_real[P_SCREW_RADIUS[k]];
+        v->roller_radius = s->par_real[P_ROLLER_RADIUS[k]];
+        v->nut_radius = s->par_real[P_NUT_RADIUS[k]];
+        v->screw_lead = s->par_real[P_SCREW_LEAD[k]];
+        v->flank_angle = s->par_real[P_FLANK_ANGLE[k]];
+        v->screw_starts = s->par_int[P_SCREW_STARTS[k]];
     }
     cfg->mu_screw_roller = s->par_real[P_MU_SCREW_ROLLER];
     cfg->mu_spline = s->par_real[P_MU_SPLINE];
@@ -441,13 +500,6 @@ static int settable(component *c, const prsm_var *v, const char *type) {
         }
         return 1;
     }
-    if (v->kind == K_STRUCTURAL) {
-        log_msg(c, fmi2Error, "fmi2Set%s: '%s' is structural in the native FMU (a constant: the "
-                "contact geometry is computed from it when the FMU is built); rebuild the FMU "
-                "(python -m fmu_build --native --preset ...) or use the Python FMU to change it",
-                type, v->name);
-        return 0;
-    }
     log_msg(c, fmi2Error, "fmi2Set%s: '%s' is an output and cannot be set", type, v->name);
     return 0;
 }
@@ -465,7 +517,6 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         switch (v->kind) {
         case K_INPUT: value[i] = c->s.u[v->index]; break;
         case K_PARAM: value[i] = c->s.par_real[v->index]; break;
-        case K_STRUCTURAL: value[i] = STRUCT_REAL[v->index]; break;
         default:
             if (!c->y_valid) compute_outputs(c);
             value[i] = c->y[v->index];
@@ -482,7 +533,6 @@ fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
         if (!v) return fmi2Error;
         switch (v->kind) {
         case K_PARAM: value[i] = c->s.par_int[v->index]; break;
-        case K_STRUCTURAL: value[i] = STRUCT_INT[v->index]; break;
         case K_COUNTER:
             if (COUNTER_QUANTITY[v->index] == C_CONTACT) {
                 value[i] = contact_status(c);

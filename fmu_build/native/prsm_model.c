@@ -9,6 +9,7 @@
 #include "prsm_model.h"
 #include "prsm_ros.h"
 #include "prsm_band.h"
+#include "prsm_geometry.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -488,33 +489,36 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     m->mu = m->kinematic ? 0.0 : cfg->mu_screw_roller;
     m->mu3 = m->kinematic ? 0.0 : cfg->mu_differential;
     m->v_eps = cfg->slip_velocity_scale;
-    double limit = INFINITY;
+    double limit = INFINITY, zeta_ideal[NS];
     for (int k = 0; k < NS; k++) {
         const prsm_stage_values *v = &cfg->stage[k];
-        const double *sc = PRSM_STAGE_CONSTS[k];
         prsm_stage *s = &m->st[k];
+        double min_normal_z;
+        /* mechanics._Stage.__init__: the contact (prsm_geometry.c) and the constants of the
+         * geometry, operation for operation */
+        if (prsm_stage_contact(k, v, m->fl[k], &s->zeta_geometric, &min_normal_z, msg, len))
+            return -1;
+        double leads = 0.0;
+        for (int i = 0; i < k; i++) leads += cfg->stage[i].screw_lead;
+        s->c_prev = leads / PRSM_TWO_PI;
+        s->c = (leads + v->screw_lead) / PRSM_TWO_PI;
+        double spline_f = k > 0 ? cfg->stage[k - 1].screw_lead / PRSM_TWO_PI : 0.0;
+        zeta_ideal[k] = v->screw_radius / (v->screw_radius + v->nut_radius);
+        double starts_1 = ((double)v->screw_starts - 1.0) * ((double)v->screw_starts - 1.0);
+        double orbit2 = prsm_pow(v->screw_radius + v->roller_radius, 2.0);
         s->n_rollers = (double)v->n_rollers;
-        s->c = sc[0];
-        s->c_prev = sc[1];
         s->m_assembly = v->nut_mass + (double)v->n_rollers * v->roller_mass
                         + (double)v->carriers * v->carrier_mass;
         s->m_screw = k > 0 ? v->screw_mass : 0.0;
         s->j_screw = v->screw_inertia;
         s->j_carrier = (double)v->carriers * v->carrier_inertia
-                       + (double)v->n_rollers * v->roller_inertia * sc[7]
-                       + (double)v->n_rollers * v->roller_mass * sc[6];
+                       + (double)v->n_rollers * v->roller_inertia * starts_1
+                       + (double)v->n_rollers * v->roller_mass * orbit2;
         s->e_spline = (k > 0 && cfg->mu_spline > 0.0) ? cfg->mu_spline / v->spline_radius : 0.0;
         s->g_bearing = (k > 0 && cfg->mu_nut_screw > 0.0)
                        ? cfg->mu_nut_screw * cfg->stage[k - 1].bearing_radius : 0.0;
-        s->spline_f = sc[4];
+        s->spline_f = spline_f;
         s->bearing_f = k > 0 ? cfg->stage[k - 1].bearing_radius : 0.0;
-        for (int f = 0; f < 2; f++) {
-            const double *c = PRSM_FLANKS[k][f];
-            prsm_flank *fl = &m->fl[k][f];
-            fl->ax = c[0]; fl->ay = c[1]; fl->az = c[2]; fl->bx = c[3]; fl->by = c[4];
-            fl->px = c[5]; fl->py = c[6]; fl->nz = c[7]; fl->pn = c[8];
-            fl->radius = PRSM_FLANK_RADIUS[k][f];
-        }
         s->c_viscous = cfg->mu_viscous * (double)v->n_rollers * (double)cfg->threads_per_roller[k];
         if (m->kinematic) {
             s->e_spline = 0.0;
@@ -523,7 +527,7 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
         }
         s->vz_factor = s->c_viscous * m->fl[k][0].az;
         if (s->c_viscous > 0.0) m->viscous = 1;
-        if (sc[5] < limit) limit = sc[5];
+        if (min_normal_z < limit) limit = min_normal_z;
     }
     if (m->mu >= limit) {
         char mu[40];
@@ -536,7 +540,7 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     m->c_out = m->st[NS - 1].c;
     for (int k = 0; k < NS; k++) {          /* carriers slaved to the screw (not dynamic) */
         prsm_stage *s = &m->st[k];
-        double z = m->kinematic ? PRSM_STAGE_CONSTS[k][3] : PRSM_STAGE_CONSTS[k][2];
+        double z = m->kinematic ? zeta_ideal[k] : s->zeta_geometric;
         s->zeta = z;
         if (!m->dynamic) s->j_screw = s->j_screw + s->j_carrier * z * z;
     }
@@ -558,7 +562,7 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
         double c_v = 0.0, c_d = 0.0;
         for (int k = 0; k < NS; k++) {
             const prsm_flank *fl = &m->fl[k][0];
-            double z = PRSM_STAGE_CONSTS[k][2];
+            double z = m->st[k].zeta_geometric;
             double sx = fl->ax + z * fl->bx, sy = fl->ay + z * fl->by, sz = fl->az;
             double cvis = cfg->mu_viscous * (double)cfg->stage[k].n_rollers
                           * (double)cfg->threads_per_roller[k];
@@ -692,7 +696,7 @@ void prsm_initial_state(const prsm_model *m, double x[PRSM_NX_MAX], double screw
     x[1] = screw_speed;
     if (m->dynamic)
         for (int k = 0; k < NS; k++)
-            x[2 + k] = (carrier_equilibrium ? PRSM_STAGE_CONSTS[k][2] : 0.0) * screw_speed;
+            x[2 + k] = (carrier_equilibrium ? m->st[k].zeta_geometric : 0.0) * screw_speed;
 }
 
 /* ---- models/base.Model.outputs --------------------------------------------------------------- */
