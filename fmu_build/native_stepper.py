@@ -13,7 +13,10 @@ The C is compiled with gcc, with the geometry of the model's preset built in
 sources in a directory of the user's own in the system's temporary directory; it exchanges only
 doubles and ints with Python (``prsm_api.c``, through ctypes).  Every friction term is modelled
 (Coulomb, the friction-torque article's viscous and differential-sliding terms, the joints);
-both drives at every level; what the C does not model (``auto``) is refused on construction.
+both drives at every level, and ``fidelity = "auto"`` (an :class:`~prsm_fmu.models.AdaptiveModel`:
+the switching between the dynamic and the quasi-static level of prsm_fmu/models/adaptive.py,
+in ``prsm_auto.c``, its dynamic steps ROS34PW2's, as the Python stepper ``rosenbrock`` of that
+model).
 """
 
 from __future__ import annotations
@@ -29,15 +32,19 @@ __all__ = ["NativeStepper", "native_library", "load_library", "library_output_na
            "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
-LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_api.c")
+LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_auto.c", "prsm_api.c")
 _STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
                 "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
-_LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
+_LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2, "auto": 3}
+#: auto's start level as prsm_api_new_auto reads it, and its level codes (prsm_api_auto_mode)
+_AUTO_START = {"dynamic": 0, "quasi-static": 1}
+_AUTO_MODES = {2: "dynamic", 1: "quasi-static"}
 #: the Python steppers the C translates, per level, and the band method of each (1: the
 #: exponential band step, 0: Dormand-Prince 5(4); None: the dynamic level's ROS34PW2)
 STEPPERS = {"kinematic": {"closed_form": 1, "closed_form_explicit": 0},
             "quasi-static": {"closed_form": 1, "closed_form_explicit": 0},
-            "dynamic": {"rosenbrock": None}}
+            "dynamic": {"rosenbrock": None},
+            "auto": {"rosenbrock": None}}
 _MSG = 600
 #: libraries loaded in this process, by source hash and by the parameters' repr
 _loaded: dict[str, ctypes.CDLL] = {}
@@ -111,6 +118,14 @@ def load_library(path: str) -> ctypes.CDLL:
     dll.prsm_api_free.argtypes = [vp]
     dll.prsm_api_set_band.argtypes = [vp, ctypes.c_int]
     dll.prsm_api_undo_advance.argtypes = [vp]
+    if hasattr(dll, "prsm_api_new_auto"):    # (an engine library packed before auto was added)
+        dll.prsm_api_new_auto.restype = vp
+        dll.prsm_api_new_auto.argtypes = [dbl, i32, dbl, i32, ctypes.c_double, ctypes.c_int,
+                                          ctypes.c_char_p, ctypes.c_int]
+        dll.prsm_api_auto_mode.argtypes = [vp]
+        dll.prsm_api_auto_info.argtypes = [vp, dbl]
+        dll.prsm_api_handle_memory_size.argtypes = [vp]
+        dll.prsm_api_reset.argtypes = [vp]
     if hasattr(dll, "prsm_api_outputs"):     # (an engine library packed before they were added)
         dll.prsm_api_output_name.restype = ctypes.c_char_p
         dll.prsm_api_output_name.argtypes = [ctypes.c_int]
@@ -134,8 +149,10 @@ class NativeStepper(Stepper):
     Parameters
     ----------
     model : prsm_fmu.models.base.Model
-        A kinematic, quasi-static or dynamic model, torque or speed drive; its parameters,
-        level and drive select the C model.
+        A kinematic, quasi-static, dynamic or auto (:class:`~prsm_fmu.models.AdaptiveModel`,
+        its ``tolerance`` and ``start``) model, torque or speed drive; its parameters, level
+        and drive select the C model.  For auto, the model's ``mode`` is set after every
+        advance to the level of that step, as the Python stepper sets it.
     rtol, atol : float
         Relative [-] and absolute [state units] tolerances of the adaptive steps (the Python
         steppers' meaning).
@@ -149,8 +166,8 @@ class NativeStepper(Stepper):
     stepper : str or None
         The Python stepper whose steps the C repeats (:data:`STEPPERS`): at the slaved levels
         ``"closed_form"`` (the exponential band step, the Python default) or
-        ``"closed_form_explicit"``; at the dynamic level ``"rosenbrock"``.  None: at the slaved
-        levels ``closed_form_explicit``, at the dynamic level ``rosenbrock``.
+        ``"closed_form_explicit"``; at the dynamic level and for auto ``"rosenbrock"``.  None:
+        at the slaved levels ``closed_form_explicit``, elsewhere ``rosenbrock``.
 
     Raises
     ------
@@ -191,10 +208,18 @@ class NativeStepper(Stepper):
         msg = ctypes.create_string_buffer(_MSG)
         term_reals = [float(params.mu_viscous), float(params.mu_differential)]
         term_ints = [int(st.threads_per_roller) for st in params.stages]
-        handle = lib.prsm_api_new_terms((ctypes.c_double * len(reals))(*reals),
-                                        (ctypes.c_int * len(ints))(*ints),
-                                        (ctypes.c_double * 2)(*term_reals),
-                                        (ctypes.c_int * len(term_ints))(*term_ints), msg, _MSG)
+        arrays = ((ctypes.c_double * len(reals))(*reals), (ctypes.c_int * len(ints))(*ints),
+                  (ctypes.c_double * 2)(*term_reals),
+                  (ctypes.c_int * len(term_ints))(*term_ints))
+        self._auto = level == "auto"
+        if self._auto:
+            if not hasattr(lib, "prsm_api_new_auto"):
+                raise ValueError("fidelity = 'auto' is not in this engine library (built before "
+                                 "it was added)")
+            handle = lib.prsm_api_new_auto(*arrays, float(model.tolerance),
+                                           _AUTO_START[model.start], msg, _MSG)
+        else:
+            handle = lib.prsm_api_new_terms(*arrays, msg, _MSG)
         if not handle:
             raise ValueError(msg.value.decode())
         self._handle = ctypes.c_void_p(handle)
@@ -208,7 +233,9 @@ class NativeStepper(Stepper):
         self._u = (ctypes.c_double * 2)()
         self._stats = (ctypes.c_int * 3)()
         self._msg = msg
-        self._memory_size = lib.prsm_api_memory_size()
+        self._memory_size = (lib.prsm_api_handle_memory_size(self._handle)
+                             if hasattr(lib, "prsm_api_handle_memory_size")
+                             else lib.prsm_api_memory_size())
         #: the names of the outputs :meth:`outputs` computes, in the C's order: () where the
         #: library has no prsm_api_outputs, and for the speed drive (the C's outputs read u[0]
         #: as the motor torque: the torque drive's, the FMU's)
@@ -254,6 +281,8 @@ class NativeStepper(Stepper):
         self._u[0], self._u[1] = u[0], u[1]
         rc = self._lib.prsm_api_advance_many(self._handle, t0, self._x, self._u, h, n_steps, out,
                                              self._stats, self._msg, _MSG)
+        if self._auto:
+            self.sync_mode()
         if rc:
             raise StepFailure(self._msg.value.decode())
         stats = StepStats()
@@ -269,6 +298,24 @@ class NativeStepper(Stepper):
         self._lib.prsm_api_rhs(self._handle, self._x, self._u, dx)
         return dx[:]
 
+    def sync_mode(self) -> None:
+        """For auto: set the model's ``mode`` to the level of the C's last step (what
+        :meth:`prsm_fmu.models.AdaptiveModel.outputs` reads)."""
+        self.model.mode = _AUTO_MODES[self._lib.prsm_api_auto_mode(self._handle)]
+
+    def auto_info(self) -> dict:
+        """For auto: what the C computed on construction (``prsm_api_auto_info``):
+        ``slaved_inertia`` [kg·m²], ``nut_term`` (m·c_out of the last nut) [kg·m/rad],
+        ``tolerance`` [-] and the lag coefficients c_k = τ_k|F|/|ω| [N·s²/rad] of each carrier,
+        ``forward`` (driving) and ``backward`` (back-driven)."""
+        n = self.model.params.n_stages
+        out = (ctypes.c_double * (3 + 2 * n))()
+        if self._lib.prsm_api_auto_info(self._handle, out):
+            raise ValueError("not an auto stepper")
+        v = out[:]
+        return {"slaved_inertia": v[0], "nut_term": v[1], "tolerance": v[2],
+                "forward": tuple(v[3:3 + n]), "backward": tuple(v[3 + n:])}
+
     def get_memory(self) -> tuple:
         """``(bytes,)``: the C stepper's memory (step proposal, continuation, last stage)."""
         buf = ctypes.create_string_buffer(self._memory_size)
@@ -282,15 +329,24 @@ class NativeStepper(Stepper):
             raise ValueError(f"{self.name}: memory must be (bytes of length "
                              f"{self._memory_size},) from get_memory")
         self._lib.prsm_api_set_memory(self._handle, m[0])
+        if self._auto:
+            self.sync_mode()
 
     def undo_advance(self) -> None:
         """Put the memory back as it was before the last advance (its result refused by the
         caller); the state is the caller's own and needs no undoing."""
         self._lib.prsm_api_undo_advance(self._handle)
+        if self._auto:
+            self.sync_mode()
 
     def reset(self) -> None:
-        """Forget the memory."""
-        self.set_memory((bytes(self._memory_size),))
+        """Forget the memory (for auto: back to its start level, as the Python stepper)."""
+        if hasattr(self._lib, "prsm_api_reset"):
+            self._lib.prsm_api_reset(self._handle)
+            if self._auto:
+                self.sync_mode()
+        else:
+            self.set_memory((bytes(self._memory_size),))
 
     def __del__(self) -> None:
         handle = getattr(self, "_handle", None)

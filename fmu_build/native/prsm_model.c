@@ -712,8 +712,18 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
     double wps[NS];
     coef_cache cache;
     sweep_rec rec;
-    int consistent;
-    double alpha = solve(m, x, load, u[0] - loss, wps, &cache, &rec, &consistent);
+    int consistent = 1;
+    double alpha;
+    if (m->speed_drive) {
+        /* the prescribed acceleration; the motor torque follows (Model._solve) */
+        alpha = u[0];
+        memset(cache.have, 0, sizeof cache.have);
+        speeds_of(m, x, wps);
+        sweep(m, omega, wps, load, alpha, &cache, &rec);
+        motor = rec.m0 + rec.m1 * alpha + loss;
+    } else {
+        alpha = solve(m, x, load, u[0] - loss, wps, &cache, &rec, &consistent);
+    }
     /* Mechanism._assemble(detail=True) */
     double motor_sol = rec.m0 + rec.m1 * alpha;
     double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0, p_viscous = 0.0, p_differential = 0.0;
