@@ -58,7 +58,7 @@ from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
 from prsm_fmu.steppers.options import TOLERANCE_FACTOR
 from prsm_fmu.models.adaptive import MAX_WAIT as AUTO_MAX_WAIT
-from prsm_fmu.models.auto import MARGIN as AUTO_MARGIN
+from prsm_fmu.models.auto import MARGIN as AUTO_MARGIN, _EFFICIENCY_POINT as AUTO_EFFICIENCY_POINT
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
 from prsm_fmu.steppers.band import _GAUSS
@@ -75,7 +75,7 @@ __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_auto.c", "prsm_fmi2_me.c")
 HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_quantity.h", "prsm_auto.h")
 #: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
 INCLUDED = ("prsm_fmi2.c",)
@@ -302,6 +302,10 @@ static const double PRSM_GAUSS3_W[3] = {{{", ".join(_hex(v) for v in _GAUSS[1][1
    dynamic -> quasi-static switch [steps] (prsm_fmu.models.adaptive.MAX_WAIT) */
 #define PRSM_AUTO_MARGIN {_hex(AUTO_MARGIN)}
 #define PRSM_AUTO_MAX_WAIT {AUTO_MAX_WAIT}
+/* the operating point of the quasi-static level's steady efficiency: screw speed [rad/s], load
+   [N] (prsm_fmu.models.auto._EFFICIENCY_POINT) */
+#define PRSM_AUTO_EFFICIENCY_SPEED {_hex(AUTO_EFFICIENCY_POINT[0])}
+#define PRSM_AUTO_EFFICIENCY_LOAD {_hex(AUTO_EFFICIENCY_POINT[1])}
 
 /* the engine's outputs (prsm_api.c prsm_api_outputs), in its order (fmu_build.native.api_outputs):
    initializers of their names, quantities (prsm_quantity.h) and stages (from 0) */

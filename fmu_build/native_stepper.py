@@ -29,7 +29,7 @@ from typing import Any
 from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
 
 __all__ = ["NativeStepper", "native_library", "load_library", "library_output_names",
-           "LIB_SOURCES"]
+           "auto_start_level", "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
 LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_auto.c", "prsm_api.c")
@@ -126,6 +126,9 @@ def load_library(path: str) -> ctypes.CDLL:
         dll.prsm_api_auto_info.argtypes = [vp, dbl]
         dll.prsm_api_handle_memory_size.argtypes = [vp]
         dll.prsm_api_reset.argtypes = [vp]
+        dll.prsm_api_auto_choose.argtypes = [dbl, i32, dbl, i32, ctypes.c_double, dbl,
+                                             ctypes.c_double, ctypes.c_int, ctypes.c_double, dbl,
+                                             ctypes.c_char_p, ctypes.c_int]
     if hasattr(dll, "prsm_api_outputs"):     # (an engine library packed before they were added)
         dll.prsm_api_output_name.restype = ctypes.c_char_p
         dll.prsm_api_output_name.argtypes = [ctypes.c_int]
@@ -140,6 +143,66 @@ def library_output_names(lib: ctypes.CDLL) -> tuple[str, ...]:
     if not hasattr(lib, "prsm_api_outputs"):
         return ()
     return tuple(lib.prsm_api_output_name(i).decode() for i in range(lib.prsm_api_n_outputs()))
+
+
+def _engine_arrays(params, level: int, drive: int, tolerance: float, kinematic_efficiency: float,
+                   substeps: int, max_substeps: int) -> tuple:
+    """The ctypes arrays ``prsm_api_new_terms`` reads (reals, ints, term_reals, term_ints)."""
+    reals = [float(getattr(st, f)) for st in params.stages for f in _STAGE_REALS]
+    reals += [params.mu_screw_roller, params.mu_spline, params.mu_nut_screw,
+              params.slip_velocity_scale, tolerance, kinematic_efficiency]
+    ints = [int(v) for st in params.stages for v in (st.n_rollers, st.carriers)]
+    ints += [level, drive, substeps, max_substeps]
+    term_reals = [float(params.mu_viscous), float(params.mu_differential)]
+    term_ints = [int(st.threads_per_roller) for st in params.stages]
+    return ((ctypes.c_double * len(reals))(*reals), (ctypes.c_int * len(ints))(*ints),
+            (ctypes.c_double * 2)(*term_reals), (ctypes.c_int * len(term_ints))(*term_ints))
+
+
+def auto_start_level(params, tolerance: float, inputs: tuple, screw_speed: float,
+                     carriers_at_rest: bool, kinematic_efficiency: float = 1.0,
+                     library: ctypes.CDLL | None = None) -> tuple[str, float, float]:
+    """The level ``fidelity = "auto"`` starts with under the torque drive, chosen by the C
+    (``prsm_api_auto_choose``, what the native FMU runs at initialization; the Python
+    :func:`prsm_fmu.models.auto.choose_for_start` with no communication step).
+
+    Parameters
+    ----------
+    params : MechanismParams
+    tolerance : float
+        Accepted model error [-].
+    inputs : tuple
+        Motor torque [N·m] and load force [N] at the start.
+    screw_speed : float
+        Screw speed at the start [rad/s].
+    carriers_at_rest : bool
+        Carriers at rest (True) or at their equilibrium (False) at the start.
+    kinematic_efficiency : float
+        The kinematic level's constant efficiency [-].
+    library : ctypes.CDLL, optional
+        Default: :func:`native_library` of ``params``.
+
+    Returns
+    -------
+    tuple
+        (level, estimated model error of the kinematic level, of the quasi-static level).
+
+    Raises
+    ------
+    ValueError
+        The C's message (a value out of range).
+    """
+    lib = library if library is not None else native_library(params)
+    arrays = _engine_arrays(params, 1, 0, 0.5, kinematic_efficiency, 0, 1000)
+    errors = (ctypes.c_double * 2)()
+    msg = ctypes.create_string_buffer(_MSG)
+    code = lib.prsm_api_auto_choose(*arrays, float(tolerance),
+                                    (ctypes.c_double * 2)(*map(float, inputs)),
+                                    float(screw_speed), 1 if carriers_at_rest else 0,
+                                    float(kinematic_efficiency), errors, msg, _MSG)
+    if code < 0:
+        raise ValueError(msg.value.decode())
+    return ("kinematic", "quasi-static", "dynamic")[code], errors[0], errors[1]
 
 
 class NativeStepper(Stepper):
@@ -195,22 +258,15 @@ class NativeStepper(Stepper):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
         kinematic_efficiency = getattr(model, "efficiency", 1.0)
-        reals = [float(getattr(st, f)) for st in params.stages for f in _STAGE_REALS]
-        reals += [params.mu_screw_roller, params.mu_spline, params.mu_nut_screw,
-                  params.slip_velocity_scale, min(rtol, 0.5), kinematic_efficiency]
-        ints = [int(v) for st in params.stages for v in (st.n_rollers, st.carriers)]
-        ints += [_LEVELS[level], 1 if model.drive == "speed" else 0, fixed_substeps or 0,
-                 max_substeps]
+        arrays = _engine_arrays(params, _LEVELS[level], 1 if model.drive == "speed" else 0,
+                                min(rtol, 0.5), kinematic_efficiency, fixed_substeps or 0,
+                                max_substeps)
         self._lib = lib = library if library is not None else native_library(params)
-        if (len(reals), len(ints)) != (lib.prsm_api_n_reals(), lib.prsm_api_n_ints()):
+        n_reals, n_ints = len(arrays[0]), len(arrays[1])
+        if (n_reals, n_ints) != (lib.prsm_api_n_reals(), lib.prsm_api_n_ints()):
             raise ValueError(f"the C model reads {lib.prsm_api_n_reals()} doubles and "
-                             f"{lib.prsm_api_n_ints()} ints, not {len(reals)} and {len(ints)}")
+                             f"{lib.prsm_api_n_ints()} ints, not {n_reals} and {n_ints}")
         msg = ctypes.create_string_buffer(_MSG)
-        term_reals = [float(params.mu_viscous), float(params.mu_differential)]
-        term_ints = [int(st.threads_per_roller) for st in params.stages]
-        arrays = ((ctypes.c_double * len(reals))(*reals), (ctypes.c_int * len(ints))(*ints),
-                  (ctypes.c_double * 2)(*term_reals),
-                  (ctypes.c_int * len(term_ints))(*term_ints))
         self._auto = level == "auto"
         if self._auto:
             if not hasattr(lib, "prsm_api_new_auto"):

@@ -134,6 +134,23 @@ void *prsm_api_new_auto(const double *reals, const int *ints, const double *term
     return h;
 }
 
+/* The level fidelity = "auto" starts with under the torque drive (prsm_auto_choose, what the
+ * native FMU runs at initialization): 0 kinematic, 1 quasi-static, 2 dynamic, with the estimated
+ * model errors of the kinematic and the quasi-static level in errors[2]; -1 with the reason in
+ * msg.  reals, ints, term_reals, term_ints as for prsm_api_new_terms (level and drive ignored);
+ * inputs: motor torque [N.m], load [N]; screw_speed [rad/s]; carriers_at_rest 1 or 0
+ * (equilibrium); kinematic_efficiency [-]. */
+int prsm_api_auto_choose(const double *reals, const int *ints, const double *term_reals,
+                         const int *term_ints, double tolerance, const double *inputs,
+                         double screw_speed, int carriers_at_rest, double kinematic_efficiency,
+                         double *errors, char *msg, int len) {
+    prsm_config cfg;
+    fill_config(&cfg, reals, ints, term_reals, term_ints);
+    cfg.speed_drive = 0;
+    return prsm_auto_choose(&cfg, tolerance, inputs, screw_speed, carriers_at_rest,
+                            kinematic_efficiency, errors, msg, len);
+}
+
 /* The level of the last step of an auto handle (2 dynamic, 1 quasi-static: the FMU's
  * step_fidelity codes), or -1 for a handle of one level. */
 int prsm_api_auto_mode(void *handle) {

@@ -35,6 +35,27 @@ static void time_constants(const prsm_model *m, double omega, double load, doubl
     }
 }
 
+/* a model of cfg's mechanism at the dynamic (dynamic = 1) or quasi-static level and the given
+ * drive (speed = 1), allocated; NULL with the reason in msg */
+static prsm_model *new_model(const prsm_config *cfg, int dynamic, int speed, char *msg, int len) {
+    prsm_config c = *cfg;
+    c.kinematic = 0;
+    c.dynamic = dynamic;
+    c.speed_drive = speed;
+    c.closed_form = 1;
+    c.band_exponential = 1;
+    prsm_model *m = (prsm_model *)malloc(sizeof *m);
+    if (!m) {
+        snprintf(msg, (size_t)len, "out of memory");
+        return NULL;
+    }
+    if (prsm_model_init(m, &c, msg, len)) {
+        free(m);
+        return NULL;
+    }
+    return m;
+}
+
 /* ---- models/adaptive.py: AdaptiveModel --------------------------------------------------- */
 void prsm_auto_set_tolerances(prsm_auto *a, double rtol, double atol) {
     prsm_model *d = &a->dyn, *q = &a->qs;
@@ -89,18 +110,8 @@ int prsm_auto_init(prsm_auto *a, const prsm_config *cfg, double tolerance, int s
     /* lag_coefficients: the time constants of the dynamic level under the speed drive at
      * 100 rad/s and +-1000 N (outside the friction band tau is proportional to |omega|/|F|) */
     {
-        prsm_model *spd = (prsm_model *)malloc(sizeof *spd);
-        if (!spd) {
-            snprintf(msg, (size_t)len, "out of memory");
-            return -1;
-        }
-        c.dynamic = 1;
-        c.speed_drive = 1;
-        c.substeps = cfg->substeps;
-        if (prsm_model_init(spd, &c, msg, len)) {
-            free(spd);
-            return -1;
-        }
+        prsm_model *spd = new_model(cfg, 1, 1, msg, len);
+        if (!spd) return -1;
         for (int forward = 0; forward < 2; forward++) {
             double omega = 100.0, load = forward ? 1000.0 : -1000.0, taus[NS];
             time_constants(spd, omega, load, taus);
@@ -341,4 +352,82 @@ int prsm_auto_advance(prsm_auto *a, prsm_auto_memory *mem, double t, const doubl
     *mem = trial;
     memcpy(x_new, y, sizeof y);
     return 0;
+}
+
+/* ---- models/auto.py: choose_for_start (torque drive, no communication step) ----------------- */
+/* Python's max(v[0], v[1], ...): the first of the largest */
+static double first_max(const double *v, int n) {
+    double m = v[0];
+    for (int i = 1; i < n; i++) m = pmax(m, v[i]);
+    return m;
+}
+
+int prsm_auto_choose(const prsm_config *cfg, double tolerance, const double inputs[2],
+                     double screw_speed, int carriers_at_rest, double kinematic_efficiency,
+                     double errors[2], char *msg, int len) {
+    if (!(isfinite(tolerance) && tolerance > 0.0)) {
+        char v[40];
+        prsm_fmt_num(v, sizeof v, tolerance);
+        snprintf(msg, (size_t)len, "tolerance = %s is out of range: must be a finite number > 0",
+                 v);
+        return -1;
+    }
+    prsm_model *qs = new_model(cfg, 0, 0, msg, len);
+    prsm_model *qs_speed = qs ? new_model(cfg, 0, 1, msg, len) : NULL;
+    prsm_model *spd = qs_speed ? new_model(cfg, 1, 1, msg, len) : NULL;
+    if (!spd) {
+        free(qs);
+        free(qs_speed);
+        return -1;
+    }
+    double load = inputs[1], omega = screw_speed, eff = kinematic_efficiency;
+    /* the quasi-static level's acceleration under the start inputs */
+    double x[PRSM_NX_MAX] = {0.0}, u[2] = {inputs[0], load};
+    prsm_outputs y;
+    x[1] = omega;
+    prsm_outputs_at(qs, x, u, &y);
+    double alpha = y.alpha;
+    double per_stage[NS];
+    double deviation = 0.0;
+    if (omega != 0.0 && carriers_at_rest) {
+        for (int k = 0; k < NS; k++) per_stage[k] = fabs(0.0 / qs->st[k].zeta - 1.0);
+        deviation = first_max(per_stage, NS);
+    }
+    /* estimate_errors */
+    double taus[NS];
+    double nut_term = 0.0 + cfg->stage[NS - 1].nut_mass * qs->c_out * 1.0;
+    time_constants(spd, omega, load + nut_term * alpha, taus);
+    double tau = first_max(taus, NS);
+    double h = 0.0;
+    double jump = 0.0 * (isfinite(tau) && tau > 0.0 ? exp(-h / tau) : 1.0);
+    double lag;
+    if (alpha == 0.0) lag = 0.0;
+    else if (omega == 0.0 || !isfinite(tau)) lag = INFINITY;
+    else lag = fabs(alpha) * tau / fabs(omega);
+    double e_qs = pmax(pmax(deviation, jump), lag);
+    /* steady_efficiency and friction_output_gap: the quasi-static level in steady forward
+     * motion outside the friction band */
+    double xs[PRSM_NX_MAX] = {0.0}, us[2] = {0.0, PRSM_AUTO_EFFICIENCY_LOAD};
+    xs[1] = PRSM_AUTO_EFFICIENCY_SPEED;
+    prsm_outputs_at(qs_speed, xs, us, &y);
+    double eta = y.efficiency;
+    double loss = fabs(eta / eff - 1.0);
+    for (int k = 0; k < NS; k++)
+        per_stage[k] = fabs(PRSM_STAGE_CONSTS[k][3] / PRSM_STAGE_CONSTS[k][2] - 1.0);
+    double ratio = first_max(per_stage, NS);
+    int spline = 0;
+    for (int k = 0; k < NS; k++)
+        if (y.spline_friction[k] != 0.0) spline = 1;
+    double power = eta < 1.0 ? fabs(eta - eff) / (1.0 - eta) : 0.0;
+    double gap = pmax(spline ? 1.0 : 0.0, power);
+    double e_kin = pmax(pmax(pmax(e_qs, loss), ratio), gap);
+    free(qs);
+    free(qs_speed);
+    free(spd);
+    errors[0] = e_kin;
+    errors[1] = e_qs;
+    /* _pick: the cheapest level with MARGIN x estimated error <= tolerance */
+    if (PRSM_AUTO_MARGIN * e_kin <= tolerance) return 0;
+    if (PRSM_AUTO_MARGIN * e_qs <= tolerance) return 1;
+    return 2;
 }

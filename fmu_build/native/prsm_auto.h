@@ -70,4 +70,14 @@ const prsm_model *prsm_auto_outputs_at(prsm_auto *a, int mode, const double x[PR
                                        const double u[2], double x_level[PRSM_NX_MAX],
                                        prsm_outputs *y);
 
+/* The level fidelity = "auto" starts with (models/auto.py choose_for_start under the torque
+ * drive, the communication step not known): 0 kinematic, 1 quasi-static, 2 dynamic, with the
+ * estimated model errors of the kinematic and the quasi-static level in errors; -1 with the
+ * reason in msg.  inputs: motor torque [N.m] and load [N] at the start; screw_speed [rad/s] at
+ * the start; carriers_at_rest: 1 carriers at rest, 0 at their equilibrium; kinematic_efficiency:
+ * the kinematic level's constant efficiency [-]. */
+int prsm_auto_choose(const prsm_config *cfg, double tolerance, const double inputs[2],
+                     double screw_speed, int carriers_at_rest, double kinematic_efficiency,
+                     double errors[2], char *msg, int msg_len);
+
 #endif
