@@ -493,6 +493,70 @@ def test_engine_auto_equals_the_reference_on_random_cases(capsys):
     assert 5 * tally.switching_cases >= tally.cases, tally
 
 
+#: start choices compared in the suite
+CHOICE_CASES = 100
+
+
+def test_auto_start_choice_in_c_equals_the_reference_on_random_cases(capsys):
+    """The level fidelity = auto starts with, chosen in C (prsm_auto_choose: what the native FMU
+    runs at initialization) and by prsm_fmu.models.auto.choose_for_start (torque drive, no
+    communication step), on random mechanisms (a quarter of them without friction, where the
+    kinematic level can be chosen), tolerances, start inputs, speeds, carriers at rest or at
+    equilibrium and kinematic efficiencies: the same level and the same estimated model errors
+    of the kinematic and the quasi-static level, bit for bit (NaN where both are NaN); the
+    quasi-static and the dynamic level are each chosen in some case.  (The kinematic level is
+    not reached: without friction the quasi-static level's efficiency rounds to 1 - 2.2e-16, and
+    the estimate of its friction outputs' error, |eta - eta_0| / (1 - eta), is then 1 for
+    eta_0 = 1.)"""
+    from fmu_build.native_stepper import auto_start_level
+    from prsm_fmu.models.auto import choose_for_start
+
+    n = int(os.environ.get("PRSM_ENGINE_CHOICE_CASES") or CHOICE_CASES)
+    seed = int(os.environ.get("PRSM_ENGINE_SEED", DIFF_SEED))
+    rng = random.Random(seed)
+    tally = Tally()
+    levels: dict[str, int] = {}
+    failures, refused = [], 0
+    for _ in range(n):
+        params = _draw_mechanism(rng, tally)
+        frictionless = rng.random() < 0.25
+        if frictionless:
+            params = replace(params, mu_screw_roller=0.0, mu_spline=0.0, mu_nut_screw=0.0,
+                             mu_viscous=0.0, mu_differential=0.0)
+        tol = rng.choice((1e-1, 3e-2, 1e-2, 1e-3, 1e-4))
+        inputs = (rng.choice((0.0, rng.uniform(-20.0, 20.0))),
+                  rng.choice((0.0, rng.uniform(-5000.0, 5000.0))))
+        speed = rng.choice((0.0, rng.uniform(-300.0, 300.0)))
+        at_rest = rng.random() < 0.5
+        eff = rng.choice((1.0, rng.uniform(0.5, 1.0)))
+        if frictionless and rng.random() < 0.5:
+            inputs, eff = (0.0, 0.0), 1.0        # no input, the kinematic level lossless
+        try:
+            ref = choose_for_start(params, tol, "torque", inputs, screw_speed=speed,
+                                   carrier_ratio=0.0 if at_rest else None,
+                                   kinematic_efficiency=eff)
+        except ValueError as exc:          # a self-locking thread: the C refuses it as well
+            try:
+                auto_start_level(params, tol, inputs, speed, at_rest, eff)
+            except ValueError:
+                refused += 1
+                continue
+            failures.append(f"{params.name}: the reference refused ({exc}), the C did not")
+            continue
+        level, e_kin, e_qs = auto_start_level(params, tol, inputs, speed, at_rest, eff)
+        levels[level] = levels.get(level, 0) + 1
+        got = (level, e_kin, e_qs)
+        want = (ref.fidelity, ref.errors["kinematic"], ref.errors["quasi-static"])
+        if not all(a == b or (a != a and b != b) for a, b in zip(got, want)):
+            failures.append(f"tol {tol} inputs {inputs} speed {speed} at rest {at_rest} eff "
+                            f"{eff}: C {got}, reference {want}")
+    with capsys.disabled():
+        print(f"\nauto's start choice, C vs reference (seed {seed}): {n} cases, levels chosen "
+              f"{levels}, {refused} refused by both, {len(failures)} failing")
+    assert not failures, "\n".join(failures[:20])
+    assert {"quasi-static", "dynamic"} <= set(levels), levels
+
+
 def test_engine_equals_the_reference_on_random_cases(capsys):
     n = int(os.environ.get("PRSM_ENGINE_CASES") or DIFF_CASES)
     seed = int(os.environ.get("PRSM_ENGINE_SEED", DIFF_SEED))
