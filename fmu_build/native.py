@@ -1,5 +1,5 @@
 """Build the native FMU ``<name>-native.fmu``: the kinematic, quasi-static and dynamic levels
-in C.
+and ``auto`` in C.
 
 No Python in the FMU: the physics of :mod:`prsm_fmu.mechanics`, :mod:`prsm_fmu.models.slaved`,
 the Dormand-Prince 5(4) fallback and the dynamic level's ROS34PW2 of :mod:`prsm_fmu.steppers`
@@ -71,7 +71,8 @@ from .native_ranges import ranges_header
 __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
            "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
 
-#: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
+#: the fidelity levels of the native FMU that the actuator loop's ``--prsm native`` runs; the
+#: native FMU runs ``auto`` too (co-simulation: tests/test_native_fmu.py), not yet offered there
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
