@@ -240,6 +240,40 @@ class Tally:
     refused_construction: int = 0
 
 
+def _step_both(ref, eng, t: float, xa, xb, u, h: float, tally, label: str,
+               level_check=None) -> tuple:
+    """One communication step of the reference and the engine, counted in ``tally``:
+    ``(ya, yb, None)`` where they agree; ``(None, None, failure)`` where the case ends, with
+    failure None where both refused the step (counted) and a message otherwise.
+    ``level_check()`` (auto), called after both stepped, returns a message where they stepped
+    different levels."""
+    fa = fb = None
+    try:
+        ya, _ = ref.advance(t, xa, u, h)
+    except StepFailure as exc:
+        fa = exc
+    try:
+        yb, _ = eng.advance(t, xb, u, h)
+    except StepFailure as exc:
+        fb = exc
+    tally.steps += 1
+    if fa is not None or fb is not None:
+        if fa is None or fb is None:
+            return None, None, f"{label}: t={t:.6g} only one refused: ref {fa!r}, engine {fb!r}"
+        tally.refused_both += 1
+        return None, None, None
+    why = level_check() if level_check is not None else None
+    if why:
+        return None, None, f"{label}: t={t:.6g} u={u} {why}"
+    if ya == yb:
+        tally.bit_equal += 1
+    elif not all(_close(a, b) for a, b in zip(ya, yb)):
+        rel = max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in zip(ya, yb))
+        return None, None, (f"{label}: t={t:.6g} u={u} engine {yb[1]!r} vs reference "
+                            f"{ya[1]!r} (screw speed; largest rel. difference {rel:.3g})")
+    return ya, yb, None
+
+
 def run_case(rng: random.Random, tally: Tally, long: bool) -> list[str]:
     """One random case; returns its failures (empty if none)."""
     params = _draw_mechanism(rng, tally)
@@ -277,30 +311,9 @@ def run_case(rng: random.Random, tally: Tally, long: bool) -> list[str]:
     first = True
     for n_steps, u in sc.pieces:
         for _ in range(n_steps):
-            fa = fb = None
-            try:
-                ya, _ = ref.advance(t, xa, u, sc.h)
-            except StepFailure as exc:
-                fa = exc
-            try:
-                yb, _ = eng.advance(t, xb, u, sc.h)
-            except StepFailure as exc:
-                fb = exc
-            tally.steps += 1
-            if fa is not None or fb is not None:
-                if fa is None or fb is None:
-                    failures.append(f"{label}: t={t:.6g} only one refused: ref {fa!r}, "
-                                    f"engine {fb!r}")
-                else:
-                    tally.refused_both += 1
-                return failures
-            if ya == yb:
-                tally.bit_equal += 1
-            elif not all(_close(a, b) for a, b in zip(ya, yb)):
-                rel = max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in zip(ya, yb))
-                failures.append(f"{label}: t={t:.6g} u={u} engine {yb[1]!r} vs reference "
-                                f"{ya[1]!r} (screw speed; largest rel. difference {rel:.3g})")
-                return failures
+            ya, yb, why = _step_both(ref, eng, t, xa, xb, u, sc.h, tally, label)
+            if ya is None:
+                return failures + ([why] if why else [])
             if radau and (first or long):
                 try:
                     norm, z = _radau_norm(model, t, xb, u, sc.h, yb, sc.tol)
@@ -412,37 +425,17 @@ def run_auto_case(rng: random.Random, tally: AutoTally, long: bool) -> list[str]
     radau = not sc.substeps and (long or tally.radau_cases_done < RADAU_CASES)
     checked = False
     switched = 0
+    def level_check() -> str | None:
+        if ref_model.mode == eng_model.mode:
+            return None
+        return f"the reference stepped {ref_model.mode}, the engine {eng_model.mode}"
+
     for n_steps, u in sc.pieces:
         for _ in range(n_steps):
-            fa = fb = None
             mode0 = ref_model.mode
-            try:
-                ya, _ = ref.advance(t, xa, u, sc.h)
-            except StepFailure as exc:
-                fa = exc
-            try:
-                yb, _ = eng.advance(t, xb, u, sc.h)
-            except StepFailure as exc:
-                fb = exc
-            tally.steps += 1
-            if fa is not None or fb is not None:
-                if fa is None or fb is None:
-                    failures.append(f"{label}: t={t:.6g} only one refused: ref {fa!r}, "
-                                    f"engine {fb!r}")
-                else:
-                    tally.refused_both += 1
-                return failures
-            if ref_model.mode != eng_model.mode:
-                failures.append(f"{label}: t={t:.6g} u={u} the reference stepped "
-                                f"{ref_model.mode}, the engine {eng_model.mode}")
-                return failures
-            if ya == yb:
-                tally.bit_equal += 1
-            elif not all(_close(a, b) for a, b in zip(ya, yb)):
-                rel = max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in zip(ya, yb))
-                failures.append(f"{label}: t={t:.6g} u={u} engine {yb[1]!r} vs reference "
-                                f"{ya[1]!r} (screw speed; largest rel. difference {rel:.3g})")
-                return failures
+            ya, yb, why = _step_both(ref, eng, t, xa, xb, u, sc.h, tally, label, level_check)
+            if ya is None:
+                return failures + ([why] if why else [])
             if ref_model.mode == "dynamic":
                 tally.dynamic_steps += 1
             else:

@@ -68,16 +68,19 @@ void prsm_auto_set_tolerances(prsm_auto *a, double rtol, double atol) {
     q->atol = q->band.atol = d->ros.atol;
 }
 
+/* -1 with the message if the tolerance is not a finite number > 0, else 0 */
+static int bad_tolerance(double tolerance, char *msg, int len) {
+    if (isfinite(tolerance) && tolerance > 0.0) return 0;
+    char v[40];
+    prsm_fmt_num(v, sizeof v, tolerance);
+    snprintf(msg, (size_t)len, "tolerance = %s is out of range: must be a finite number > 0", v);
+    return -1;
+}
+
 int prsm_auto_init(prsm_auto *a, const prsm_config *cfg, double tolerance, int start, char *msg,
                    int len) {
     memset(a, 0, sizeof *a);
-    if (!(isfinite(tolerance) && tolerance > 0.0)) {
-        char v[40];
-        prsm_fmt_num(v, sizeof v, tolerance);
-        snprintf(msg, (size_t)len, "tolerance = %s is out of range: must be a finite number > 0",
-                 v);
-        return -1;
-    }
+    if (bad_tolerance(tolerance, msg, len)) return -1;
     if (start != PRSM_AUTO_DYNAMIC && start != PRSM_AUTO_QUASI_STATIC) {
         snprintf(msg, (size_t)len, "start = %d is not allowed: must be 0 (dynamic) or 1 "
                  "(quasi-static)", start);
@@ -365,13 +368,7 @@ static double first_max(const double *v, int n) {
 int prsm_auto_choose(const prsm_config *cfg, double tolerance, const double inputs[2],
                      double screw_speed, int carriers_at_rest, double kinematic_efficiency,
                      double errors[2], char *msg, int len) {
-    if (!(isfinite(tolerance) && tolerance > 0.0)) {
-        char v[40];
-        prsm_fmt_num(v, sizeof v, tolerance);
-        snprintf(msg, (size_t)len, "tolerance = %s is out of range: must be a finite number > 0",
-                 v);
-        return -1;
-    }
+    if (bad_tolerance(tolerance, msg, len)) return -1;
     prsm_model *qs = new_model(cfg, 0, 0, msg, len);
     prsm_model *qs_speed = qs ? new_model(cfg, 0, 1, msg, len) : NULL;
     prsm_model *spd = qs_speed ? new_model(cfg, 1, 1, msg, len) : NULL;
