@@ -240,6 +240,28 @@ class Tally:
     refused_construction: int = 0
 
 
+def _refused_alike(make, params, sc: Scenario, tally, label: str, exc: Exception) -> list[str]:
+    """The reference refused ``params`` (a self-locking thread, ``exc``): the engine must refuse
+    them as well.  It is handed a model ``make(params)`` of the same level built without the
+    screw-roller friction, whose params then carry the refused value.  Its failures (none
+    where the engine refused for the same reason, counted)."""
+    model = make(replace(params, mu_screw_roller=0.0))
+    model.params = params
+    try:
+        _engine(model, sc)
+    except ValueError as exc_engine:
+        tally.refused_construction += 1
+        return [] if "mu_screw_roller" in str(exc_engine) else [
+            f"{label}: the engine refused for another reason: {exc_engine} (ref: {exc})"]
+    return [f"{label}: the reference refused ({exc}), the engine did not"]
+
+
+def _mechanism_label(params) -> str:
+    return (f"{params.n_stages} stages mu=({params.mu_screw_roller:.3g}, {params.mu_spline:.3g},"
+            f" {params.mu_nut_screw:.3g}, viscous {params.mu_viscous:.3g}, differential "
+            f"{params.mu_differential:.3g}) v_eps={params.slip_velocity_scale:.3g}")
+
+
 def _step_both(ref, eng, t: float, xa, xb, u, h: float, tally, label: str,
                level_check=None) -> tuple:
     """One communication step of the reference and the engine, counted in ``tally``:
@@ -280,25 +302,14 @@ def run_case(rng: random.Random, tally: Tally, long: bool) -> list[str]:
     # the scenario's scales (band speed, load torque) do not depend on mu_screw_roller
     model_q = make_model(replace(params, mu_screw_roller=0.0), "quasi-static", "torque")
     sc = _draw_scenario(rng, params, model_q)
-    label = (f"{params.n_stages} stages mu=({params.mu_screw_roller:.3g}, {params.mu_spline:.3g},"
-             f" {params.mu_nut_screw:.3g}, viscous {params.mu_viscous:.3g}, differential "
-             f"{params.mu_differential:.3g}) v_eps={params.slip_velocity_scale:.3g} {sc}")
+    label = f"{_mechanism_label(params)} {sc}"
     tally.cases += 1
     try:
         model = make_model(params, sc.level, sc.drive)
         ref = _reference_stepper(model, sc)
     except ValueError as exc:
-        # refused by the reference (self-locking thread): the engine must refuse it as well;
-        # it is handed a model of the same level whose params carry the refused value
-        model = make_model(replace(params, mu_screw_roller=0.0), sc.level, sc.drive)
-        model.params = params
-        try:
-            _engine(model, sc)
-        except ValueError as exc_engine:
-            tally.refused_construction += 1
-            return [] if "mu_screw_roller" in str(exc_engine) else [
-                f"{label}: the engine refused for another reason: {exc_engine} (ref: {exc})"]
-        return [f"{label}: the reference refused ({exc}), the engine did not"]
+        return _refused_alike(lambda p: make_model(p, sc.level, sc.drive), params, sc, tally,
+                              label, exc)
     eng = _engine(model, sc)
     u0 = sc.pieces[0][1]
     x0 = model.initial_state(u0, screw_speed=sc.screw_speed) if sc.level != "dynamic" else \
@@ -397,25 +408,13 @@ def run_auto_case(rng: random.Random, tally: AutoTally, long: bool) -> list[str]
     params = _draw_mechanism(rng, tally)
     model_q = make_model(replace(params, mu_screw_roller=0.0), "quasi-static", "torque")
     sc, level0, ratio = _draw_auto_scenario(rng, model_q)
-    label = (f"auto from {level0} (carrier ratio {ratio}) {params.n_stages} stages "
-             f"mu=({params.mu_screw_roller:.3g}, {params.mu_spline:.3g}, "
-             f"{params.mu_nut_screw:.3g}, viscous {params.mu_viscous:.3g}, differential "
-             f"{params.mu_differential:.3g}) v_eps={params.slip_velocity_scale:.3g} {sc}")
+    label = f"auto from {level0} (carrier ratio {ratio}) {_mechanism_label(params)} {sc}"
     tally.cases += 1
     try:
         ref_model = _auto_model(params, sc, level0)
         ref = _reference_stepper(ref_model, sc)
     except ValueError as exc:
-        # refused by the reference (self-locking thread): the engine must refuse it as well
-        model = _auto_model(replace(params, mu_screw_roller=0.0), sc, level0)
-        model.params = params
-        try:
-            _engine(model, sc)
-        except ValueError as exc_engine:
-            tally.refused_construction += 1
-            return [] if "mu_screw_roller" in str(exc_engine) else [
-                f"{label}: the engine refused for another reason: {exc_engine} (ref: {exc})"]
-        return [f"{label}: the reference refused ({exc}), the engine did not"]
+        return _refused_alike(lambda p: _auto_model(p, sc, level0), params, sc, tally, label, exc)
     eng_model = _auto_model(params, sc, level0)     # its own: each stepper sets its model's mode
     eng = _engine(eng_model, sc)
     x0 = ref_model.initial_state(sc.pieces[0][1], screw_speed=sc.screw_speed, carrier_ratio=ratio)
@@ -463,15 +462,22 @@ def run_auto_case(rng: random.Random, tally: AutoTally, long: bool) -> list[str]
     return failures
 
 
-def test_engine_auto_equals_the_reference_on_random_cases(capsys):
-    n = int(os.environ.get("PRSM_ENGINE_AUTO_CASES") or AUTO_CASES)
+def _run_cases(run, tally, cases_env: str, default: int) -> tuple[int, list[str]]:
+    """``run(rng, tally, long)`` for as many cases as ``cases_env`` says (default ``default``),
+    seeded by ``PRSM_ENGINE_SEED``, every step with ``PRSM_ENGINE_LONG``: (seed, failures)."""
+    n = int(os.environ.get(cases_env) or default)
     seed = int(os.environ.get("PRSM_ENGINE_SEED", DIFF_SEED))
     long = bool(os.environ.get("PRSM_ENGINE_LONG"))
     rng = random.Random(seed)
-    tally = AutoTally()
-    failures = []
+    failures: list[str] = []
     for _ in range(n):
-        failures += run_auto_case(rng, tally, long)
+        failures += run(rng, tally, long)
+    return seed, failures
+
+
+def test_engine_auto_equals_the_reference_on_random_cases(capsys):
+    tally = AutoTally()
+    seed, failures = _run_cases(run_auto_case, tally, "PRSM_ENGINE_AUTO_CASES", AUTO_CASES)
     with capsys.disabled():
         print(f"\nengine vs reference, auto (seed {seed}): {tally.cases} cases, {tally.steps} "
               f"steps ({tally.dynamic_steps} dynamic, {tally.quasi_static_steps} quasi-static), "
@@ -551,14 +557,8 @@ def test_auto_start_choice_in_c_equals_the_reference_on_random_cases(capsys):
 
 
 def test_engine_equals_the_reference_on_random_cases(capsys):
-    n = int(os.environ.get("PRSM_ENGINE_CASES") or DIFF_CASES)
-    seed = int(os.environ.get("PRSM_ENGINE_SEED", DIFF_SEED))
-    long = bool(os.environ.get("PRSM_ENGINE_LONG"))
-    rng = random.Random(seed)
     tally = Tally()
-    failures = []
-    for _ in range(n):
-        failures += run_case(rng, tally, long)
+    seed, failures = _run_cases(run_case, tally, "PRSM_ENGINE_CASES", DIFF_CASES)
     with capsys.disabled():
         print(f"\nengine vs reference (seed {seed}): {tally.cases} cases, {tally.steps} steps, "
               f"{tally.bit_equal} bit for bit, {tally.refused_both} steps refused by both, "
