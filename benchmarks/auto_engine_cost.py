@@ -18,7 +18,14 @@ relative to each output's largest magnitude (docs/accuracy.md §1's measure; two
 the same switching with other dynamic steps, each aiming at the tolerance: printed, not
 required).  Tolerance 1e-6.  Each way runs ``ROUNDS`` times; the median CPU time is printed.
 
-Run: ``python benchmarks/auto_engine_cost.py`` (about a minute; needs gcc).
+With ``--accuracy``: the error of ``auto`` on the engine (its default) at tolerance 1e-4 … 1e-7
+on the work-precision loop scenes (benchmarks/work_precision.py: load step, sine tracking, speed
+reversal, position step; docs/accuracy.md §1's measure over each scene's outputs), against the
+dynamic level stepped by the engine's ROS34PW2 at rtol 1e-11 (a converged solution, not the
+Radau reference of the charts, which takes hours in Python), with the error over the tolerance.
+
+Run: ``python benchmarks/auto_engine_cost.py`` (about a minute; needs gcc), ``--accuracy``
+(a few minutes more).
 """
 
 from __future__ import annotations
@@ -79,5 +86,25 @@ def main() -> None:
               f"over {', '.join(OUTPUTS)}")
 
 
+def accuracy() -> None:
+    """The ``--accuracy`` table (module docstring)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import work_precision as wp
+
+    for name in ("load_step", "sine_tracking", "speed_reversal", "position_step"):
+        scene = wp.SCENES[name]
+        ref = scene.run(wp.Config("dynamic", "rosenbrock", "rtol", 1e-11), time_it=False)
+        print(f"{name} (reference: the dynamic level, ROS34PW2 at rtol 1e-11 on the engine)")
+        for tol in (1e-4, 1e-5, 1e-6, 1e-7):
+            p = wp.measure(scene, wp.Config("auto", "default", "rtol", tol), ref)
+            print(f"  auto on the engine at tolerance {tol:g}: {p.status}, error {p.error:.3g} "
+                  f"= {p.error / tol:.2f} x the tolerance, {p.rhs_calls} rhs calls")
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    accuracy() if "--accuracy" in sys.argv[1:] else main()
