@@ -41,7 +41,7 @@ def build_named(name: str, dest="dist", check: bool = True, start: dict | None =
     (``start``: parameter start values other than the preset's, see ``builder.start_values``).
 
     ``native``: the native C FMU ``<name>-native.fmu`` (kinematic, quasi-static and dynamic
-    levels, :mod:`fmu_build.native`) instead of the Python one; ``targets``: its platforms
+    levels and auto, :mod:`fmu_build.native`) instead of the Python one; ``targets``: its platforms
     (default: all of :data:`fmu_build.platforms.FMI2_PLATFORMS`).  ``engine``: the Python FMU
     packs the compiled engine (:mod:`fmu_build.packing`; for this platform and
     ``engine_platforms``); False: the Python model only.

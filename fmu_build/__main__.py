@@ -7,7 +7,7 @@
     prsm-fmu-build --preset NAME --name ID [--native] [--engine native|python] [--dest DIR]
 
 ``--native`` builds ``<name>-native.fmu`` instead: the kinematic, quasi-static and dynamic
-levels in C, no Python needed to run it (:mod:`fmu_build.native`), with binaries for linux64,
+levels and ``auto`` in C, no Python needed to run it (:mod:`fmu_build.native`), with binaries for linux64,
 win64 and darwin64 cross-compiled by Zig's C compiler (``pip install ziglang``), or only the
 platforms named by ``--platform``; and ``<name>-native-fmi3.fmu``, the same as FMI 3.0
 (:mod:`fmu_build.fmi3`; ``--fmi-version 2`` or ``3`` builds one of them).
@@ -33,7 +33,7 @@ DESCRIPTION = ("Build the planetary roller screw FMUs (FMI 2.0 co-simulation, py
                "is the FMI modelIdentifier, e.g. PRSM2_assembly). Each FMU is checked with "
                "fmpy validate and the project's modelDescription rules unless --no-validate. "
                "With --native: the native C FMU <name>-native.fmu (kinematic, quasi-static and "
-               "dynamic levels; runs without Python), with binaries for linux64 (glibc 2.17 "
+               "dynamic levels and auto; runs without Python), with binaries for linux64 (glibc 2.17 "
                "and later), win64 and darwin64 (x86_64 and arm64), cross-compiled with Zig's C "
                "compiler (pip install ziglang), and its FMI 3.0 twin <name>-native-fmi3.fmu. "
                "Also runs as 'python -m fmu_build'.")
@@ -54,7 +54,7 @@ def build_parser() -> ArgumentParser:
                          "fidelity=dynamic (for hosts that cannot set it); repeatable")
     ap.add_argument("--native", action="store_true",
                     help="build the native C FMU <name>-native.fmu (kinematic, quasi-static and "
-                         "dynamic levels; needs ziglang) instead of the Python one")
+                         "dynamic levels and auto; needs ziglang) instead of the Python one")
     ap.add_argument("--engine-platform", action="append", choices=PYTHONFMU_PLATFORMS,
                     metavar="P", help="also pack the Python FMU's engine for platform P, of "
                     f"{', '.join(PYTHONFMU_PLATFORMS)} (cross-compiled with Zig; a machine's "

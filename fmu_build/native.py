@@ -1,5 +1,5 @@
 """Build the native FMU ``<name>-native.fmu``: the kinematic, quasi-static and dynamic levels
-in C.
+and ``auto`` in C.
 
 No Python in the FMU: the physics of :mod:`prsm_fmu.mechanics`, :mod:`prsm_fmu.models.slaved`,
 the Dormand-Prince 5(4) fallback and the dynamic level's ROS34PW2 of :mod:`prsm_fmu.steppers`
@@ -54,6 +54,8 @@ from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import MechanismParams
 from prsm_fmu.steppers.control import APPROACH, KINK_BAND, MAX_KINK_CUTS
 from prsm_fmu.steppers.options import TOLERANCE_FACTOR
+from prsm_fmu.models.adaptive import MAX_WAIT as AUTO_MAX_WAIT
+from prsm_fmu.models.auto import MARGIN as AUTO_MARGIN, _EFFICIENCY_POINT as AUTO_EFFICIENCY_POINT
 from prsm_fmu.steppers.tableaux import (_ROS_E, _ROS_EQ, _ROS_M, _ROS_TRIAL, _ROS_WQ,
                                         EXPLICIT_TABLEAUS, ROS_GAMMA)
 from prsm_fmu.steppers.band import _GAUSS
@@ -67,12 +69,15 @@ from .native_stepper import GEOMETRY_REALS
 __all__ = ["build_native", "native_name", "NATIVE_LEVELS", "STRUCTURAL",
            "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
 
-#: the fidelity levels the native FMU runs (prsm_fmi2.c refuses the others at initialization)
+#: the fidelity levels of the native FMU that the actuator loop's ``--prsm native`` runs; the
+#: native FMU runs ``auto`` too (co-simulation: tests/test_native_fmu.py), not yet offered there
 NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
-SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_fmi2_me.c")
-HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_geometry.h", "prsm_quantity.h")
+SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_auto.c",
+           "prsm_fmi2_me.c")
+HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_geometry.h", "prsm_quantity.h",
+           "prsm_auto.h")
 #: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
 INCLUDED = ("prsm_fmi2.c",)
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
@@ -268,6 +273,16 @@ static const double PRSM_GAUSS3_W[3] = {{{", ".join(_hex(v) for v in _GAUSS[1][1
 
 /* ROS34PW2's factor on the FMU's tolerances (prsm_fmu.steppers.options.TOLERANCE_FACTOR) */
 #define PRSM_ROS_TOLERANCE_FACTOR {_hex(TOLERANCE_FACTOR.get("rosenbrock", 1.0))}
+
+/* fidelity = auto (prsm_auto.c): the safety factor on the estimated model error
+   (prsm_fmu.models.auto.MARGIN) and the longest wait between two confirmations of a
+   dynamic -> quasi-static switch [steps] (prsm_fmu.models.adaptive.MAX_WAIT) */
+#define PRSM_AUTO_MARGIN {_hex(AUTO_MARGIN)}
+#define PRSM_AUTO_MAX_WAIT {AUTO_MAX_WAIT}
+/* the operating point of the quasi-static level's steady efficiency: screw speed [rad/s], load
+   [N] (prsm_fmu.models.auto._EFFICIENCY_POINT) */
+#define PRSM_AUTO_EFFICIENCY_SPEED {_hex(AUTO_EFFICIENCY_POINT[0])}
+#define PRSM_AUTO_EFFICIENCY_LOAD {_hex(AUTO_EFFICIENCY_POINT[1])}
 
 /* the engine's outputs (prsm_api.c prsm_api_outputs), in its order (fmu_build.native.api_outputs):
    initializers of their names, quantities (prsm_quantity.h) and stages (from 0) */

@@ -14,7 +14,10 @@ contact the C solves, ``prsm_geometry.c``), into a shared library cached by the 
 sources in a directory of the user's own in the system's temporary directory; it exchanges only
 doubles and ints with Python (``prsm_api.c``, through ctypes).  Every friction term is modelled
 (Coulomb, the friction-torque article's viscous and differential-sliding terms, the joints);
-both drives at every level; what the C does not model (``auto``) is refused on construction.
+both drives at every level, and ``fidelity = "auto"`` (an :class:`~prsm_fmu.models.AdaptiveModel`:
+the switching between the dynamic and the quasi-static level of prsm_fmu/models/adaptive.py,
+in ``prsm_auto.c``, its dynamic steps ROS34PW2's, as the Python stepper ``rosenbrock`` of that
+model).
 """
 
 from __future__ import annotations
@@ -28,21 +31,27 @@ from prsm_fmu import geometry
 from prsm_fmu.steppers.base import StepFailure, StepStats, Stepper
 
 __all__ = ["NativeStepper", "native_library", "load_library", "library_output_names",
-           "contact_solver", "solves_geometry", "GEOMETRY_REALS", "LIB_SOURCES"]
+           "contact_solver", "solves_geometry", "auto_start_level", "GEOMETRY_REALS",
+           "LIB_SOURCES"]
 
 #: the library's sources: the model, its steppers and the flat interface
-LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_api.c")
+LIB_SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_auto.c",
+               "prsm_api.c")
 _STAGE_REALS = ("screw_mass", "nut_mass", "roller_mass", "carrier_mass", "screw_inertia",
                 "roller_inertia", "carrier_inertia", "spline_radius", "bearing_radius")
 #: the geometry's real parameters per stage, in the order prsm_api_new_geometry reads them (and
 #: of the built-in PRSM_GEOMETRY rows); screw_starts is its integer one
 GEOMETRY_REALS = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "flank_angle")
-_LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2}
+_LEVELS = {"kinematic": 0, "quasi-static": 1, "dynamic": 2, "auto": 3}
+#: auto's start level as prsm_api_new_auto reads it, and its level codes (prsm_api_auto_mode)
+_AUTO_START = {"dynamic": 0, "quasi-static": 1}
+_AUTO_MODES = {2: "dynamic", 1: "quasi-static"}
 #: the Python steppers the C translates, per level, and the band method of each (1: the
 #: exponential band step, 0: Dormand-Prince 5(4); None: the dynamic level's ROS34PW2)
 STEPPERS = {"kinematic": {"closed_form": 1, "closed_form_explicit": 0},
             "quasi-static": {"closed_form": 1, "closed_form_explicit": 0},
-            "dynamic": {"rosenbrock": None}}
+            "dynamic": {"rosenbrock": None},
+            "auto": {"rosenbrock": None}}
 _MSG = 600
 #: libraries loaded in this process, by source hash and by the parameters' repr
 _loaded: dict[str, ctypes.CDLL] = {}
@@ -136,6 +145,17 @@ def load_library(path: str) -> ctypes.CDLL:
                                                   ctypes.c_double, ctypes.c_int,
                                                   ctypes.c_double, dbl]
         geometry.use_compiled_solver(contact_solver(dll))
+    if hasattr(dll, "prsm_api_new_auto"):    # (an engine library packed before auto was added)
+        dll.prsm_api_new_auto.restype = vp
+        dll.prsm_api_new_auto.argtypes = [dbl, i32, dbl, i32, dbl, i32, ctypes.c_double,
+                                          ctypes.c_int, ctypes.c_char_p, ctypes.c_int]
+        dll.prsm_api_auto_mode.argtypes = [vp]
+        dll.prsm_api_auto_info.argtypes = [vp, dbl]
+        dll.prsm_api_handle_memory_size.argtypes = [vp]
+        dll.prsm_api_reset.argtypes = [vp]
+        dll.prsm_api_auto_choose.argtypes = [dbl, i32, dbl, i32, dbl, i32, ctypes.c_double, dbl,
+                                             ctypes.c_double, ctypes.c_int, ctypes.c_double, dbl,
+                                             ctypes.c_char_p, ctypes.c_int]
     if hasattr(dll, "prsm_api_outputs"):     # (an engine library packed before they were added)
         dll.prsm_api_output_name.restype = ctypes.c_char_p
         dll.prsm_api_output_name.argtypes = [ctypes.c_int]
@@ -175,6 +195,70 @@ def library_output_names(lib: ctypes.CDLL) -> tuple[str, ...]:
     return tuple(lib.prsm_api_output_name(i).decode() for i in range(lib.prsm_api_n_outputs()))
 
 
+def _engine_arrays(params, level: int, drive: int, tolerance: float, kinematic_efficiency: float,
+                   substeps: int, max_substeps: int) -> tuple:
+    """The ctypes arrays ``prsm_api_new_geometry`` reads (reals, ints, term_reals, term_ints,
+    geo_reals, geo_ints; ``prsm_api_new_terms`` reads the first four)."""
+    reals = [float(getattr(st, f)) for st in params.stages for f in _STAGE_REALS]
+    reals += [params.mu_screw_roller, params.mu_spline, params.mu_nut_screw,
+              params.slip_velocity_scale, tolerance, kinematic_efficiency]
+    ints = [int(v) for st in params.stages for v in (st.n_rollers, st.carriers)]
+    ints += [level, drive, substeps, max_substeps]
+    term_reals = [float(params.mu_viscous), float(params.mu_differential)]
+    term_ints = [int(st.threads_per_roller) for st in params.stages]
+    geo = [float(getattr(st, f)) for st in params.stages for f in GEOMETRY_REALS]
+    starts = [int(st.screw_starts) for st in params.stages]
+    return ((ctypes.c_double * len(reals))(*reals), (ctypes.c_int * len(ints))(*ints),
+            (ctypes.c_double * 2)(*term_reals), (ctypes.c_int * len(term_ints))(*term_ints),
+            (ctypes.c_double * len(geo))(*geo), (ctypes.c_int * len(starts))(*starts))
+
+
+def auto_start_level(params, tolerance: float, inputs: tuple, screw_speed: float,
+                     carriers_at_rest: bool, kinematic_efficiency: float = 1.0,
+                     library: ctypes.CDLL | None = None) -> tuple[str, float, float]:
+    """The level ``fidelity = "auto"`` starts with under the torque drive, chosen by the C
+    (``prsm_api_auto_choose``, what the native FMU runs at initialization; the Python
+    :func:`prsm_fmu.models.auto.choose_for_start` with no communication step).
+
+    Parameters
+    ----------
+    params : MechanismParams
+    tolerance : float
+        Accepted model error [-].
+    inputs : tuple
+        Motor torque [N·m] and load force [N] at the start.
+    screw_speed : float
+        Screw speed at the start [rad/s].
+    carriers_at_rest : bool
+        Carriers at rest (True) or at their equilibrium (False) at the start.
+    kinematic_efficiency : float
+        The kinematic level's constant efficiency [-].
+    library : ctypes.CDLL, optional
+        Default: :func:`native_library` of ``params``.
+
+    Returns
+    -------
+    tuple
+        (level, estimated model error of the kinematic level, of the quasi-static level).
+
+    Raises
+    ------
+    ValueError
+        The C's message (a value out of range).
+    """
+    lib = library if library is not None else native_library(params)
+    arrays = _engine_arrays(params, 1, 0, 0.5, kinematic_efficiency, 0, 1000)
+    errors = (ctypes.c_double * 2)()
+    msg = ctypes.create_string_buffer(_MSG)
+    code = lib.prsm_api_auto_choose(*arrays, float(tolerance),
+                                    (ctypes.c_double * 2)(*map(float, inputs)),
+                                    float(screw_speed), 1 if carriers_at_rest else 0,
+                                    float(kinematic_efficiency), errors, msg, _MSG)
+    if code < 0:
+        raise ValueError(msg.value.decode())
+    return ("kinematic", "quasi-static", "dynamic")[code], errors[0], errors[1]
+
+
 class NativeStepper(Stepper):
     """ROS34PW2 (dynamic level) or the closed form with its exponential or Dormand-Prince band
     step (slaved levels) in C, for a :mod:`prsm_fmu` model of the mechanism (either drive).
@@ -182,8 +266,10 @@ class NativeStepper(Stepper):
     Parameters
     ----------
     model : prsm_fmu.models.base.Model
-        A kinematic, quasi-static or dynamic model, torque or speed drive; its parameters,
-        level and drive select the C model.
+        A kinematic, quasi-static, dynamic or auto (:class:`~prsm_fmu.models.AdaptiveModel`,
+        its ``tolerance`` and ``start``) model, torque or speed drive; its parameters, level
+        and drive select the C model.  For auto, the model's ``mode`` is set after every
+        advance to the level of that step, as the Python stepper sets it.
     rtol, atol : float
         Relative [-] and absolute [state units] tolerances of the adaptive steps (the Python
         steppers' meaning).
@@ -197,8 +283,8 @@ class NativeStepper(Stepper):
     stepper : str or None
         The Python stepper whose steps the C repeats (:data:`STEPPERS`): at the slaved levels
         ``"closed_form"`` (the exponential band step, the Python default) or
-        ``"closed_form_explicit"``; at the dynamic level ``"rosenbrock"``.  None: at the slaved
-        levels ``closed_form_explicit``, at the dynamic level ``rosenbrock``.
+        ``"closed_form_explicit"``; at the dynamic level and for auto ``"rosenbrock"``.  None:
+        at the slaved levels ``closed_form_explicit``, elsewhere ``rosenbrock``.
 
     Raises
     ------
@@ -226,30 +312,27 @@ class NativeStepper(Stepper):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} = {value!r} is out of range: must be a finite number > 0")
         kinematic_efficiency = getattr(model, "efficiency", 1.0)
-        reals = [float(getattr(st, f)) for st in params.stages for f in _STAGE_REALS]
-        reals += [params.mu_screw_roller, params.mu_spline, params.mu_nut_screw,
-                  params.slip_velocity_scale, min(rtol, 0.5), kinematic_efficiency]
-        ints = [int(v) for st in params.stages for v in (st.n_rollers, st.carriers)]
-        ints += [_LEVELS[level], 1 if model.drive == "speed" else 0, fixed_substeps or 0,
-                 max_substeps]
+        arrays = _engine_arrays(params, _LEVELS[level], 1 if model.drive == "speed" else 0,
+                                min(rtol, 0.5), kinematic_efficiency, fixed_substeps or 0,
+                                max_substeps)
         self._lib = lib = library if library is not None else native_library(params)
-        if (len(reals), len(ints)) != (lib.prsm_api_n_reals(), lib.prsm_api_n_ints()):
+        n_reals, n_ints = len(arrays[0]), len(arrays[1])
+        if (n_reals, n_ints) != (lib.prsm_api_n_reals(), lib.prsm_api_n_ints()):
             raise ValueError(f"the C model reads {lib.prsm_api_n_reals()} doubles and "
-                             f"{lib.prsm_api_n_ints()} ints, not {len(reals)} and {len(ints)}")
+                             f"{lib.prsm_api_n_ints()} ints, not {n_reals} and {n_ints}")
         msg = ctypes.create_string_buffer(_MSG)
-        term_reals = [float(params.mu_viscous), float(params.mu_differential)]
-        term_ints = [int(st.threads_per_roller) for st in params.stages]
-        args = [(ctypes.c_double * len(reals))(*reals), (ctypes.c_int * len(ints))(*ints),
-                (ctypes.c_double * 2)(*term_reals),
-                (ctypes.c_int * len(term_ints))(*term_ints)]
-        if solves_geometry(lib):
+        self._auto = level == "auto"
+        if self._auto:
+            if not hasattr(lib, "prsm_api_new_auto"):
+                raise ValueError("fidelity = 'auto' is not in this engine library (built before "
+                                 "it was added)")
+            handle = lib.prsm_api_new_auto(*arrays, float(model.tolerance),
+                                           _AUTO_START[model.start], msg, _MSG)
+        elif solves_geometry(lib):
             # the model's own geometry: the engine solves its contact (prsm_geometry.c)
-            geo = [float(getattr(st, f)) for st in params.stages for f in GEOMETRY_REALS]
-            starts = [int(st.screw_starts) for st in params.stages]
-            args += [(ctypes.c_double * len(geo))(*geo), (ctypes.c_int * len(starts))(*starts)]
-            handle = lib.prsm_api_new_geometry(*args, msg, _MSG)
+            handle = lib.prsm_api_new_geometry(*arrays, msg, _MSG)
         else:       # a library packed before: the geometry it was built with
-            handle = lib.prsm_api_new_terms(*args, msg, _MSG)
+            handle = lib.prsm_api_new_terms(*arrays[:4], msg, _MSG)
         if not handle:
             raise ValueError(msg.value.decode())
         self._handle = ctypes.c_void_p(handle)
@@ -263,7 +346,9 @@ class NativeStepper(Stepper):
         self._u = (ctypes.c_double * 2)()
         self._stats = (ctypes.c_int * 3)()
         self._msg = msg
-        self._memory_size = lib.prsm_api_memory_size()
+        self._memory_size = (lib.prsm_api_handle_memory_size(self._handle)
+                             if hasattr(lib, "prsm_api_handle_memory_size")
+                             else lib.prsm_api_memory_size())
         #: the names of the outputs :meth:`outputs` computes, in the C's order: () where the
         #: library has no prsm_api_outputs, and for the speed drive (the C's outputs read u[0]
         #: as the motor torque: the torque drive's, the FMU's)
@@ -309,6 +394,8 @@ class NativeStepper(Stepper):
         self._u[0], self._u[1] = u[0], u[1]
         rc = self._lib.prsm_api_advance_many(self._handle, t0, self._x, self._u, h, n_steps, out,
                                              self._stats, self._msg, _MSG)
+        if self._auto:
+            self.sync_mode()
         if rc:
             raise StepFailure(self._msg.value.decode())
         stats = StepStats()
@@ -324,6 +411,24 @@ class NativeStepper(Stepper):
         self._lib.prsm_api_rhs(self._handle, self._x, self._u, dx)
         return dx[:]
 
+    def sync_mode(self) -> None:
+        """For auto: set the model's ``mode`` to the level of the C's last step (what
+        :meth:`prsm_fmu.models.AdaptiveModel.outputs` reads)."""
+        self.model.mode = _AUTO_MODES[self._lib.prsm_api_auto_mode(self._handle)]
+
+    def auto_info(self) -> dict:
+        """For auto: what the C computed on construction (``prsm_api_auto_info``):
+        ``slaved_inertia`` [kg·m²], ``nut_term`` (m·c_out of the last nut) [kg·m/rad],
+        ``tolerance`` [-] and the lag coefficients c_k = τ_k|F|/|ω| [N·s²/rad] of each carrier,
+        ``forward`` (driving) and ``backward`` (back-driven)."""
+        n = self.model.params.n_stages
+        out = (ctypes.c_double * (3 + 2 * n))()
+        if self._lib.prsm_api_auto_info(self._handle, out):
+            raise ValueError("not an auto stepper")
+        v = out[:]
+        return {"slaved_inertia": v[0], "nut_term": v[1], "tolerance": v[2],
+                "forward": tuple(v[3:3 + n]), "backward": tuple(v[3 + n:])}
+
     def get_memory(self) -> tuple:
         """``(bytes,)``: the C stepper's memory (step proposal, continuation, last stage)."""
         buf = ctypes.create_string_buffer(self._memory_size)
@@ -337,15 +442,24 @@ class NativeStepper(Stepper):
             raise ValueError(f"{self.name}: memory must be (bytes of length "
                              f"{self._memory_size},) from get_memory")
         self._lib.prsm_api_set_memory(self._handle, m[0])
+        if self._auto:
+            self.sync_mode()
 
     def undo_advance(self) -> None:
         """Put the memory back as it was before the last advance (its result refused by the
         caller); the state is the caller's own and needs no undoing."""
         self._lib.prsm_api_undo_advance(self._handle)
+        if self._auto:
+            self.sync_mode()
 
     def reset(self) -> None:
-        """Forget the memory."""
-        self.set_memory((bytes(self._memory_size),))
+        """Forget the memory (for auto: back to its start level, as the Python stepper)."""
+        if hasattr(self._lib, "prsm_api_reset"):
+            self._lib.prsm_api_reset(self._handle)
+            if self._auto:
+                self.sync_mode()
+        else:
+            self.set_memory((bytes(self._memory_size),))
 
     def __del__(self) -> None:
         handle = getattr(self, "_handle", None)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-from .engine import check_engine, default_engine, engine_stepper
+from .engine import ENGINE_METHOD, check_engine, default_engine, engine_stepper
 from .geometry import contact_geometry
 from .models import FIDELITIES, auto_model, make_model
 from .models.auto import choose_for_start
@@ -219,6 +219,8 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     if engine == "native":
         stepper, why = engine_stepper(model, level, asked, tol, ATOL_FACTOR * tol, max_substeps,
                                       substeps, library_path, engine_refusal)
+        if stepper is not None and asked == "default":
+            name = ENGINE_METHOD.get(level, name)     # auto's default is ROS34PW2 there
     if stepper is None:
         stepper = make_stepper(name, model, **opts)
         if why is not None:

@@ -6,9 +6,12 @@ It is the default engine of every door: the pythonfmu FMU (which loads the libra
 its ``resources/binaries/<platform>/``), :func:`prsm_fmu.configure.configure` and so the
 actuator loop's Python PRSM block, and :func:`prsm_fmu.simulate.simulate` (which compile it
 with gcc on first use, cached).  The Python model and steppers stay the readable reference:
-``engine="python"`` selects them, and they run wherever the engine cannot:
+``engine="python"`` selects them, and they run wherever the engine cannot.  The engine runs
+every level, ``auto`` included (prsm_auto.c; its dynamic steps ROS34PW2's,
+:data:`ENGINE_METHOD`).  It falls back to the reference where:
 
-* no engine library loads (no gcc, another platform, a build without it);
+* no engine library loads (no gcc, another platform, a build without it), or the library
+  is older than the level (an FMU packed before ``auto`` was in the engine);
 * the engine refuses the configuration on construction (a level, drive or friction term the C
   does not model: its own message says which);
 * the stepper asked for is not the engine's method at that level (:data:`ENGINE_METHOD`);
@@ -43,13 +46,16 @@ DEFAULT_ENGINE = "native"
 ENGINE_ENV = "PRSM_FMU_ENGINE"
 #: per level, every Python stepper the engine translates operation for operation (equal
 #: states bit for bit, tests/test_engine_differential.py), the level's method first; any other
-#: stepper runs in Python
+#: stepper runs in Python.  ``auto``: the switching of prsm_fmu/models/adaptive.py with every
+#: dynamic step ROS34PW2's (the Python stepper ``rosenbrock`` of an auto model)
 ENGINE_STEPPERS = {"kinematic": ("closed_form", "closed_form_explicit"),
                    "quasi-static": ("closed_form", "closed_form_explicit"),
-                   "dynamic": ("rosenbrock",)}
-#: per level, the engine's method: what ``default`` means where the engine runs (the Python
-#: default of the level, simulate.DEFAULT_STEPPER).  A level not listed (``auto``) is offered
-#: to the engine with ``default`` and it decides.
+                   "dynamic": ("rosenbrock",), "auto": ("rosenbrock",)}
+#: per level, the engine's method: what ``default`` means where the engine runs: the Python
+#: default of the level (simulate.DEFAULT_STEPPER), except for ``auto``, whose Python default
+#: chooses an explicit, exponential or linearly implicit stepper per dynamic step; the engine
+#: takes every dynamic step with ROS34PW2 (the same levels chosen by the same rules, other
+#: dynamic steps within the same tolerance).
 ENGINE_METHOD = {level: steppers[0] for level, steppers in ENGINE_STEPPERS.items()}
 #: the library's file name in an FMU's ``resources/binaries/<platform>/``
 LIBRARY_STEM = "prsm_engine"
@@ -255,8 +261,11 @@ def _engine_class() -> type:
             xi[:] = x
             ui[0] = u[0]
             ui[1] = u[1]
-            if self._call(self._handle, double(t), xi, ui, double(h), 1, self._row, counts,
-                          self._msg, self._msg_len):
+            failed = self._call(self._handle, double(t), xi, ui, double(h), 1, self._row, counts,
+                                self._msg, self._msg_len)
+            if self._auto:
+                self.sync_mode()
+            if failed:
                 raise StepFailure(self._msg.value.decode())
             stats = StepStats(rhs_calls=counts[0], substeps=counts[1], rejected=counts[2])
             return self._row[:], stats

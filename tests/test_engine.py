@@ -34,7 +34,7 @@ SOLVER = {"fidelity": "quasi-static", "tolerance": 1e-6, "stepper": "default", "
           "initial_screw_angle": 0.0, "initial_carrier_equilibrium": False}
 #: the Python stepper the engine translates at each level (docs/fmu.md, "The native FMU")
 REFERENCE = {"kinematic": "closed_form", "quasi-static": "closed_form",
-             "dynamic": "rosenbrock"}
+             "dynamic": "rosenbrock", "auto": "rosenbrock"}
 
 
 def _bits(values: list[float]) -> list[bytes]:
@@ -56,24 +56,35 @@ def _run(level: str, engine: str, stepper: str, rng: random.Random, n: int, **so
     for k in range(n):
         u = (rng.uniform(-30.0, 30.0), rng.uniform(-6000.0, 6000.0))
         x, stats = st.advance(k * 1e-3, x, u, 1e-3)
-        rows.append((list(x), stats.rhs_calls, stats.substeps))
+        rows.append((list(x), stats.rhs_calls, stats.substeps, getattr(model, "mode", level)))
     return st, rows
 
 
-@pytest.mark.parametrize("level", ["kinematic", "quasi-static", "dynamic"])
+@pytest.mark.parametrize("level", ["kinematic", "quasi-static", "dynamic", "auto"])
 @pytest.mark.parametrize("substeps", [0, 7])
 def test_configure_runs_the_engine_equal_to_the_reference_on_random_cases(level, substeps):
     """20 seeded random runs of 30 steps per level, adaptive and with 7 fixed substeps: the
     default door (engine) and the reference (engine="python" with the method the engine
-    translates) give equal states and work, bit for bit."""
+    translates) give equal states and work, bit for bit; for auto (at tolerance 1e-3, where
+    it switches) also the level of every step."""
     cases = 20
+    tol = {"tolerance": 1e-3} if level == "auto" else {}
+    switches = 0
     for case in range(cases):
-        st, a = _run(level, "native", "default", random.Random(case), 30, substeps=substeps)
+        st, a = _run(level, "native", "default", random.Random(case), 30, substeps=substeps,
+                     **tol)
         ref, b = _run(level, "python", REFERENCE[level], random.Random(case), 30,
-                      substeps=substeps)
+                      substeps=substeps, **tol)
         assert is_engine(st) and not is_engine(ref), (st.name, ref.name)
         assert a == b, (level, substeps, case)
-    print(f"{cases} random cases x 30 steps equal at {level}, substeps = {substeps}")
+        if level == "auto":
+            modes_a, modes_b = (tuple(r[3] for r in rows) for rows in (a, b))
+            assert modes_a == modes_b, (substeps, case)
+            switches += sum(m != n for m, n in zip(modes_b, modes_b[1:]))
+    if level == "auto":
+        assert switches > 0      # the random inputs make it switch (else this tests one level)
+    print(f"{cases} random cases x 30 steps equal at {level}, substeps = {substeps}"
+          + (f", {switches} level switches" if level == "auto" else ""))
 
 
 @pytest.mark.parametrize("change", [{"mu_viscous": 10.0}, {"mu_differential": 1e-5}])
@@ -91,11 +102,22 @@ def test_configure_falls_back_for_a_stepper_or_level_the_engine_lacks():
     _m, st, *_ = configure(params, dict(SOLVER, fidelity="dynamic", stepper="exponential"),
                            (0.0, 0.0))
     assert st.name == "exponential" and "'exponential' is not the engine's" in fallback_reason(st)
-    _m, st, *_ = configure(params, dict(SOLVER, fidelity="auto"), (0.0, 0.0))
-    assert not is_engine(st) and "auto" in fallback_reason(st)
+    _m, st, *_ = configure(params, dict(SOLVER, fidelity="auto", stepper="explicit_adaptive"),
+                           (0.0, 0.0))
+    assert st.name == "auto(explicit_adaptive)"
+    assert "'explicit_adaptive' is not the engine's" in fallback_reason(st)
     # the reference asked for: no engine, no reason
     _m, st, *_ = configure(params, SOLVER, (0.0, 0.0), engine="python")
     assert st.name == "closed_form" and fallback_reason(st) is None
+
+
+def test_configure_runs_auto_on_the_engine():
+    """fidelity = auto runs on the engine (its dynamic steps ROS34PW2's), without fallback."""
+    params = presets.load("li2021_two_stage")
+    model, st, _x, level, name = configure(params, dict(SOLVER, fidelity="auto"), (0.0, 0.0))
+    assert level == "auto" and model.fidelity == "auto"
+    assert is_engine(st) and fallback_reason(st) is None
+    assert name == "rosenbrock"
 
 
 def test_configure_refuses_an_unknown_engine():

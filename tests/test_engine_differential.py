@@ -33,6 +33,18 @@ Checks, per communication step:
 The suite runs DIFF_CASES cases (seeded; the counts of cases, steps, bit-for-bit steps and
 Radau checks are printed); ``PRSM_ENGINE_CASES=N`` runs N cases, ``PRSM_ENGINE_SEED=S``
 another seed.
+
+``fidelity = "auto"`` (prsm_auto.c against prsm_fmu/models/adaptive.py's SwitchingStepper with
+ROS34PW2 dynamic steps, the Python stepper ``rosenbrock`` of an auto model) has cases of its own,
+AUTO_CASES of them (``PRSM_ENGINE_AUTO_CASES=N``; same seed variable), drawn to cross levels: the
+same random mechanisms, a tolerance of 1e-4 to 0.1 (the model error that decides the level),
+either start level, start-ups (carriers at rest under a turning screw), load steps, reversals
+and the speed drive, 2-10 communication steps per piece of held inputs.  Per step the states
+must agree as above and both must have stepped the same level; the level switches are counted
+and at least one case in five must switch (else the draw misses what it is for).  Radau is
+checked on steps that were dynamic from start to end (the quasi-static steps leave the
+dynamic model by design), on the first such step of the first RADAU_CASES cases or, with
+``PRSM_ENGINE_LONG=1``, every one.
 """
 
 from __future__ import annotations
@@ -46,7 +58,7 @@ from dataclasses import dataclass, replace
 import pytest
 
 from prsm_fmu import presets
-from prsm_fmu.models import make_model
+from prsm_fmu.models import AdaptiveModel, make_model
 from prsm_fmu.simulate import tuned_stepper_options
 from prsm_fmu.steppers import StepFailure, make_stepper
 
@@ -228,31 +240,76 @@ class Tally:
     refused_construction: int = 0
 
 
+def _refused_alike(make, params, sc: Scenario, tally, label: str, exc: Exception) -> list[str]:
+    """The reference refused ``params`` (a self-locking thread, ``exc``): the engine must refuse
+    them as well.  It is handed a model ``make(params)`` of the same level built without the
+    screw-roller friction, whose params then carry the refused value.  Its failures (none
+    where the engine refused for the same reason, counted)."""
+    model = make(replace(params, mu_screw_roller=0.0))
+    model.params = params
+    try:
+        _engine(model, sc)
+    except ValueError as exc_engine:
+        tally.refused_construction += 1
+        return [] if "mu_screw_roller" in str(exc_engine) else [
+            f"{label}: the engine refused for another reason: {exc_engine} (ref: {exc})"]
+    return [f"{label}: the reference refused ({exc}), the engine did not"]
+
+
+def _mechanism_label(params) -> str:
+    return (f"{params.n_stages} stages mu=({params.mu_screw_roller:.3g}, {params.mu_spline:.3g},"
+            f" {params.mu_nut_screw:.3g}, viscous {params.mu_viscous:.3g}, differential "
+            f"{params.mu_differential:.3g}) v_eps={params.slip_velocity_scale:.3g}")
+
+
+def _step_both(ref, eng, t: float, xa, xb, u, h: float, tally, label: str,
+               level_check=None) -> tuple:
+    """One communication step of the reference and the engine, counted in ``tally``:
+    ``(ya, yb, None)`` where they agree; ``(None, None, failure)`` where the case ends, with
+    failure None where both refused the step (counted) and a message otherwise.
+    ``level_check()`` (auto), called after both stepped, returns a message where they stepped
+    different levels."""
+    fa = fb = None
+    try:
+        ya, _ = ref.advance(t, xa, u, h)
+    except StepFailure as exc:
+        fa = exc
+    try:
+        yb, _ = eng.advance(t, xb, u, h)
+    except StepFailure as exc:
+        fb = exc
+    tally.steps += 1
+    if fa is not None or fb is not None:
+        if fa is None or fb is None:
+            return None, None, f"{label}: t={t:.6g} only one refused: ref {fa!r}, engine {fb!r}"
+        tally.refused_both += 1
+        return None, None, None
+    why = level_check() if level_check is not None else None
+    if why:
+        return None, None, f"{label}: t={t:.6g} u={u} {why}"
+    if ya == yb:
+        tally.bit_equal += 1
+    elif not all(_close(a, b) for a, b in zip(ya, yb)):
+        rel = max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in zip(ya, yb))
+        return None, None, (f"{label}: t={t:.6g} u={u} engine {yb[1]!r} vs reference "
+                            f"{ya[1]!r} (screw speed; largest rel. difference {rel:.3g})")
+    return ya, yb, None
+
+
 def run_case(rng: random.Random, tally: Tally, long: bool) -> list[str]:
     """One random case; returns its failures (empty if none)."""
     params = _draw_mechanism(rng, tally)
     # the scenario's scales (band speed, load torque) do not depend on mu_screw_roller
     model_q = make_model(replace(params, mu_screw_roller=0.0), "quasi-static", "torque")
     sc = _draw_scenario(rng, params, model_q)
-    label = (f"{params.n_stages} stages mu=({params.mu_screw_roller:.3g}, {params.mu_spline:.3g},"
-             f" {params.mu_nut_screw:.3g}, viscous {params.mu_viscous:.3g}, differential "
-             f"{params.mu_differential:.3g}) v_eps={params.slip_velocity_scale:.3g} {sc}")
+    label = f"{_mechanism_label(params)} {sc}"
     tally.cases += 1
     try:
         model = make_model(params, sc.level, sc.drive)
         ref = _reference_stepper(model, sc)
     except ValueError as exc:
-        # refused by the reference (self-locking thread): the engine must refuse it as well;
-        # it is handed a model of the same level whose params carry the refused value
-        model = make_model(replace(params, mu_screw_roller=0.0), sc.level, sc.drive)
-        model.params = params
-        try:
-            _engine(model, sc)
-        except ValueError as exc_engine:
-            tally.refused_construction += 1
-            return [] if "mu_screw_roller" in str(exc_engine) else [
-                f"{label}: the engine refused for another reason: {exc_engine} (ref: {exc})"]
-        return [f"{label}: the reference refused ({exc}), the engine did not"]
+        return _refused_alike(lambda p: make_model(p, sc.level, sc.drive), params, sc, tally,
+                              label, exc)
     eng = _engine(model, sc)
     u0 = sc.pieces[0][1]
     x0 = model.initial_state(u0, screw_speed=sc.screw_speed) if sc.level != "dynamic" else \
@@ -265,30 +322,9 @@ def run_case(rng: random.Random, tally: Tally, long: bool) -> list[str]:
     first = True
     for n_steps, u in sc.pieces:
         for _ in range(n_steps):
-            fa = fb = None
-            try:
-                ya, _ = ref.advance(t, xa, u, sc.h)
-            except StepFailure as exc:
-                fa = exc
-            try:
-                yb, _ = eng.advance(t, xb, u, sc.h)
-            except StepFailure as exc:
-                fb = exc
-            tally.steps += 1
-            if fa is not None or fb is not None:
-                if fa is None or fb is None:
-                    failures.append(f"{label}: t={t:.6g} only one refused: ref {fa!r}, "
-                                    f"engine {fb!r}")
-                else:
-                    tally.refused_both += 1
-                return failures
-            if ya == yb:
-                tally.bit_equal += 1
-            elif not all(_close(a, b) for a, b in zip(ya, yb)):
-                rel = max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in zip(ya, yb))
-                failures.append(f"{label}: t={t:.6g} u={u} engine {yb[1]!r} vs reference "
-                                f"{ya[1]!r} (screw speed; largest rel. difference {rel:.3g})")
-                return failures
+            ya, yb, why = _step_both(ref, eng, t, xa, xb, u, sc.h, tally, label)
+            if ya is None:
+                return failures + ([why] if why else [])
             if radau and (first or long):
                 try:
                     norm, z = _radau_norm(model, t, xb, u, sc.h, yb, sc.tol)
@@ -311,15 +347,218 @@ def run_case(rng: random.Random, tally: Tally, long: bool) -> list[str]:
     return failures
 
 
-def test_engine_equals_the_reference_on_random_cases(capsys):
-    n = int(os.environ.get("PRSM_ENGINE_CASES") or DIFF_CASES)
+#: auto cases in the suite
+AUTO_CASES = 100
+#: auto's tolerances (its model error, and the steppers' rtol as in the FMU)
+AUTO_TOLERANCES = (1e-1, 1e-2, 1e-3, 1e-4)
+
+
+@dataclass
+class AutoTally:
+    cases: int = 0
+    steps: int = 0
+    bit_equal: int = 0
+    refused_both: int = 0
+    refused_construction: int = 0
+    rejected_mechanisms: int = 0
+    switches: int = 0
+    switching_cases: int = 0
+    dynamic_steps: int = 0
+    quasi_static_steps: int = 0
+    radau_cases_done: int = 0
+    radau_checked: int = 0
+    worst_radau: float = 0.0
+
+
+def _draw_auto_scenario(rng: random.Random, model_q) -> tuple[Scenario, str, float | None]:
+    """A scenario for auto: the level fields as :func:`_draw_scenario`'s, the start level and
+    the carriers' start ratio (None: at equilibrium, 0: at rest)."""
+    drive = rng.choice(("torque", "torque", "speed"))
+    tol = rng.choice(AUTO_TOLERANCES)
+    substeps = rng.choice((0, 0, 0, 0, 2, 5))
+    h = rng.choice((1e-5, 1e-4, 1e-3))
+    band = model_q._advance_law().band_speed
+    start = rng.choice(("rest", "creep", "moving", "moving", "moving"))
+    speed = {"rest": 0.0, "creep": rng.uniform(-1.0, 1.0) * band,
+             "moving": rng.choice((-1.0, 1.0)) * _log_uniform(rng, 1.0, 300.0)}[start]
+    # a start-up (carriers at rest under the turning screw) or the carriers at equilibrium
+    ratio = rng.choice((None, None, 0.0))
+    level0 = rng.choice(("dynamic", "quasi-static"))
+    c_out = model_q.mechanism.c_out
+    pieces = []
+    for _ in range(rng.randint(1, 3)):
+        load = rng.choice((-1.0, 1.0)) * _log_uniform(rng, 10.0, 8000.0)
+        if rng.random() < 0.15:
+            load = 0.0
+        if drive == "speed":
+            first = rng.choice((0.0, 0.0, rng.uniform(-3e4, 3e4)))
+        else:
+            r = rng.choice((0.0, rng.uniform(-2.0, 2.0), rng.uniform(-1.0, 1.0)))
+            first = r * abs(load) * c_out if load else rng.uniform(-5.0, 5.0)
+        pieces.append((rng.randint(2, 10), (first, load)))
+    return Scenario("auto", drive, "rosenbrock", tol, substeps, h, speed, pieces), level0, ratio
+
+
+def _auto_model(params, sc: Scenario, level0: str) -> AdaptiveModel:
+    return AdaptiveModel(params, sc.drive, tolerance=sc.tol, start=level0)
+
+
+def run_auto_case(rng: random.Random, tally: AutoTally, long: bool) -> list[str]:
+    """One random auto case; returns its failures (empty if none)."""
+    params = _draw_mechanism(rng, tally)
+    model_q = make_model(replace(params, mu_screw_roller=0.0), "quasi-static", "torque")
+    sc, level0, ratio = _draw_auto_scenario(rng, model_q)
+    label = f"auto from {level0} (carrier ratio {ratio}) {_mechanism_label(params)} {sc}"
+    tally.cases += 1
+    try:
+        ref_model = _auto_model(params, sc, level0)
+        ref = _reference_stepper(ref_model, sc)
+    except ValueError as exc:
+        return _refused_alike(lambda p: _auto_model(p, sc, level0), params, sc, tally, label, exc)
+    eng_model = _auto_model(params, sc, level0)     # its own: each stepper sets its model's mode
+    eng = _engine(eng_model, sc)
+    x0 = ref_model.initial_state(sc.pieces[0][1], screw_speed=sc.screw_speed, carrier_ratio=ratio)
+    xa = xb = x0
+    t = 0.0
+    failures: list[str] = []
+    radau = not sc.substeps and (long or tally.radau_cases_done < RADAU_CASES)
+    checked = False
+    switched = 0
+    def level_check() -> str | None:
+        if ref_model.mode == eng_model.mode:
+            return None
+        return f"the reference stepped {ref_model.mode}, the engine {eng_model.mode}"
+
+    for n_steps, u in sc.pieces:
+        for _ in range(n_steps):
+            mode0 = ref_model.mode
+            ya, yb, why = _step_both(ref, eng, t, xa, xb, u, sc.h, tally, label, level_check)
+            if ya is None:
+                return failures + ([why] if why else [])
+            if ref_model.mode == "dynamic":
+                tally.dynamic_steps += 1
+            else:
+                tally.quasi_static_steps += 1
+            if ref_model.mode != mode0:
+                switched += 1
+            if radau and mode0 == ref_model.mode == "dynamic" and (long or not checked):
+                checked = True
+                try:
+                    norm, z = _radau_norm(ref_model.dynamic, t, xb, u, sc.h, yb, sc.tol)
+                except StepFailure:
+                    norm, z = None, None
+                if norm is not None:
+                    tally.radau_checked += 1
+                    tally.worst_radau = max(tally.worst_radau, norm)
+                    if not norm <= RADAU_NORM:
+                        failures.append(f"{label}: t={t:.6g} u={u} engine {yb[1]!r} vs Radau "
+                                        f"{z[1]!r} (screw speed): error norm {norm:.3g} > "
+                                        f"{RADAU_NORM}")
+            xa, xb = ya, yb
+            t += sc.h
+    tally.radau_cases_done += radau and checked
+    tally.switches += switched
+    tally.switching_cases += switched > 0
+    return failures
+
+
+def _run_cases(run, tally, cases_env: str, default: int) -> tuple[int, list[str]]:
+    """``run(rng, tally, long)`` for as many cases as ``cases_env`` says (default ``default``),
+    seeded by ``PRSM_ENGINE_SEED``, every step with ``PRSM_ENGINE_LONG``: (seed, failures)."""
+    n = int(os.environ.get(cases_env) or default)
     seed = int(os.environ.get("PRSM_ENGINE_SEED", DIFF_SEED))
     long = bool(os.environ.get("PRSM_ENGINE_LONG"))
     rng = random.Random(seed)
-    tally = Tally()
-    failures = []
+    failures: list[str] = []
     for _ in range(n):
-        failures += run_case(rng, tally, long)
+        failures += run(rng, tally, long)
+    return seed, failures
+
+
+def test_engine_auto_equals_the_reference_on_random_cases(capsys):
+    tally = AutoTally()
+    seed, failures = _run_cases(run_auto_case, tally, "PRSM_ENGINE_AUTO_CASES", AUTO_CASES)
+    with capsys.disabled():
+        print(f"\nengine vs reference, auto (seed {seed}): {tally.cases} cases, {tally.steps} "
+              f"steps ({tally.dynamic_steps} dynamic, {tally.quasi_static_steps} quasi-static), "
+              f"{tally.bit_equal} bit for bit, {tally.switches} level switches in "
+              f"{tally.switching_cases} cases, {tally.refused_both} steps refused by both, "
+              f"{tally.refused_construction} mechanisms refused by both, "
+              f"{tally.rejected_mechanisms} mechanisms redrawn, {tally.radau_checked} dynamic "
+              f"steps checked against Radau (worst norm {tally.worst_radau:.3g}), "
+              f"{len(failures)} failing cases")
+    assert not failures, "\n".join(failures[:20])
+    # the draw is for crossing levels: at least one case in five switches
+    assert 5 * tally.switching_cases >= tally.cases, tally
+
+
+#: start choices compared in the suite
+CHOICE_CASES = 100
+
+
+def test_auto_start_choice_in_c_equals_the_reference_on_random_cases(capsys):
+    """The level fidelity = auto starts with, chosen in C (prsm_auto_choose: what the native FMU
+    runs at initialization) and by prsm_fmu.models.auto.choose_for_start (torque drive, no
+    communication step), on random mechanisms (a quarter of them without friction, where the
+    kinematic level can be chosen), tolerances, start inputs, speeds, carriers at rest or at
+    equilibrium and kinematic efficiencies: the same level and the same estimated model errors
+    of the kinematic and the quasi-static level, bit for bit (NaN where both are NaN); the
+    quasi-static and the dynamic level are each chosen in some case.  (The kinematic level is
+    not reached: without friction the quasi-static level's efficiency rounds to 1 - 2.2e-16, and
+    the estimate of its friction outputs' error, |eta - eta_0| / (1 - eta), is then 1 for
+    eta_0 = 1.)"""
+    from fmu_build.native_stepper import auto_start_level
+    from prsm_fmu.models.auto import choose_for_start
+
+    n = int(os.environ.get("PRSM_ENGINE_CHOICE_CASES") or CHOICE_CASES)
+    seed = int(os.environ.get("PRSM_ENGINE_SEED", DIFF_SEED))
+    rng = random.Random(seed)
+    tally = Tally()
+    levels: dict[str, int] = {}
+    failures, refused = [], 0
+    for _ in range(n):
+        params = _draw_mechanism(rng, tally)
+        frictionless = rng.random() < 0.25
+        if frictionless:
+            params = replace(params, mu_screw_roller=0.0, mu_spline=0.0, mu_nut_screw=0.0,
+                             mu_viscous=0.0, mu_differential=0.0)
+        tol = rng.choice((1e-1, 3e-2, 1e-2, 1e-3, 1e-4))
+        inputs = (rng.choice((0.0, rng.uniform(-20.0, 20.0))),
+                  rng.choice((0.0, rng.uniform(-5000.0, 5000.0))))
+        speed = rng.choice((0.0, rng.uniform(-300.0, 300.0)))
+        at_rest = rng.random() < 0.5
+        eff = rng.choice((1.0, rng.uniform(0.5, 1.0)))
+        if frictionless and rng.random() < 0.5:
+            inputs, eff = (0.0, 0.0), 1.0        # no input, the kinematic level lossless
+        try:
+            ref = choose_for_start(params, tol, "torque", inputs, screw_speed=speed,
+                                   carrier_ratio=0.0 if at_rest else None,
+                                   kinematic_efficiency=eff)
+        except ValueError as exc:          # a self-locking thread: the C refuses it as well
+            try:
+                auto_start_level(params, tol, inputs, speed, at_rest, eff)
+            except ValueError:
+                refused += 1
+                continue
+            failures.append(f"{params.name}: the reference refused ({exc}), the C did not")
+            continue
+        level, e_kin, e_qs = auto_start_level(params, tol, inputs, speed, at_rest, eff)
+        levels[level] = levels.get(level, 0) + 1
+        got = (level, e_kin, e_qs)
+        want = (ref.fidelity, ref.errors["kinematic"], ref.errors["quasi-static"])
+        if not all(a == b or (a != a and b != b) for a, b in zip(got, want)):
+            failures.append(f"tol {tol} inputs {inputs} speed {speed} at rest {at_rest} eff "
+                            f"{eff}: C {got}, reference {want}")
+    with capsys.disabled():
+        print(f"\nauto's start choice, C vs reference (seed {seed}): {n} cases, levels chosen "
+              f"{levels}, {refused} refused by both, {len(failures)} failing")
+    assert not failures, "\n".join(failures[:20])
+    assert {"quasi-static", "dynamic"} <= set(levels), levels
+
+
+def test_engine_equals_the_reference_on_random_cases(capsys):
+    tally = Tally()
+    seed, failures = _run_cases(run_case, tally, "PRSM_ENGINE_CASES", DIFF_CASES)
     with capsys.disabled():
         print(f"\nengine vs reference (seed {seed}): {tally.cases} cases, {tally.steps} steps, "
               f"{tally.bit_equal} bit for bit, {tally.refused_both} steps refused by both, "

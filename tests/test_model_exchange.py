@@ -273,3 +273,33 @@ def test_no_rigid_contact_solution_is_an_error_naming_the_cause(fmu):
                 assert all(np.isfinite(list(dx))) and dx[1] != 0.0
         finally:
             m.freeInstance()
+
+
+def test_auto_is_refused_for_model_exchange_naming_the_fidelity(fmu):
+    """fidelity = auto chooses the level per communication step: a model-exchange instance
+    (no communication steps of its own) refuses it at fmi2ExitInitializationMode with
+    fmi2Error, the reason logged; the co-simulation of the same FMU runs it
+    (tests/test_native_fmu.py)."""
+    md, unzip = fmu
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    messages = []
+
+    def logger(env, name, status, category, message):
+        messages.append(message.decode())
+
+    m = FMU2Model(guid=md.guid, unzipDirectory=unzip,
+                  modelIdentifier=md.modelExchange.modelIdentifier, instanceName="auto")
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(logger)
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    m.instantiate(loggingOn=True, callbacks=cb)
+    try:
+        m.setupExperiment(startTime=0.0)
+        m.enterInitializationMode()
+        _set(m, vr, {"fidelity": 3})
+        with pytest.raises(Exception, match="status 3"):
+            m.exitInitializationMode()
+        assert "fidelity = 'auto' is not available for model exchange" in messages[-1]
+    finally:
+        m.freeInstance()

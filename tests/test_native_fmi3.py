@@ -152,7 +152,7 @@ def _reversal(host, n: int = 300, h: float = 1e-3) -> list[list[float]]:
 
 
 SCENARIOS = [("startup", "kinematic"), ("startup", "quasi-static"), ("startup", "dynamic"),
-             ("reversal", "quasi-static"), ("reversal", "dynamic")]
+             ("reversal", "quasi-static"), ("reversal", "dynamic"), ("reversal", "auto")]
 
 
 @pytest.mark.parametrize("scenario,fidelity", SCENARIOS)
@@ -280,7 +280,8 @@ def test_a_call_of_the_wrong_type_or_not_allowed_is_an_error_naming_the_variable
         host.free()
 
 
-@pytest.mark.parametrize("start,word", [({"fidelity": "auto"}, "fidelity"),
+@pytest.mark.parametrize("start,word", [({"fidelity": "auto", "stepper": "closed_form"},
+                                         "stepper"),
                                         ({"stepper": "exponential"}, "stepper"),
                                         ({"stage[2].nut_mass": -1.0}, "stage[2].nut_mass")])
 def test_initialization_refuses_what_the_fmi2_fmu_refuses(fmu3, start, word):

@@ -182,6 +182,30 @@ def test_closed_loop_with_reversal_equals_python_fmu_to_1e_12(native, fidelity, 
     assert [r[i_calls] for r in nat] == [r[i_calls] for r in py]  # ... the same ones
 
 
+@pytest.mark.parametrize("name,start,load", [
+    ("PRSM2", {"tolerance": 1e-3}, 3000.0),
+    ("PRSM2", {"tolerance": 1e-2, "initial_screw_speed": 50.0,
+               "initial_carrier_equilibrium": True}, -1000.0),
+    ("PRSM3", {"tolerance": 1e-3}, 2000.0),
+    ("PRSM1", {"tolerance": 1e-2}, 500.0)])
+def test_auto_equals_the_python_fmu_bit_for_bit_and_switches(native, name, start, load):
+    """fidelity = auto in the speed loop with a reversal: the native FMU (prsm_auto.c) chooses
+    the same start level and the same level at every step as the Python FMU (whose engine runs
+    the same C; the start level is chosen in Python there), and every output is equal, the rhs
+    calls and step_fidelity among them; the run switches between the dynamic and the
+    quasi-static level."""
+    start = {"fidelity": "auto", **start}
+    py, nat, names = both_loops(name, start, start, load)
+    assert same(nat, py)                                          # bit for bit
+    i_speed, i_level = names.index("screw_speed"), names.index("step_fidelity")
+    speeds = [r[i_speed] for r in py]
+    assert min(speeds) < -50.0 < 90.0 < max(speeds)              # it reversed
+    levels = [r[i_level] for r in py]
+    assert set(levels) == {1, 2}, levels                          # both levels ran
+    print(f"{name} {start}: {sum(a != b for a, b in zip(levels, levels[1:]))} level switches "
+          f"in {len(levels)} steps")
+
+
 @pytest.mark.parametrize("fidelity,stepper", [("quasi-static", None), ("kinematic", None),
                                               ("quasi-static", "closed_form_explicit"),
                                               ("dynamic", None)])
@@ -348,7 +372,8 @@ def test_refused_calls_are_logged_and_change_nothing(native):
         raise
 
 
-@pytest.mark.parametrize("start,word", [({"fidelity": "auto"}, "fidelity"),
+@pytest.mark.parametrize("start,word", [({"fidelity": "auto", "stepper": "closed_form"},
+                                         "stepper"),
                                         ({"stepper": "rosenbrock"}, "stepper"),
                                         # the dynamic level runs ROS34PW2 only
                                         ({"fidelity": "dynamic", "stepper": "explicit_adaptive"},
@@ -402,12 +427,14 @@ def test_generator_pins_unmodelled_parameters_to_zero_and_refuses_unknown_output
 
 # ---- FMU state -------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("fidelity", ["quasi-static", "dynamic"])
+@pytest.mark.parametrize("fidelity", ["quasi-static", "dynamic", "auto"])
 def test_fmu_state_round_trip_is_bit_exact_and_checked_whole(native, fidelity):
     from fmpy.fmi1 import FMICallException
 
-    a = native_host(start={"fidelity": fidelity})
-    b = native_host(start={"fidelity": fidelity})
+    # auto at a tolerance where it switches (the level is part of the state)
+    start = {"fidelity": fidelity, **({"tolerance": 1e-3} if fidelity == "auto" else {})}
+    a = native_host(start=start)
+    b = native_host(start=start)
     try:
         names = all_outputs(a)
         _, lp = loop(a, 140, 3000.0, names)              # state saved before the reversal

@@ -9,7 +9,7 @@ import shutil
 import pytest
 
 from prsm_fmu import presets
-from prsm_fmu.models import make_model
+from prsm_fmu.models import AdaptiveModel, make_model
 from prsm_fmu.simulate import tuned_stepper_options
 from prsm_fmu.steppers import StepFailure, make_stepper
 
@@ -124,8 +124,8 @@ def test_memory_round_trip_repeats_the_next_advance():
 
 def test_refuses_what_it_does_not_model_and_reports_a_failed_step():
     params = presets.load("li2021_two_stage")
-    with pytest.raises(ValueError, match="fidelity"):
-        _native(make_model(params, "auto", "torque", tolerance=1e-3))
+    with pytest.raises(ValueError, match="stepper"):
+        _native(AdaptiveModel(params, "torque", tolerance=1e-3), stepper="closed_form")
     with pytest.raises(ValueError, match="rtol"):
         _native(make_model(params, "dynamic", "torque"), rtol=0.0)
     from dataclasses import replace
@@ -197,3 +197,51 @@ def test_reversal_through_zero_speed_equals_the_python_rosenbrock_bit_for_bit(dr
                 sa.rhs_calls, sa.substeps, sa.rejected), (rtol, i)
         assert xa[1] < 0.0 < x0[1]              # the screw went through zero speed
         assert cut_or_rejected > 0
+
+
+def test_auto_keeps_its_level_in_the_memory_and_across_a_refused_step():
+    """fidelity = auto (Li et al.'s (2021) two stages, tolerance 1e-3, starting dynamic at
+    50 rad/s, carriers at equilibrium, 3 N.m against 1 kN, then a reversal to -9 N.m against
+    200 N): the level is part of the engine's memory — a memory saved after 20 steps and
+    restored repeats the next 40 states and levels (both levels among them) bit for bit; reset
+    goes back to the start level; a refused step (max_substeps = 1) leaves the memory and the
+    model's level as they were."""
+    params = presets.load("li2021_two_stage")
+    model = AdaptiveModel(params, "torque", tolerance=1e-3, start="dynamic")
+    nat = _native(model, rtol=1e-3, atol=1e-5, stepper="rosenbrock")
+    u1, u2 = (3.0, 1000.0), (-9.0, 200.0)
+    x = model.initial_state(u1, screw_speed=50.0, carrier_ratio=None)
+    h = 1e-3
+    for i in range(20):
+        x, _ = nat.advance(i * h, x, u1, h)
+    memory, x20, mode20 = nat.get_memory(), list(x), model.mode
+
+    def run(stepper):
+        y, rows = list(x20), []
+        for i in range(40):
+            y, _ = stepper.advance((20 + i) * h, y, u1 if i < 20 else u2, h)
+            rows.append((y, model.mode))
+        return rows
+
+    first = run(nat)
+    modes = {m for _, m in first}
+    assert modes == {"dynamic", "quasi-static"}, modes      # it switches in these steps
+    nat.set_memory(memory)
+    assert model.mode == mode20
+    assert run(nat) == first
+    nat.reset()
+    assert model.mode == "dynamic"
+    # a refused step: the memory and the level stay as they were before it
+    tight = _native(model, rtol=1e-3, atol=1e-5, stepper="rosenbrock", max_substeps=1)
+    tight.set_memory(memory)
+    before, mode_before, refused = tight.get_memory(), model.mode, 0
+    y = list(x20)
+    for i in range(40):
+        try:
+            y, _ = tight.advance((20 + i) * h, y, u1 if i < 20 else u2, h)
+        except StepFailure:
+            refused += 1
+            assert tight.get_memory() == before and model.mode == mode_before, i
+            break
+        before, mode_before = tight.get_memory(), model.mode
+    assert refused == 1

@@ -5,13 +5,24 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "prsm_auto.h"
 #include "prsm_model.h"
+
+/* fidelity = auto: the switching stepper and its memory (now and before the last advance) */
+typedef struct {
+    prsm_auto a;
+    prsm_auto_memory memory, before;
+} prsm_auto_part;
 
 typedef struct {
     prsm_model model;
     prsm_memory memory;
     prsm_memory before;        /* the memory before the last prsm_api_advance_many */
+    prsm_auto_part *au;        /* fidelity = auto (prsm_api_new_auto), else NULL */
 } prsm_handle;
+
+/* the model whose states, right-hand side and tolerances a handle has: auto's dynamic level */
+static prsm_model *model_of(prsm_handle *h) { return h->au ? &h->au->a.dyn : &h->model; }
 
 /* Number of doubles and ints prsm_api_new reads. */
 int prsm_api_n_reals(void) { return 9 * PRSM_N_STAGES + 6; }
@@ -31,23 +42,10 @@ static int refuse(char *msg, int len, const char *text) {
     return -1;
 }
 
-/* A model with its stepper from
- *   geo_reals (NULL: the built-in geometry, prsm_constants.h): per stage screw_radius,
- *          roller_radius, nut_radius, screw_lead [m], flank_angle [rad];
- *   geo_ints (NULL: the built-in): per stage screw_starts;
- *   reals: per stage screw_mass, nut_mass, roller_mass, carrier_mass [kg], screw_inertia,
- *          roller_inertia, carrier_inertia [kg m2], spline_radius, bearing_radius [m]; then
- *          mu_screw_roller, mu_spline, mu_nut_screw [-], slip_velocity_scale [m/s],
- *          tolerance [-], kinematic_efficiency [-];
- *   ints:  per stage n_rollers, carriers; then the level (0 kinematic, 1 quasi-static,
- *          2 dynamic), the drive (0 torque, 1 speed), substeps (0: adaptive), max_substeps;
- *   term_reals (NULL: zeros): mu_viscous [N.s/m], mu_differential [m];
- *   term_ints (NULL: ones): per stage threads_per_roller.
- * The contact geometry is solved from the geometry (prsm_geometry.c).  Returns NULL with the
- * reason in msg when a value is out of range or the geometry gives no contact. */
-void *prsm_api_new_geometry(const double *reals, const int *ints, const double *term_reals,
-                            const int *term_ints, const double *geo_reals, const int *geo_ints,
-                            char *msg, int len) {
+/* the configuration prsm_api_new_geometry reads (its comment) */
+static void fill_config(prsm_config *cfg_, const double *reals, const int *ints,
+                        const double *term_reals, const int *term_ints,
+                        const double *geo_reals, const int *geo_ints) {
     prsm_config cfg;
     memset(&cfg, 0, sizeof cfg);
     for (int k = 0; k < PRSM_N_STAGES; k++) {
@@ -72,16 +70,39 @@ void *prsm_api_new_geometry(const double *reals, const int *ints, const double *
         cfg.mu_viscous = term_reals[0];
         cfg.mu_differential = term_reals[1];
     }
-    if (i[0] < 0 || i[0] > 2 || i[1] < 0 || i[1] > 1) {
-        refuse(msg, len, "level must be 0, 1 or 2 and drive 0 or 1");
-        return NULL;
-    }
     cfg.kinematic = i[0] == 0;
     cfg.dynamic = i[0] == 2;
     cfg.speed_drive = i[1];
     cfg.closed_form = 1;
     cfg.substeps = i[2];
     cfg.max_substeps = i[3];
+    *cfg_ = cfg;
+}
+
+/* A model with its stepper from
+ *   geo_reals (NULL: the built-in geometry, prsm_constants.h): per stage screw_radius,
+ *          roller_radius, nut_radius, screw_lead [m], flank_angle [rad];
+ *   geo_ints (NULL: the built-in): per stage screw_starts;
+ *   reals: per stage screw_mass, nut_mass, roller_mass, carrier_mass [kg], screw_inertia,
+ *          roller_inertia, carrier_inertia [kg m2], spline_radius, bearing_radius [m]; then
+ *          mu_screw_roller, mu_spline, mu_nut_screw [-], slip_velocity_scale [m/s],
+ *          tolerance [-], kinematic_efficiency [-];
+ *   ints:  per stage n_rollers, carriers; then the level (0 kinematic, 1 quasi-static,
+ *          2 dynamic), the drive (0 torque, 1 speed), substeps (0: adaptive), max_substeps;
+ *   term_reals (NULL: zeros): mu_viscous [N.s/m], mu_differential [m];
+ *   term_ints (NULL: ones): per stage threads_per_roller.
+ * The contact geometry is solved from the geometry (prsm_geometry.c).  Returns NULL with the
+ * reason in msg when a value is out of range or the geometry gives no contact. */
+void *prsm_api_new_geometry(const double *reals, const int *ints, const double *term_reals,
+                            const int *term_ints, const double *geo_reals, const int *geo_ints,
+                            char *msg, int len) {
+    const int *i = ints + 2 * PRSM_N_STAGES;
+    if (i[0] < 0 || i[0] > 2 || i[1] < 0 || i[1] > 1) {
+        refuse(msg, len, "level must be 0, 1 or 2 and drive 0 or 1");
+        return NULL;
+    }
+    prsm_config cfg;
+    fill_config(&cfg, reals, ints, term_reals, term_ints, geo_reals, geo_ints);
     prsm_handle *h = (prsm_handle *)calloc(1, sizeof *h);
     if (!h) {
         refuse(msg, len, "out of memory");
@@ -100,6 +121,85 @@ void *prsm_api_new_terms(const double *reals, const int *ints, const double *ter
     return prsm_api_new_geometry(reals, ints, term_reals, term_ints, NULL, NULL, msg, len);
 }
 
+/* fidelity = "auto" (prsm_auto.h): reals, ints, term_reals, term_ints, geo_reals and geo_ints
+ * as for prsm_api_new_geometry, with the level 3; the accepted model error tolerance [-] (finite, > 0)
+ * and the level of the first step, start (0 dynamic, 1 quasi-static).  The dynamic steps are
+ * ROS34PW2's; prsm_api_set_band does not apply.  Returns NULL with the reason in msg when a
+ * value is out of range. */
+void *prsm_api_new_auto(const double *reals, const int *ints, const double *term_reals,
+                        const int *term_ints, const double *geo_reals, const int *geo_ints,
+                        double tolerance, int start, char *msg, int len) {
+    const int *i = ints + 2 * PRSM_N_STAGES;
+    if (i[0] != 3 || i[1] < 0 || i[1] > 1) {
+        refuse(msg, len, "level must be 3 (auto) and drive 0 or 1");
+        return NULL;
+    }
+    prsm_config cfg;
+    fill_config(&cfg, reals, ints, term_reals, term_ints, geo_reals, geo_ints);
+    prsm_handle *h = (prsm_handle *)calloc(1, sizeof *h);
+    prsm_auto_part *p = (prsm_auto_part *)calloc(1, sizeof *p);
+    if (!h || !p) {
+        free(h);
+        free(p);
+        refuse(msg, len, "out of memory");
+        return NULL;
+    }
+    if (prsm_auto_init(&p->a, &cfg, tolerance, start, msg, len)) {
+        free(h);
+        free(p);
+        return NULL;
+    }
+    prsm_auto_reset(&p->a, &p->memory);
+    p->before = p->memory;
+    h->au = p;
+    return h;
+}
+
+/* The level fidelity = "auto" starts with under the torque drive (prsm_auto_choose, what the
+ * native FMU runs at initialization): 0 kinematic, 1 quasi-static, 2 dynamic, with the estimated
+ * model errors of the kinematic and the quasi-static level in errors[2]; -1 with the reason in
+ * msg.  reals, ints, term_reals, term_ints, geo_reals, geo_ints as for prsm_api_new_geometry
+ * (level and drive ignored);
+ * inputs: motor torque [N.m], load [N]; screw_speed [rad/s]; carriers_at_rest 1 or 0
+ * (equilibrium); kinematic_efficiency [-]. */
+int prsm_api_auto_choose(const double *reals, const int *ints, const double *term_reals,
+                         const int *term_ints, const double *geo_reals, const int *geo_ints,
+                         double tolerance, const double *inputs,
+                         double screw_speed, int carriers_at_rest, double kinematic_efficiency,
+                         double *errors, char *msg, int len) {
+    prsm_config cfg;
+    fill_config(&cfg, reals, ints, term_reals, term_ints, geo_reals, geo_ints);
+    cfg.speed_drive = 0;
+    return prsm_auto_choose(&cfg, tolerance, inputs, screw_speed, carriers_at_rest,
+                            kinematic_efficiency, errors, msg, len);
+}
+
+/* The level of the last step of an auto handle (2 dynamic, 1 quasi-static: the FMU's
+ * step_fidelity codes), or -1 for a handle of one level. */
+int prsm_api_auto_mode(void *handle) {
+    prsm_handle *h = (prsm_handle *)handle;
+    if (!h->au) return -1;
+    return h->au->memory.mode == PRSM_AUTO_QUASI_STATIC ? 1 : 2;
+}
+
+/* What an auto handle computed on construction, into out[3 + 2 * PRSM_N_STAGES]: the inertia
+ * on the screw axis with the carriers slaved [kg m2], m c_out of the last nut [kg m/rad], the
+ * tolerance [-], then per carrier c_k = tau_k |F| / |omega| [N s2/rad] driving, then
+ * back-driven.  Returns 0, or -1 for a handle of one level. */
+int prsm_api_auto_info(void *handle, double *out) {
+    prsm_handle *h = (prsm_handle *)handle;
+    if (!h->au) return -1;
+    const prsm_auto *a = &h->au->a;
+    out[0] = a->slaved_inertia;
+    out[1] = a->nut_term;
+    out[2] = a->tolerance;
+    for (int k = 0; k < PRSM_N_STAGES; k++) {
+        out[3 + k] = a->coef[1][k];
+        out[3 + PRSM_N_STAGES + k] = a->coef[0][k];
+    }
+    return 0;
+}
+
 /* prsm_api_new_terms with Coulomb friction only (no viscous or differential-sliding term). */
 void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
     return prsm_api_new_terms(reals, ints, NULL, NULL, msg, len);
@@ -110,6 +210,10 @@ void *prsm_api_new(const double *reals, const int *ints, char *msg, int len) {
  * exponential band step). */
 void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
     prsm_handle *h = (prsm_handle *)handle;
+    if (h->au) {
+        prsm_auto_set_tolerances(&h->au->a, rtol, atol);
+        return;
+    }
     h->model.rtol = h->model.band.rtol = rtol;
     h->model.atol = h->model.band.atol = atol;
     /* ROS34PW2's tolerances as prsm_model_init sets them from the FMU's */
@@ -122,11 +226,12 @@ void prsm_api_set_tolerances(void *handle, double rtol, double atol) {
  * prsm_api_new).  Returns 0, or -1 for another value. */
 int prsm_api_set_band(void *handle, int exponential) {
     if (exponential != 0 && exponential != 1) return -1;
+    if (((prsm_handle *)handle)->au) return -1;
     ((prsm_handle *)handle)->model.band_exponential = exponential;
     return 0;
 }
 
-int prsm_api_n_states(void *handle) { return ((prsm_handle *)handle)->model.nx; }
+int prsm_api_n_states(void *handle) { return model_of((prsm_handle *)handle)->nx; }
 
 /* n_steps advances (prsm_advance) of step [s] each from t0 (the i-th from t0 + i step) with the
  * inputs u held throughout: the states after each in x_out (n_steps rows of n_states); stats
@@ -135,14 +240,18 @@ int prsm_api_n_states(void *handle) { return ((prsm_handle *)handle)->model.nx; 
 int prsm_api_advance_many(void *handle, double t0, const double *x, const double *u, double step,
                           int n_steps, double *x_out, int *stats, char *msg, int len) {
     prsm_handle *h = (prsm_handle *)handle;
-    int nx = h->model.nx;
+    int nx = model_of(h)->nx;
     double xi[PRSM_NX_MAX] = {0.0}, xo[PRSM_NX_MAX] = {0.0};
     memcpy(xi, x, sizeof(double) * (size_t)nx);
     stats[0] = stats[1] = stats[2] = 0;
     h->before = h->memory;
+    if (h->au) h->au->before = h->au->memory;
     for (int i = 0; i < n_steps; i++) {
         prsm_stats st;
-        int rc = prsm_advance(&h->model, &h->memory, t0 + i * step, xi, u, step, xo, &st, msg, len);
+        int rc = h->au ? prsm_auto_advance(&h->au->a, &h->au->memory, t0 + i * step, xi, u, step,
+                                           xo, &st, msg, len)
+                       : prsm_advance(&h->model, &h->memory, t0 + i * step, xi, u, step, xo, &st,
+                                      msg, len);
         stats[0] += st.rhs_calls;
         stats[1] += st.substeps;
         stats[2] += st.rejected;
@@ -158,27 +267,52 @@ int prsm_api_advance_many(void *handle, double t0, const double *x, const double
 void prsm_api_undo_advance(void *handle) {
     prsm_handle *h = (prsm_handle *)handle;
     h->memory = h->before;
+    if (h->au) h->au->memory = h->au->before;
 }
 
 /* The model's right-hand side at x with inputs u (Model.rhs). */
 void prsm_api_rhs(void *handle, const double *x, const double *u, double *dx) {
     prsm_handle *h = (prsm_handle *)handle;
+    const prsm_model *m = model_of(h);
     double xi[PRSM_NX_MAX] = {0.0}, d[PRSM_NX_MAX];
-    memcpy(xi, x, sizeof(double) * (size_t)h->model.nx);
-    prsm_rhs(&h->model, xi, u, d);
-    memcpy(dx, d, sizeof(double) * (size_t)h->model.nx);
+    memcpy(xi, x, sizeof(double) * (size_t)m->nx);
+    prsm_rhs(m, xi, u, d);
+    memcpy(dx, d, sizeof(double) * (size_t)m->nx);
 }
 
-/* The stepper's memory as bytes (what decides the next advance besides its arguments). */
+/* The stepper's memory as bytes (what decides the next advance besides its arguments):
+ * prsm_api_memory_size() bytes for a handle of one level, prsm_api_handle_memory_size(handle)
+ * for any handle (an auto handle's memory is larger). */
 int prsm_api_memory_size(void) { return (int)sizeof(prsm_memory); }
+int prsm_api_handle_memory_size(void *handle) {
+    return ((prsm_handle *)handle)->au ? (int)sizeof(prsm_auto_memory) : (int)sizeof(prsm_memory);
+}
 void prsm_api_get_memory(void *handle, unsigned char *out) {
-    memcpy(out, &((prsm_handle *)handle)->memory, sizeof(prsm_memory));
+    prsm_handle *h = (prsm_handle *)handle;
+    if (h->au)
+        memcpy(out, &h->au->memory, sizeof(prsm_auto_memory));
+    else
+        memcpy(out, &h->memory, sizeof(prsm_memory));
 }
 void prsm_api_set_memory(void *handle, const unsigned char *in) {
-    memcpy(&((prsm_handle *)handle)->memory, in, sizeof(prsm_memory));
+    prsm_handle *h = (prsm_handle *)handle;
+    if (h->au)
+        memcpy(&h->au->memory, in, sizeof(prsm_auto_memory));
+    else
+        memcpy(&h->memory, in, sizeof(prsm_memory));
 }
 
-void prsm_api_free(void *handle) { free(handle); }
+/* Forget the memory: the start of a run (for auto its start level, SwitchingStepper.reset). */
+void prsm_api_reset(void *handle) {
+    prsm_handle *h = (prsm_handle *)handle;
+    memset(&h->memory, 0, sizeof h->memory);
+    if (h->au) prsm_auto_reset(&h->au->a, &h->au->memory);
+}
+
+void prsm_api_free(void *handle) {
+    if (handle) free(((prsm_handle *)handle)->au);
+    free(handle);
+}
 
 /* ---- outputs ---------------------------------------------------------------------------------- */
 #include "prsm_quantity.h"
@@ -205,11 +339,18 @@ void prsm_api_outputs(void *handle, double t, const double *x, const double *u, 
     prsm_handle *h = (prsm_handle *)handle;
     double xi[PRSM_NX_MAX] = {0.0};
     (void)t;
-    memcpy(xi, x, sizeof(double) * (size_t)h->model.nx);
+    memcpy(xi, x, sizeof(double) * (size_t)model_of(h)->nx);
     prsm_outputs o;
-    prsm_outputs_at(&h->model, xi, u, &o);
+    const prsm_model *m = &h->model;
+    if (h->au) {     /* AdaptiveModel.outputs: the level of the last step */
+        double xl[PRSM_NX_MAX];
+        m = prsm_auto_outputs_at(&h->au->a, h->au->memory.mode, xi, u, xl, &o);
+        memcpy(xi, xl, sizeof xi);
+    } else {
+        prsm_outputs_at(&h->model, xi, u, &o);
+    }
     for (int i = 0; i < PRSM_API_N_OUTPUTS; i++)
-        out[i] = prsm_quantity(&h->model, xi, u, &o, API_OUTPUT_Q[i], API_OUTPUT_STAGE[i]);
+        out[i] = prsm_quantity(m, xi, u, &o, API_OUTPUT_Q[i], API_OUTPUT_STAGE[i]);
 }
 
 /* ---- contact geometry --------------------------------------------------------------------- */

@@ -1,5 +1,5 @@
 /* FMI 2.0 co-simulation interface of the native PRSM FMU (kinematic, quasi-static and dynamic
- * levels).
+ * levels, and auto: prsm_auto.c).
  *
  * The variable table (names, value references, types, start values) is the Python FMU's,
  * generated into prsm_variables.h by fmu_build.native; the physics is prsm_model.c.
@@ -11,11 +11,11 @@
  *    included: exitInitializationMode solves its contact (prsm_geometry.c);
  *  - exitInitializationMode checks every parameter and refuses (fmi2Error, logged, the FMU stays
  *    in initialization mode) a value out of range (the rows of prsm_params_gen.h, generated from
- *    prsm_fmu/param_ranges.py: the Python FMU's rules and messages), fidelity auto, a stepper the
+ *    prsm_fmu/param_ranges.py: the Python FMU's rules and messages), a stepper the
  *    level does not run here (kinematic, quasi-static: default = closed_form, closed_form_explicit,
  *    explicit_adaptive;
- *    dynamic: default, rosenbrock), or a value of a parameter this code does not model (it must
- *    stay at its start value, 0);
+ *    dynamic and auto: default, rosenbrock), fidelity auto for model exchange, or a value of a
+ *    parameter this code does not model (it must stay at its start value, 0);
  *  - doStep refuses with fmi2Discard (logged, state unchanged) a non-finite or non-positive
  *    step or one too small to advance the time, non-finite inputs or inputs out of their
  *    bounds, a failed integration, a step that would end out of the state's bounds; with
@@ -33,6 +33,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "prsm_auto.h"
 #include "prsm_model.h"
 #include "prsm_quantity.h"
 
@@ -65,7 +66,7 @@ enum { PH_INSTANTIATED, PH_INITIALIZATION, PH_STEPPING, PH_TERMINATED };
 static const char *const PHASE_NAMES[] = {"instantiated", "initialization mode", "stepping",
                                           "terminated"};
 
-#define MAGIC "PRSMNAT1"
+#define MAGIC "PRSMNAT2"
 
 /* everything an FMU state holds (also the serialized bytes) */
 typedef struct {
@@ -83,11 +84,16 @@ typedef struct {
     double u_held[2];
     int stats[3];
     prsm_memory mem;
+    int auto_start;            /* fidelity auto: the level chosen at initialization (0 kinematic,
+                                  1 quasi-static, 2 dynamic) */
+    prsm_auto_memory amem;     /* fidelity auto (unless it chose kinematic): its stepper's memory */
 } snapshot;
 
 typedef struct {
     snapshot s;
-    prsm_model model;          /* valid in phases stepping and terminated */
+    prsm_model model;          /* valid in phases stepping and terminated (auto: au.dyn) */
+    int is_auto;               /* auto switches between the dynamic and quasi-static level (au) */
+    prsm_auto au;
     double y[N_OUT_REAL > 0 ? N_OUT_REAL : 1];
     int y_valid;
     fmi2CallbackFunctions cb;
@@ -367,14 +373,10 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
     }
     if (!strcmp(fid, "kinematic")) cfg->kinematic = 1;
     else if (!strcmp(fid, "quasi-static")) cfg->kinematic = 0;
-    else if (!strcmp(fid, "dynamic")) cfg->dynamic = 1;
-    else if (!strcmp(fid, "auto")) {
-        snprintf(msg, (size_t)len, "fidelity = '%s' is not available in the native FMU: it runs "
-                 "kinematic, quasi-static and dynamic (use the Python FMU for auto)", fid);
-        return -1;
-    } else {
+    else if (!strcmp(fid, "dynamic") || !strcmp(fid, "auto")) cfg->dynamic = 1;
+    else {
         snprintf(msg, (size_t)len, "fidelity = '%s' is not allowed: must be one of kinematic, "
-                 "quasi-static, dynamic (native FMU)", fid);
+                 "quasi-static, dynamic, auto (native FMU)", fid);
         return -1;
     }
     const char *st = choice(s, P_STEPPER_TYPE, P_STEPPER, P_STEPPER_ITEMS, P_STEPPER_N_ITEMS);
@@ -384,11 +386,12 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
     }
     /* the slaved levels run the Python FMU's default, closed_form (the friction band stepped by
      * the exponential step of prsm_band.c), or closed_form_explicit (Dormand-Prince 5(4) in the
-     * band) or explicit_adaptive; the dynamic level the Python FMU's default, ROS34PW2. */
+     * band) or explicit_adaptive; the dynamic level the Python FMU's default, ROS34PW2, and
+     * auto its dynamic steps with ROS34PW2 (the engine's method of the Python FMU). */
     if (cfg->dynamic) {
         if (strcmp(st, "default") && strcmp(st, "rosenbrock")) {
-            snprintf(msg, (size_t)len, "stepper = '%s' is not allowed with fidelity = 'dynamic' in "
-                     "the native FMU: must be one of default (= rosenbrock), rosenbrock", st);
+            snprintf(msg, (size_t)len, "stepper = '%s' is not allowed with fidelity = '%s' in "
+                     "the native FMU: must be one of default (= rosenbrock), rosenbrock", st, fid);
             return -1;
         }
     } else if (!strcmp(st, "default") || !strcmp(st, "closed_form")) {
@@ -404,10 +407,69 @@ static int configuration(const snapshot *s, prsm_config *cfg, char *msg, int len
     return 0;
 }
 
-static int build_model(const snapshot *s, prsm_model *m, char *msg, int len) {
+static int is_auto_fidelity(const snapshot *s) {
+    const char *fid = choice(s, P_FIDELITY_TYPE, P_FIDELITY, P_FIDELITY_ITEMS, P_FIDELITY_N_ITEMS);
+    return fid && !strcmp(fid, "auto");
+}
+
+/* fidelity auto: the level to start with (s->auto_start) from the parameters and the inputs
+ * at the start (configure: choose_for_start under the torque drive); the estimated model errors
+ * of the kinematic and quasi-static level in errors.  0, or -1 with the reason. */
+static int choose_start(snapshot *s, double errors[2], char *msg, int len) {
     prsm_config cfg;
     if (configuration(s, &cfg, msg, len)) return -1;
+    double eff = cfg.kinematic_efficiency;
+    int level = prsm_auto_choose(&cfg, cfg.tolerance, s->u, s->par_real[P_INITIAL_SCREW_SPEED],
+                                 !s->par_bool[P_INITIAL_CARRIER_EQUILIBRIUM],
+                                 isfinite(eff) && 0.0 < eff && eff <= 1.0 ? eff : 1.0, errors, msg,
+                                 len);
+    if (level < 0) return -1;
+    s->auto_start = level;
+    return 0;
+}
+
+/* The model of the parameters into m, and for fidelity auto (unless it starts kinematic, with
+ * s->auto_start chosen) its switching stepper into au (*is_auto = 1; m is then its dynamic
+ * level).  0, or -1 with the reason. */
+static int build_model(const snapshot *s, prsm_model *m, prsm_auto *au, int *is_auto, char *msg,
+                       int len) {
+    prsm_config cfg;
+    *is_auto = 0;
+    if (configuration(s, &cfg, msg, len)) return -1;
+    if (is_auto_fidelity(s)) {
+        if (s->auto_start < 0 || s->auto_start > 2) {
+            snprintf(msg, (size_t)len, "bad start level %d of fidelity auto", s->auto_start);
+            return -1;
+        }
+        if (s->auto_start == 0) {      /* the kinematic level, with its default stepper */
+            const char *st = choice(s, P_STEPPER_TYPE, P_STEPPER, P_STEPPER_ITEMS,
+                                    P_STEPPER_N_ITEMS);
+            if (strcmp(st, "default")) {
+                snprintf(msg, (size_t)len, "stepper = '%s' is not allowed when fidelity = 'auto' "
+                         "starts with the kinematic level in the native FMU: must be default "
+                         "(= closed_form)", st);
+                return -1;
+            }
+            cfg.kinematic = 1;
+            cfg.dynamic = 0;
+            cfg.closed_form = 1;
+            cfg.band_exponential = 1;
+            return prsm_model_init(m, &cfg, msg, len);
+        }
+        if (prsm_auto_init(au, &cfg, cfg.tolerance, s->auto_start == 2 ? PRSM_AUTO_DYNAMIC
+                                                                      : PRSM_AUTO_QUASI_STATIC,
+                           msg, len))
+            return -1;
+        *m = au->dyn;
+        *is_auto = 1;
+        return 0;
+    }
     return prsm_model_init(m, &cfg, msg, len);
+}
+
+/* step_fidelity of an auto stepper's memory (configure.LEVEL_CODES) */
+static int auto_level(const prsm_auto_memory *mem) {
+    return mem->mode == PRSM_AUTO_QUASI_STATIC ? 1 : 2;
 }
 
 static void set_starts(snapshot *s) {
@@ -429,18 +491,37 @@ static void set_starts(snapshot *s) {
 
 /* ---- outputs ------------------------------------------------------------------------------------ */
 static void compute_outputs(component *c) {
-    prsm_model preview;
-    prsm_model *m = &c->model;
+    prsm_model *preview = NULL;
+    prsm_auto *preview_au = NULL;
+    const prsm_model *m = &c->model;
+    prsm_auto *au = c->is_auto ? &c->au : NULL;
+    int mode = c->s.amem.mode;
     const double *x = c->s.x, *u = c->s.u_held;
     double x0[PRSM_NX_MAX];
     if (c->s.phase < PH_STEPPING) {      /* before exitInitializationMode: the initial state */
         char msg[600];
-        if (build_model(&c->s, &preview, msg, sizeof msg)) {
+        double errors[2];
+        snapshot *s = (snapshot *)malloc(sizeof *s);
+        preview = (prsm_model *)malloc(sizeof *preview);
+        preview_au = (prsm_auto *)malloc(sizeof *preview_au);
+        int is_auto = 0, failed = !s || !preview || !preview_au;
+        if (failed) snprintf(msg, sizeof msg, "out of memory");
+        if (!failed) {
+            *s = c->s;
+            failed = (is_auto_fidelity(s) && choose_start(s, errors, msg, sizeof msg))
+                     || build_model(s, preview, preview_au, &is_auto, msg, sizeof msg);
+        }
+        free(s);
+        if (failed) {
             log_msg(c, fmi2Error, "outputs cannot be computed: %s", msg);
             for (int i = 0; i < N_OUT_REAL; i++) c->y[i] = NAN;
+            free(preview);
+            free(preview_au);
             return;
         }
-        m = &preview;
+        m = preview;
+        au = is_auto ? preview_au : NULL;
+        if (au) mode = au->start;
         prsm_initial_state(m, x0, c->s.par_real[P_INITIAL_SCREW_ANGLE],
                            c->s.par_real[P_INITIAL_SCREW_SPEED],
                            c->s.par_bool[P_INITIAL_CARRIER_EQUILIBRIUM]);
@@ -450,10 +531,18 @@ static void compute_outputs(component *c) {
         u = c->s.u;
     }
     prsm_outputs o;
-    prsm_outputs_at(m, x, u, &o);
+    double xl[PRSM_NX_MAX];
+    if (au) {       /* AdaptiveModel.outputs: the level of the last step (before it: the start) */
+        m = prsm_auto_outputs_at(au, mode, x, u, xl, &o);
+        x = xl;
+    } else {
+        prsm_outputs_at((prsm_model *)m, x, u, &o);
+    }
     for (int i = 0; i < N_OUT_REAL; i++)
         c->y[i] = prsm_quantity(m, x, u, &o, OUT_QUANTITY[i], OUT_STAGE[i]);
-    if (m == &c->model) c->y_valid = 1;
+    if (!preview) c->y_valid = 1;
+    free(preview);
+    free(preview_au);
 }
 
 /* contact_status: 1 where the rigid contact has no solution at the current state and inputs */
@@ -707,17 +796,36 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     COMPONENT_OR_ERROR(comp);
     if (c->s.phase != PH_INITIALIZATION) return wrong_phase(c, "fmi2ExitInitializationMode");
     char msg[600];
-    if (build_model(&c->s, &c->model, msg, sizeof msg)) {
+    double errors[2];
+    int is_auto = is_auto_fidelity(&c->s);
+    if (is_auto && c->model_exchange) {
+        log_msg(c, fmi2Error, "initialization failed: fidelity = 'auto' is not available for "
+                "model exchange (it chooses the level per communication step): must be one of "
+                "kinematic, quasi-static, dynamic, or use co-simulation");
+        return fmi2Error;
+    }
+    if ((is_auto && choose_start(&c->s, errors, msg, sizeof msg))
+        || build_model(&c->s, &c->model, &c->au, &c->is_auto, msg, sizeof msg)) {
         log_msg(c, fmi2Error, "initialization failed: %s", msg);
         return fmi2Error;
+    }
+    if (is_auto) {
+        static const char *const names[3] = {"kinematic", "quasi-static", "dynamic"};
+        log_msg(c, fmi2OK, "fidelity = 'auto' starts with '%s' (estimated model errors: kinematic "
+                "%.2g, quasi-static %.2g, dynamic 0; tolerance %g)%s", names[c->s.auto_start],
+                errors[0], errors[1], c->s.par_real[P_TOLERANCE],
+                c->is_auto ? "; it switches between the dynamic and the quasi-static level along "
+                             "the run" : "");
     }
     prsm_initial_state(&c->model, c->s.x, c->s.par_real[P_INITIAL_SCREW_ANGLE],
                        c->s.par_real[P_INITIAL_SCREW_SPEED], c->s.par_bool[P_INITIAL_CARRIER_EQUILIBRIUM]);
     c->s.u_held[0] = c->s.u[0];
     c->s.u_held[1] = c->s.u[1];
     c->s.stats[0] = c->s.stats[1] = 0;
-    c->s.stats[2] = model_level(&c->model);
     memset(&c->s.mem, 0, sizeof c->s.mem);
+    memset(&c->s.amem, 0, sizeof c->s.amem);
+    if (c->is_auto) prsm_auto_reset(&c->au, &c->s.amem);
+    c->s.stats[2] = c->is_auto ? auto_level(&c->s.amem) : model_level(&c->model);
     c->y_valid = 0;
     c->s.phase = PH_STEPPING;
     return fmi2OK;
@@ -735,6 +843,7 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     set_starts(&c->s);
     c->y_valid = 0;
     c->has_refused = c->stuck = 0;
+    c->is_auto = 0;
     return fmi2OK;
 }
 
@@ -793,12 +902,17 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
     prsm_stats stats;
     char msg[700];
     prsm_memory mem_before = c->s.mem;
-    if (prsm_advance(&c->model, &c->s.mem, t, c->s.x, u, h, x_new, &stats, msg, sizeof msg)) {
+    prsm_auto_memory amem_before = c->s.amem;
+    if (c->is_auto ? prsm_auto_advance(&c->au, &c->s.amem, t, c->s.x, u, h, x_new, &stats, msg,
+                                       sizeof msg)
+                   : prsm_advance(&c->model, &c->s.mem, t, c->s.x, u, h, x_new, &stats, msg,
+                                  sizeof msg)) {
         snprintf(reason, sizeof reason, "integration failed: %s", msg);
         return refuse_call(c, t, h, reason);
     }
     if (state_violation(x_new, c->model.nx, msg, sizeof msg)) {   /* outputs could overflow */
         c->s.mem = mem_before;
+        c->s.amem = amem_before;
         snprintf(reason, sizeof reason, "the step would end out of the state's bounds: %s", msg);
         return refuse_call(c, t, h, reason);
     }
@@ -809,6 +923,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
     c->s.u_held[1] = u[1];
     c->s.stats[0] = stats.rhs_calls;
     c->s.stats[1] = stats.substeps;
+    if (c->is_auto) c->s.stats[2] = auto_level(&c->s.amem);
     c->y_valid = 0;
     return fmi2OK;
 }
@@ -892,8 +1007,32 @@ static int finite_all(const double *v, int n) {
     return 1;
 }
 
-/* the whole snapshot checked; builds the model it needs into m.  0, or -1 and the reason */
-static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) {
+/* a stepper memory's flags and values */
+static int memory_ok(const prsm_memory *mem) {
+    return !((mem->has_h_prop != 0 && mem->has_h_prop != 1) || (mem->has_fsal != 0 && mem->has_fsal != 1)
+        || (mem->has_cont != 0 && mem->has_cont != 1)
+        || (mem->has_h_prop && !(mem->h_prop > 0.0 && mem->h_prop < INFINITY))
+        || (mem->has_fsal && !(isfinite(mem->fsal_t) && finite_all(mem->fsal_x, PRSM_NX)
+                               && finite_all(mem->fsal_u, 2) && finite_all(mem->fsal_f, PRSM_NX)))
+        || (mem->has_cont && !(isfinite(mem->cont_t) && finite_all(mem->cont_x, PRSM_NX_MAX)
+                               && finite_all(mem->cont_u, 2)
+                               && mem->cont_h > 0.0 && mem->cont_h < INFINITY)));
+}
+
+/* auto's memory: its level, counters and estimates in their ranges, both steppers' memories */
+static int auto_memory_ok(const prsm_auto_memory *a) {
+    return (a->mode == PRSM_AUTO_DYNAMIC || a->mode == PRSM_AUTO_QUASI_STATIC) && a->wait >= 0
+           && a->wait <= PRSM_AUTO_MAX_WAIT && a->backoff >= 1 && a->backoff <= PRSM_AUTO_MAX_WAIT
+           && a->switches >= 0 && finite_all(a->lag, PRSM_N_STAGES) && isfinite(a->omega_scale)
+           && a->omega_scale >= 0.0 && a->gain >= 1.0 && a->gain < INFINITY && isfinite(a->alpha)
+           && memory_ok(&a->dyn) && memory_ok(&a->qs);
+}
+
+/* the whole snapshot checked; builds the model it needs into m (and for auto its stepper into
+ * au, *is_auto).  0, or -1 and the reason */
+static int check_snapshot(const snapshot *s, prsm_model *m, prsm_auto *au, int *is_auto,
+                          char *msg, int len) {
+    *is_auto = 0;
     if (memcmp(s->magic, MAGIC, 8) || strncmp(s->guid, PRSM_GUID, sizeof s->guid)
         || s->n_stages != PRSM_N_STAGES) {
         snprintf(msg, (size_t)len, "not a state of this FMU (%s, GUID %s)", PRSM_MODEL_IDENTIFIER, PRSM_GUID);
@@ -921,15 +1060,7 @@ static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) 
         snprintf(msg, (size_t)len, "bad step counters");
         return -1;
     }
-    const prsm_memory *mem = &s->mem;
-    if ((mem->has_h_prop != 0 && mem->has_h_prop != 1) || (mem->has_fsal != 0 && mem->has_fsal != 1)
-        || (mem->has_cont != 0 && mem->has_cont != 1)
-        || (mem->has_h_prop && !(mem->h_prop > 0.0 && mem->h_prop < INFINITY))
-        || (mem->has_fsal && !(isfinite(mem->fsal_t) && finite_all(mem->fsal_x, PRSM_NX)
-                               && finite_all(mem->fsal_u, 2) && finite_all(mem->fsal_f, PRSM_NX)))
-        || (mem->has_cont && !(isfinite(mem->cont_t) && finite_all(mem->cont_x, PRSM_NX_MAX)
-                               && finite_all(mem->cont_u, 2)
-                               && mem->cont_h > 0.0 && mem->cont_h < INFINITY))) {
+    if (!memory_ok(&s->mem)) {
         snprintf(msg, (size_t)len, "bad stepper memory");
         return -1;
     }
@@ -940,12 +1071,16 @@ static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) 
         }
         if (input_violation(s->u_held, msg, len)) return -1;
         char why[600];
-        if (build_model(s, m, why, sizeof why)) {
+        if (build_model(s, m, au, is_auto, why, sizeof why)) {
             snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
             return -1;
         }
         if (state_violation(s->x, m->nx, msg, len)) return -1;
-        if (s->stats[2] != model_level(m)) {
+        if (*is_auto && !auto_memory_ok(&s->amem)) {
+            snprintf(msg, (size_t)len, "bad memory of fidelity auto");
+            return -1;
+        }
+        if (s->stats[2] != (*is_auto ? auto_level(&s->amem) : model_level(m))) {
             snprintf(msg, (size_t)len, "step_fidelity %d does not match the fidelity parameter", s->stats[2]);
             return -1;
         }
@@ -1003,16 +1138,28 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
     const snapshot *s = &b->s;
     char msg[800];
     prsm_model *m = (prsm_model *)malloc(sizeof *m);
-    if (!m) return fmi2Error;
-    if (check_snapshot(s, m, msg, sizeof msg)) {
+    prsm_auto *au = (prsm_auto *)malloc(sizeof *au);
+    int is_auto = 0;
+    if (!m || !au) {
+        free(m);
+        free(au);
+        return fmi2Error;
+    }
+    if (check_snapshot(s, m, au, &is_auto, msg, sizeof msg)) {
         log_msg(c, fmi2Error, "fmi2SetFMUstate: the state cannot be restored, nothing changed: %s", msg);
         free(m);
+        free(au);
         return fmi2Error;
     }
     memcpy(&c->s, s, sizeof c->s);
     c->has_refused = c->stuck = 0;
-    if (c->s.phase >= PH_STEPPING) c->model = *m;
+    if (c->s.phase >= PH_STEPPING) {
+        c->model = *m;
+        c->is_auto = is_auto;
+        if (is_auto) c->au = *au;
+    }
     free(m);
+    free(au);
     c->y_valid = 0;
     return fmi2OK;
 }
@@ -1056,19 +1203,24 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte bytes[], s
     if (*state && !own_block(c, *state, "fmi2DeSerializeFMUstate")) return fmi2Error;
     state_block *b = new_block(c);
     prsm_model *m = (prsm_model *)malloc(sizeof *m);
-    if (!b || !m) {
+    prsm_auto *au = (prsm_auto *)malloc(sizeof *au);
+    int is_auto = 0;
+    if (!b || !m || !au) {
         free(b);
         free(m);
+        free(au);
         return fmi2Error;
     }
     memcpy(&b->s, bytes, sizeof b->s);
-    if (check_snapshot(&b->s, m, msg, sizeof msg)) {
+    if (check_snapshot(&b->s, m, au, &is_auto, msg, sizeof msg)) {
         log_msg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state: %s", msg);
         free(b);
         free(m);
+        free(au);
         return fmi2Error;
     }
     free(m);
+    free(au);
     if (*state) free(*state);
     *state = b;
     return fmi2OK;

@@ -305,27 +305,36 @@ static double solve(const prsm_model *m, const double *x, double load, double to
     return balance(m, x[1], wps, load, torque, cache, rec, consistent);
 }
 
+/* Model._solve: the screw acceleration at x with inputs u (torque drive: u[0] the motor torque;
+ * speed drive: u[0] the prescribed acceleration, the motor torque following, Mechanism._balance),
+ * the motor torque (with the extra loss) into *motor, the carrier speeds, the sweep record and
+ * the consistency flag */
+static double balance_at(const prsm_model *m, const double *x, const double *u, double loss,
+                         double *motor, double *wps, coef_cache *cache, sweep_rec *rec,
+                         int *consistent) {
+    double load = u[1];
+    *consistent = 1;
+    *motor = u[0];
+    if (!m->speed_drive) return solve(m, x, load, u[0] - loss, wps, cache, rec, consistent);
+    double alpha = u[0];
+    memset(cache->have, 0, sizeof cache->have);
+    speeds_of(m, x, wps);
+    sweep(m, x[1], wps, load, alpha, cache, rec);
+    *motor = rec->m0 + rec->m1 * alpha + loss;
+    return alpha;
+}
+
 /* Model.rhs: torque drive at every level, speed drive at the dynamic level (the carrier speeds
  * are states there, slaved to the screw otherwise; an extra loss at the kinematic level only) */
 static void rhs(const prsm_model *m, const double *x, const double *u, double *dx) {
     double load = u[1], omega = x[1];
     double loss = extra_loss(m, omega, load);
-    double motor = u[0];
+    double motor;
     double wps[NS];
     coef_cache cache;
     sweep_rec rec;
-    int consistent = 1;
-    double alpha;
-    if (m->speed_drive) {
-        /* the prescribed acceleration; the motor torque follows (Mechanism._balance) */
-        alpha = u[0];
-        memset(cache.have, 0, sizeof cache.have);
-        speeds_of(m, x, wps);
-        sweep(m, omega, wps, load, alpha, &cache, &rec);
-        motor = rec.m0 + rec.m1 * alpha + loss;
-    } else {
-        alpha = solve(m, x, load, motor - loss, wps, &cache, &rec, &consistent);
-    }
+    int consistent;
+    double alpha = balance_at(m, x, u, loss, &motor, wps, &cache, &rec, &consistent);
     double p_fric = consistent ? rates_power(m, omega, alpha, &rec) : NAN;
     if (!consistent) alpha = NAN;
     if (m->dynamic)      /* Mechanism._rates: carrier generalized forces over their inertias */
@@ -712,12 +721,12 @@ static double efficiency(double p_in, double p_out, double omega) {
 void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[2], prsm_outputs *y) {
     double omega = x[1], load = u[1];
     double loss = extra_loss(m, omega, load);
-    double motor = u[0];
+    double motor;
     double wps[NS];
     coef_cache cache;
     sweep_rec rec;
     int consistent;
-    double alpha = solve(m, x, load, u[0] - loss, wps, &cache, &rec, &consistent);
+    double alpha = balance_at(m, x, u, loss, &motor, wps, &cache, &rec, &consistent);
     /* Mechanism._assemble(detail=True) */
     double motor_sol = rec.m0 + rec.m1 * alpha;
     double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0, p_viscous = 0.0, p_differential = 0.0;

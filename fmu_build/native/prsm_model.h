@@ -13,6 +13,8 @@
  *   prsm_fmu/steppers/band.py      the exponential band step (closed_form), in prsm_band.c
  *   prsm_fmu/models/dynamic.py     the dynamic level (carrier speeds as states; torque or speed
  *                                  drive), stepped by steppers/rosenbrock.py in prsm_ros.c
+ *   prsm_fmu/models/adaptive.py,   fidelity = auto: its start level and the switching between
+ *   prsm_fmu/models/auto.py        the dynamic and the quasi-static level, in prsm_auto.c
  * The geometry-derived constants (contact points, normals, slip Jacobians of both flanks, c_k,
  * zeta) are computed by prsm_model_init from the configuration's geometry (the contact solved by
  * prsm_geometry.c, as prsm_fmu.mechanics does); the default geometry (the preset's), the

@@ -121,7 +121,11 @@ def carrier_time_constants(params: MechanismParams, screw_speed: float,
         i = 2 + k
         fl = s.flanks[0]
         # a thousandth of the carrier speed change that moves the slip across the friction band
-        dw = max(1e-3 * v_eps / math.hypot(fl.bx, fl.by), 1e-9 * max(abs(x[i]), 1.0))
+        # (|b| as sqrt(bx² + by²): IEEE operations only, which C repeats bit for bit, as the
+        # engine's auto must (fmu_build/native/prsm_auto.c); libm's hypot and Python's
+        # math.hypot differ in the last bit in ~1 of 700 cases)
+        dw = max(1e-3 * v_eps / math.sqrt(fl.bx * fl.bx + fl.by * fl.by),
+                 1e-9 * max(abs(x[i]), 1.0))
         xp, xm = list(x), list(x)
         xp[i] += dw
         xm[i] -= dw
