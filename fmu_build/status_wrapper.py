@@ -21,6 +21,8 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
+from prsm_fmu.fmu_exit import PYTHONFMU_LIBRARY_STEM
+
 from . import platforms
 from .errors import BuildError
 
@@ -28,8 +30,9 @@ __all__ = ["wrap_binaries", "WRAPPER_SOURCE", "INNER_STEM", "input_references"]
 
 #: the wrapper's source, in fmu_build/native
 WRAPPER_SOURCE = "prsm_status_wrapper.c"
-#: file name (without suffix) of pythonfmu's library inside the FMU, beside the wrapper
-INNER_STEM = "pythonfmu-export"
+#: file name (without suffix) of pythonfmu's library inside the FMU, beside the wrapper (where
+#: prsm_fmu.fmu_exit finds it at exit)
+INNER_STEM = PYTHONFMU_LIBRARY_STEM
 #: the functions the wrapper exports: FMI 2.0 co-simulation's
 EXPORTS = tuple("""fmi2GetTypesPlatform fmi2GetVersion fmi2SetDebugLogging fmi2Instantiate
 fmi2FreeInstance fmi2SetupExperiment fmi2EnterInitializationMode fmi2ExitInitializationMode

@@ -201,25 +201,25 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
                                      stopTimeDefined, stopTime);
 }
 
+/* the phase after a call that returned s: ``to`` if it succeeded from ``from`` */
+static fmi2Status moved(wrapper *w, fmi2Status s, int from, int to) {
+    if (s == fmi2OK && w->phase == from) w->phase = to;
+    return s;
+}
+
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     W(c);
-    fmi2Status s = inner.fmi2EnterInitializationMode(w->inner);
-    if (s == fmi2OK && w->phase == PH_INSTANTIATED) w->phase = PH_INITIALIZATION;
-    return s;
+    return moved(w, inner.fmi2EnterInitializationMode(w->inner), PH_INSTANTIATED, PH_INITIALIZATION);
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     W(c);
-    fmi2Status s = inner.fmi2ExitInitializationMode(w->inner);
-    if (s == fmi2OK && w->phase == PH_INITIALIZATION) w->phase = PH_STEPPING;
-    return s;
+    return moved(w, inner.fmi2ExitInitializationMode(w->inner), PH_INITIALIZATION, PH_STEPPING);
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
     W(c);
-    fmi2Status s = inner.fmi2Terminate(w->inner);
-    if (s == fmi2OK && w->phase == PH_STEPPING) w->phase = PH_TERMINATED;
-    return s;
+    return moved(w, inner.fmi2Terminate(w->inner), PH_STEPPING, PH_TERMINATED);
 }
 
 fmi2Status fmi2Reset(fmi2Component c) {
