@@ -38,7 +38,7 @@ from prsm_fmu.configure import ENUMERATIONS
 from prsm_fmu.slave import ENUM_PARAMETERS, parameter_defaults, type_definitions
 
 from .errors import BuildError
-from . import extra, model_description, packing, status_wrapper
+from . import extra, model_description, packing, platforms, status_wrapper
 
 #: the default experiment of every FMU: start [s], stop [s], communication step [s]
 DEFAULT_EXPERIMENT = (0.0, 0.1, 1e-3)
@@ -199,7 +199,10 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
         extra.add_baselines(built, name)         # extra/baselines (issue 6), PRSM2 only
         # the status queries answered as docs/fmu.md says (pythonfmu 0.7's answer fmi2Terminated
         # true after any refused step): on the platforms the engine is built for
-        status_wrapper.wrap_binaries(built, (packing.platform_folder(), *(engine_platforms or ())))
+        here = packing.platform_folder()
+        wrapped = status_wrapper.wrap_binaries(built, (here, *(engine_platforms or ())))
+        if here in platforms.PYTHONFMU_PLATFORMS and here not in wrapped:
+            raise BuildError(f"{name}.fmu: pythonfmu's {here} library was not wrapped")
         if check:
             problems = validate(built)
             if problems:
