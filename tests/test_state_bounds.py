@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import random
+from collections import Counter
 import re
 import struct
 
@@ -172,9 +173,8 @@ def test_random_crafted_states_get_the_same_verdict_and_finite_outputs_from_both
             verdicts.append((xs, why, verdict))
     finally:
         pair.free()
-    for xs, why, verdict in verdicts:
-        print(f"  {verdict}: x = {xs}: {why['native']}")
-    counts = {v: sum(got == v for _, _, got in verdicts) for v in ("refused", "accepted")}
+    counts = Counter(verdict for _, _, verdict in verdicts)
+    print("\n".join(f"  {verdict}: x = {xs}: {why['native']}" for xs, why, verdict in verdicts))
     print(f"  {len(verdicts)} crafted states (seed 2026): {counts['refused']} refused by both "
           f"with the same message, {counts['accepted']} accepted by both with finite outputs")
     assert all(why["pythonfmu"] == why["native"] for _, why, _ in verdicts)
