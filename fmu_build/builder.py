@@ -13,7 +13,10 @@ The FMU ``PRSM<n>`` (or any name) is built from a :class:`~prsm_fmu.params.Mecha
    rewritten with the completed ``modelDescription.xml``;
 4. :func:`fmu_build.extra.add_baselines` packs the regression baselines into ``extra/``
    (PRSM2);
-5. :func:`fmu_build.model_description.check` and, if fmpy is installed, ``fmpy``'s
+5. :func:`fmu_build.status_wrapper.wrap_binaries` puts a thin C library in front of
+   pythonfmu's binary (this platform and ``engine_platforms``) that answers
+   ``fmi2GetBooleanStatus(fmi2Terminated)`` as docs/fmu.md's error table says;
+6. :func:`fmu_build.model_description.check` and, if fmpy is installed, ``fmpy``'s
    ``validate_fmu`` must report no problem, or the build fails.
 
 Build in a process of its own (``python -m fmu_build``): pythonfmu imports the generated
@@ -35,7 +38,7 @@ from prsm_fmu.configure import ENUMERATIONS
 from prsm_fmu.slave import ENUM_PARAMETERS, parameter_defaults, type_definitions
 
 from .errors import BuildError
-from . import extra, model_description, packing
+from . import extra, model_description, packing, platforms, status_wrapper
 
 #: the default experiment of every FMU: start [s], stop [s], communication step [s]
 DEFAULT_EXPERIMENT = (0.0, 0.1, 1e-3)
@@ -195,6 +198,12 @@ def build_fmu(name: str, params: MechanismParams, preset: str, dest: str | Path 
                                                                      type_definitions()))
         extra.add_baselines(built, name)         # extra/baselines (issue 6), PRSM2 only
         packing.add_bytecode(built)              # no compiling at every start of the FMU
+        # the status queries answered as docs/fmu.md says (pythonfmu 0.7's answer fmi2Terminated
+        # true after any refused step): on the platforms the engine is built for
+        here = packing.platform_folder()
+        wrapped = status_wrapper.wrap_binaries(built, (here, *(engine_platforms or ())))
+        if here in platforms.PYTHONFMU_PLATFORMS and here not in wrapped:
+            raise BuildError(f"{name}.fmu: pythonfmu's {here} library was not wrapped")
         if check:
             problems = validate(built)
             if problems:

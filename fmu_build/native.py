@@ -549,13 +549,15 @@ def _fmi_headers(header: str = "fmi2Functions.h", version: str = "2.0") -> Path:
     return found[0].parent
 
 
-def compile_library(src: Path, out: Path, sources: tuple[str, ...] = SOURCES) -> None:
-    """Compile ``sources`` (default: the FMU's) in ``src`` into the shared library ``out`` with gcc."""
+def compile_library(src: Path, out: Path, sources: tuple[str, ...] = SOURCES,
+                    defines: tuple[str, ...] = (), link: tuple[str, ...] = ()) -> None:
+    """Compile ``sources`` (default: the FMU's) in ``src`` into the shared library ``out`` with
+    gcc, with the ``-D`` ``defines`` and the extra linker arguments ``link``."""
     gcc = shutil.which("gcc")
     if gcc is None:
         raise BuildError("gcc is needed to build the native FMU's Linux binary (apt-get install gcc)")
-    cmd = [gcc, *COMPILE_FLAGS, "-Wall", f"-I{src}", *(str(src / s) for s in sources),
-           "-o", str(out), "-lm"]
+    cmd = [gcc, *COMPILE_FLAGS, "-Wall", f"-I{src}", *(f"-D{d}" for d in defines),
+           *(str(src / s) for s in sources), "-o", str(out), *link, "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise BuildError(f"gcc failed:\n{proc.stderr}")

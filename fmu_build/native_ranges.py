@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import re
 
-from prsm_fmu.param_ranges import (INPUT_BOUNDS, MAX_QUOTIENT, SMALLEST,
+from prsm_fmu.param_ranges import (INPUT_BOUNDS, KINETIC_ENERGY_MAX, MAX_QUOTIENT, SMALLEST,
                                     SPLINE_RADIUS_MIN_FRACTION, STATE_BOUNDS, fmu_rules)
 from prsm_fmu.params import GEOMETRY_RTOL, MechanismParams
 
@@ -86,11 +86,12 @@ def ranges_header(params: MechanismParams) -> str:
         *rows,
         "};",
         "/* bounds of the inputs and of the state (param_ranges.INPUT_BOUNDS, STATE_BOUNDS,",
+        " * KINETIC_ENERGY_MAX: the speeds' bounds follow from it and the inertias,",
         " * SMALLEST): a step that starts or would end beyond them is refused */",
         f"#define PRSM_MAX_TORQUE {_num(INPUT_BOUNDS['screw_torque'][0])}",
         f"#define PRSM_MAX_LOAD {_num(INPUT_BOUNDS['load_force'][0])}",
         f"#define PRSM_MAX_ANGLE {_num(STATE_BOUNDS['angle'][0])}",
-        f"#define PRSM_MAX_SPEED {_num(STATE_BOUNDS['speed'][0])}",
+        f"#define PRSM_KINETIC_ENERGY_MAX {_num(KINETIC_ENERGY_MAX)}",
         f"#define PRSM_MAX_WORK {_num(STATE_BOUNDS['work'][0])}",
         f"#define PRSM_SMALLEST {_num(SMALLEST)}",
         f"#define PRSM_MAX_QUOTIENT {_num(MAX_QUOTIENT)}",

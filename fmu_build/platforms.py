@@ -157,7 +157,8 @@ def check_library(path: Path, platform: Platform, exports: tuple[str, ...]) -> N
 
 def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
                 exports: tuple[str, ...], defines: tuple[str, ...] = (),
-                arches: tuple[str, ...] | None = None) -> Path:
+                arches: tuple[str, ...] | None = None, link: tuple[str, ...] = (),
+                allow: tuple[str, ...] = ()) -> Path:
     """Compile ``sources`` (in ``src``, headers there too) into the shared library ``out`` for
     ``platform`` (a key of :data:`PLATFORMS`) with Zig's C compiler, and check it
     (:func:`check_library`) for the functions ``exports``.
@@ -179,6 +180,10 @@ def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
     arches : tuple of str, optional
         Only these of the platform's architectures (FMI 3.0: one library per architecture);
         default all (darwin64: one universal file).
+    link : tuple of str
+        Extra linker arguments (``-ldl``).
+    allow : tuple of str
+        Libraries the result may load besides the platform's C runtime (``libdl.so.2``).
 
     Returns
     -------
@@ -204,6 +209,8 @@ def compile_for(platform: str, src: Path, sources: tuple[str, ...], out: Path,
                              f"of {', '.join(p.arches)}")
         keep = [i for i, a in enumerate(p.arches) if a in arches]
         p = replace(p, targets=tuple(p.targets[i] for i in keep), arches=tuple(arches))
+    if link or allow:                        # part of the platform, so of the cache's key too
+        p = replace(p, link_flags=p.link_flags + tuple(link), libraries=p.libraries + tuple(allow))
     out.parent.mkdir(parents=True, exist_ok=True)
     # a library built before from the same files is reused (Zig's own cache misses here: the
     # sources are in a new temporary directory each build); it is checked again below

@@ -129,7 +129,37 @@ ATOL_FACTOR = 1e-2
 #: at most 6 simplified-Newton iterations each, plus its finite-difference Jacobian of the
 #: 3-8 states): ``radau`` stops after RADAU_RHS_PER_STEP * max_substeps rhs calls
 RADAU_RHS_PER_STEP = 30
+#: most internal steps of one doStep where the Python reference model steps (not the compiled
+#: engine), whatever ``max_substeps`` above it, and most fixed ``substeps`` there; ``radau``
+#: (scipy's, always Python) at most PYTHON_MAX_RHS_CALLS rhs calls.  Measured at the limit
+#: (``python benchmarks/dostep_work_bound.py``, PRSM3, tolerance 1e-12, 2026-11-26, loaded
+#: 2-core machine): the Python steppers take 0.1-0.25 ms per internal step (at most 8 rhs calls
+#: of ~40 us) and radau ~57 us per rhs call, so 100 000 steps could take 10-25 s; with these
+#: bounds one doStep takes at most ~2.5 s (exponential, 10 000 steps) and ~3.4 s (radau,
+#: 60 000 rhs calls): a margin of about 3 below the 10 s a host may allow a doStep
+PYTHON_MAX_SUBSTEPS = 10_000
+PYTHON_MAX_RHS_CALLS = 60_000
 
+
+
+def _python_work_bound(opts: dict[str, Any], substeps: int, why: str | None) -> None:
+    """Bound the Python stepper's options ``opts`` (in place) to :data:`PYTHON_MAX_SUBSTEPS`
+    internal steps per doStep (``radau``: :data:`PYTHON_MAX_RHS_CALLS` rhs calls).
+
+    Raises
+    ------
+    ValueError
+        If fixed ``substeps`` exceed it: the step would take that many regardless.
+    """
+    if substeps > PYTHON_MAX_SUBSTEPS:
+        where = f"the Python model runs ({why})" if why else "the Python model runs"
+        raise ValueError(f"substeps = {substeps} is out of range where {where}: must be an "
+                         f"integer in [0, {PYTHON_MAX_SUBSTEPS}] (bounds the work of one doStep "
+                         "of the Python model)")
+    if "max_substeps" in opts:
+        opts["max_substeps"] = min(opts["max_substeps"], PYTHON_MAX_SUBSTEPS)
+    if "max_rhs_calls" in opts:
+        opts["max_rhs_calls"] = min(opts["max_rhs_calls"], PYTHON_MAX_RHS_CALLS)
 
 
 def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[float, float],
@@ -222,6 +252,7 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         if stepper is not None and asked == "default":
             name = ENGINE_METHOD.get(level, name)     # auto's default is ROS34PW2 there
     if stepper is None:
+        _python_work_bound(opts, substeps, why)
         stepper = make_stepper(name, model, **opts)
         if why is not None:
             stepper.engine_fallback = why

@@ -34,7 +34,11 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["guard_library", "guarded"]
+__all__ = ["guard_library", "guarded", "PYTHONFMU_LIBRARY_STEM"]
+
+#: pythonfmu's library in an FMU whose binary is the status wrapper (fmu_build.status_wrapper):
+#: ``binaries/linux64/pythonfmu-export.so``, beside the wrapper ``<modelIdentifier>.so``
+PYTHONFMU_LIBRARY_STEM = "pythonfmu-export"
 
 _LIBRARIES: dict[str, ctypes.CDLL] = {}
 _REGISTERED = False
@@ -54,8 +58,9 @@ def guard_library(resources: str | None, model_identifier: str) -> str | None:
     Parameters
     ----------
     resources : str or None
-        The instance's resource directory (pythonfmu's ``resources`` argument); the library is
-        ``../binaries/linux64/<model_identifier>.so`` from there.
+        The instance's resource directory (pythonfmu's ``resources`` argument); pythonfmu's
+        library is ``../binaries/linux64/pythonfmu-export.so`` from there where the FMU's binary
+        is the status wrapper, else ``../binaries/linux64/<model_identifier>.so``.
     model_identifier : str
         The FMU's modelIdentifier (the slave class's name).
 
@@ -68,14 +73,18 @@ def guard_library(resources: str | None, model_identifier: str) -> str | None:
     global _REGISTERED
     if not sys.platform.startswith("linux") or not resources:
         return None
-    path = Path(resources).parent / "binaries" / "linux64" / f"{model_identifier}.so"
-    key = str(path)
-    if key in _LIBRARIES:
-        return key
-    try:   # RTLD_NOLOAD: the library the host has loaded from there, never a new copy
-        lib = ctypes.CDLL(key, mode=os.RTLD_NOW | os.RTLD_NOLOAD)
-        lib.finalizePythonInterpreter.restype = None
-    except (OSError, AttributeError):
+    folder = Path(resources).parent / "binaries" / "linux64"
+    for stem in (PYTHONFMU_LIBRARY_STEM, model_identifier):
+        key = str(folder / f"{stem}.so")
+        if key in _LIBRARIES:
+            return key
+        try:   # RTLD_NOLOAD: the library the host has loaded from there, never a new copy
+            lib = ctypes.CDLL(key, mode=os.RTLD_NOW | os.RTLD_NOLOAD)
+            lib.finalizePythonInterpreter.restype = None
+            break
+        except (OSError, AttributeError):
+            continue
+    else:
         return None
     _LIBRARIES[key] = lib
     if not _REGISTERED:

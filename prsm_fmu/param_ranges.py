@@ -20,11 +20,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
+from weakref import WeakKeyDictionary
 
 __all__ = ["Range", "fmt", "STAGE_RANGES", "MECHANISM_RANGES", "SOLVER_RANGES", "FmuRule",
            "fmu_rules", "max_rollers", "spline_rule", "bearing_rule", "INPUT_BOUNDS",
-           "STATE_BOUNDS", "SMALLEST", "MAX_QUOTIENT", "input_violation", "state_violation", "SPLINE_RADIUS_MIN_FRACTION"]
+           "STATE_BOUNDS", "SMALLEST", "MAX_QUOTIENT", "input_violation", "state_violation",
+           "SPLINE_RADIUS_MIN_FRACTION", "KINETIC_ENERGY_MAX", "speed_bounds", "model_speed_bounds"]
 
 #: the smallest spline radius relative to the screw's pitch radius (Li et al. (2021), eq. 12:
 #: the spline friction µ_SS |M| / r_SS grows without bound as r_SS -> 0; below r_S/100 the bore
@@ -253,10 +255,13 @@ def fmu_rules(stages: tuple, geometry: Callable[[int], tuple[float, float]] | No
 #: largest (≈ 40 N.m, 8 kN); a step with a larger input is refused (docs/fmu.md, Errors)
 INPUT_BOUNDS: dict[str, tuple[float, str]] = {"screw_torque": (1e6, "N.m"),
                                               "load_force": (1e8, "N")}
-#: |state component| at most: the screw angle [rad] (a year at 10^4 rad/s is 3e11 rad), every
-#: speed [rad/s] (10 times the largest initial speed), every work integral [J]
-STATE_BOUNDS: dict[str, tuple[float, str]] = {"angle": (1e15, "rad"), "speed": (1e5, "rad/s"),
-                                              "work": (1e150, "J")}
+#: |state component| at most: the screw angle [rad] (a year at 10^4 rad/s is 3e11 rad; beyond
+#: 10^15 rad a step's increment loses its digits), every work integral [J]; the speeds' bounds
+#: follow from the parameters (:func:`speed_bounds`)
+STATE_BOUNDS: dict[str, tuple[float, str]] = {"angle": (1e15, "rad"), "work": (1e150, "J")}
+#: the largest kinetic energy a state may carry [J]: the work integrals' bound, so that the
+#: energy balance input_work = output_work + friction_work + Δkinetic_energy stays representable
+KINETIC_ENERGY_MAX = STATE_BOUNDS["work"][0]
 #: a nonzero input smaller than this in magnitude is refused: ``efficiency`` divides the load's
 #: power by the motor's, about F c / T, which stays below 1e300 for |T| >= 1e-150 N.m
 SMALLEST = 1e-150
@@ -275,13 +280,56 @@ def input_violation(u: tuple[float, float]) -> str | None:
     return None
 
 
-def state_violation(x) -> str | None:
+def speed_bounds(inertias: Sequence[float]) -> tuple[float, ...]:
+    """|speed| at most [rad/s] of each of the n speed states whose kinetic energy is
+    ½ J_i ω_i² (``inertias`` J_i [kg·m²]): sqrt(2 E / (n J_i)), E = :data:`KINETIC_ENERGY_MAX`,
+    so that the kinetic energy of any state within them is at most E (inf where J_i <= 0)."""
+    n = len(inertias)
+    return tuple(math.sqrt(2.0 * KINETIC_ENERGY_MAX / (n * j)) if j > 0.0 else math.inf
+                 for j in inertias)
+
+
+_SPEED_BOUNDS: WeakKeyDictionary = WeakKeyDictionary()
+
+
+def model_speed_bounds(model: Any, n: int) -> tuple[float, ...]:
+    """:func:`speed_bounds` of ``model``'s state of length ``n`` (speeds x[1] .. x[n-4]): J_i is
+    twice the kinetic energy (``Model.kinetic_energy`` of the model's own level, for ``auto``
+    the dynamic level's) of the state with speed i at 1 rad/s and everything else 0; cached
+    per model.  The native FMU computes the same J_i from its model's equivalent and carrier
+    inertias with the same operations (prsm_fmi2.c)."""
+    key = _SPEED_BOUNDS.get(model)
+    if key is not None and key[0] == n:
+        return key[1]
+    from .models.base import Model
+
+    inertias = []
+    for i in range(1, n - 3):
+        x = [0.0] * n
+        x[i] = 1.0
+        inertias.append(2.0 * Model.kinetic_energy(model, x, (0.0, 0.0)))
+    bounds = speed_bounds(inertias)
+    _SPEED_BOUNDS[model] = (n, bounds)
+    return bounds
+
+
+def state_violation(x, speeds: Sequence[float] | None = None) -> str | None:
     """Why the model state x = (angle, speed, [carrier speeds], input, output and friction
-    work) is out of :data:`STATE_BOUNDS` or would make a quotient among the outputs exceed
-    :data:`MAX_QUOTIENT`, or None."""
+    work) is out of :data:`STATE_BOUNDS`, out of the speed bounds ``speeds`` (one per speed
+    state, :func:`model_speed_bounds`; None: not checked) or would make a quotient among the
+    outputs exceed :data:`MAX_QUOTIENT`, or None."""
     n = len(x)
     for i, v in enumerate(x):
-        kind = "angle" if i == 0 else "work" if i >= n - 3 else "speed"
+        if 0 < i < n - 3:
+            if speeds is None:
+                continue
+            bound = speeds[i - 1]
+            if not abs(v) <= bound:
+                return (f"state x[{i}] (speed) = {fmt(v)} rad/s is out of range: must be in "
+                        f"[-{fmt(bound)}, {fmt(bound)}] rad/s (kinetic energy at most "
+                        f"{fmt(KINETIC_ENERGY_MAX)} J)")
+            continue
+        kind = "angle" if i == 0 else "work"
         bound, unit = STATE_BOUNDS[kind]
         if not abs(v) <= bound:
             return (f"state x[{i}] ({kind}) = {fmt(v)} {unit} is out of range: must be in "

@@ -64,7 +64,7 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
                         FIDELITY_ITEMS, LEVEL_CODES, MAX_INITIAL_ANGLE, MAX_INITIAL_SPEED,
                         MAX_SUBSTEPS_RANGE, STEPPER_CHOICES, STEPPER_ITEMS, TOLERANCE_RANGE,
                         active_level, configure, fidelity_name)
-from .param_ranges import input_violation, state_violation
+from .param_ranges import input_violation, model_speed_bounds, state_violation
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
 from .engine import (ENGINE_ENV, fallback_reason, is_engine, library_name,
@@ -954,7 +954,7 @@ class PRSMSlave(Fmi2Slave):
             cause = self._model.contact_diagnosis(self._x, u)
             return self._refuse(cause or "integration failed: the stepper returned a non-finite "
                                 "state")
-        why = state_violation(x)
+        why = state_violation(x, model_speed_bounds(self._model, len(x)))
         if why is not None:          # the outputs of that state could overflow: docs/fmu.md
             undo()
             return self._refuse(f"the step would end out of the state's bounds: {why}")
@@ -1019,6 +1019,9 @@ class PRSMSlave(Fmi2Slave):
                 if len(f["x"]) != stepper.n_states:
                     raise ValueError(f"x has {len(f['x'])} values, the model "
                                      f"{stepper.n_states} states")
+                why = state_violation(f["x"], model_speed_bounds(model, len(f["x"])))
+                if why is not None:     # the outputs of such a state could overflow
+                    raise ValueError(why)
                 stepper.set_memory(f["memory"])
             except Exception as exc:  # noqa: BLE001 - invalid parameters or memory in the state
                 self._par.clear()

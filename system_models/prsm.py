@@ -20,7 +20,7 @@ from typing import Any
 
 from prsm_fmu import presets
 from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, active_level, configure
-from prsm_fmu.param_ranges import input_violation, state_violation
+from prsm_fmu.param_ranges import input_violation, model_speed_bounds, state_violation
 from prsm_fmu.params import MECHANISM_FIELD_NAMES, MechanismParams, stage_field_names
 from prsm_fmu.simulate import DEFAULT_STEPPER
 from prsm_fmu.steppers import StepFailure
@@ -167,7 +167,7 @@ class PythonPRSM(PythonBlock):
         except StepFailure as exc:
             self.stepper.set_memory(self.memory)
             raise StepRefused(self.name, t, h, f"integration failed: {exc}") from None
-        why = state_violation(x)
+        why = state_violation(x, model_speed_bounds(self.model, len(x)))
         if why is not None:
             self.stepper.set_memory(self.memory)
             raise StepRefused(self.name, t, h, f"the step would end out of the state's bounds: "

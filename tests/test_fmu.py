@@ -857,12 +857,14 @@ def test_auto_fidelity_runs_the_documented_level():
 
 
 def test_the_fmu_library_in_this_process_is_guarded_for_exit():
-    """Instantiating an FMU registers its library for the exit-time reset (fmu_exit)."""
+    """Instantiating an FMU registers pythonfmu's library for the exit-time reset (fmu_exit):
+    the FMU's binary is the status wrapper (docs/fmu.md, Errors), pythonfmu's library lies
+    beside it."""
     from prsm_fmu import fmu_exit
 
     host = Host("PRSM2", "exit")
     host.free()
-    lib = unzipped("PRSM2") / "binaries" / "linux64" / "PRSM2.so"
+    lib = unzipped("PRSM2") / "binaries" / "linux64" / "pythonfmu-export.so"
     if sys.platform.startswith("linux"):
         assert str(lib) in fmu_exit.guarded()
 

@@ -273,28 +273,29 @@ def test_dynamic_level_with_inputs_changing_every_step_equals_python_fmu_bit_for
 
 
 @pytest.mark.parametrize("torque,load", [(1e6, 0.0), (40.0, -1e8)])
-def test_dynamic_level_refuses_the_steps_the_python_fmu_refuses_for_the_same_reason(native, torque,
-                                                                                   load):
-    """Inputs no rigid PRSM follows in a 1 ms step (1e6 N.m; 1e8 N pulling: the inputs'
-    bounds): both FMUs discard the step, state unchanged, for the same reason in the same
-    words."""
-    reasons = []
+def test_dynamic_level_at_the_inputs_bounds_steps_as_the_python_fmu(native, torque, load):
+    """Inputs at their bounds (1e6 N.m; 1e8 N pulling) for 1 ms: the screw ends near 2e6 and
+    6e5 rad/s, far below the speed bound the kinetic energy allows (about 1e76 rad/s for
+    PRSM2's inertias: docs/fmu.md, bounds of the state), and both FMUs take the step with the
+    same, finite outputs.  (Before the speed bound followed from the inertias, a constant
+    1e5 rad/s refused both steps in both FMUs.)"""
+    rows = []
     for host in (Host("PRSM2", start={"fidelity": "dynamic"}),
                  native_host(start={"fidelity": "dynamic"})):
         try:
             vr = [host.vars["screw_torque"].valueReference, host.vars["load_force"].valueReference]
-            before = host.state_bytes()
             host.fmu.setReal(vr, [torque, load])
-            assert host.step(0.0) == DISCARD
-            host.fmu.setReal(vr, [0.0, 0.0])
-            assert host.state_bytes() == before and host.get_real(["screw_speed"]) == [0.0]
-            reasons.append(host.messages[-1][1])
+            assert host.step(0.0) == OK
+            rows.append(host.get_real(host.outputs))
+            names = host.outputs
         finally:
             host.free()
-    # at the inputs' bounds the step ends beyond the state's speed bound (1e5 rad/s) in both
-    # (before that bound existed: the same step-size collapse, compared as numbers)
-    py, nat = (r.split("state unchanged: ")[1] for r in reasons)
-    assert "out of the state's bounds" in nat and nat == py
+    py, nat = rows
+    speed = py[names.index("screw_speed")]
+    print(f"  screw speed after 1 ms: {speed} rad/s")
+    assert abs(speed) > 1e5                      # beyond the constant bound of before
+    assert all(math.isfinite(v) for n, v in zip(names, py) if n != "efficiency")
+    assert same([nat], [py])
 
 
 def test_random_states_both_flanks_both_load_directions_equal_python_fmu(native):

@@ -248,17 +248,37 @@ static int input_violation(const double u[2], char *msg, int len) {
     return 0;
 }
 
-static int state_violation(const double *x, int n, char *msg, int len) {
+/* the bound of speed state i (1 .. n-4) [rad/s]: param_ranges.speed_bounds of the inertias
+ * model_speed_bounds takes from the kinetic energy (2 x the energy at 1 rad/s: the same
+ * operations, so the same double), sqrt(2 E / (n_speeds J_i)), E = PRSM_KINETIC_ENERGY_MAX */
+static double speed_bound(const prsm_model *m, int i, int n) {
+    double inertia = i == 1 ? m->equivalent_inertia : m->st[i - 2].j_carrier;
+    double j = 2.0 * (0.5 * inertia * 1.0 * 1.0);
+    return j > 0.0 ? sqrt(2.0 * PRSM_KINETIC_ENERGY_MAX / ((double)(n - 4) * j)) : INFINITY;
+}
+
+static int state_violation(const double *x, const prsm_model *m, char *msg, int len) {
+    int n = m->nx;
     char v[40], w[40], q[40];
     for (int i = 0; i < n; i++) {
         int angle = i == 0, work = i >= n - 3;
-        double bound = angle ? PRSM_MAX_ANGLE : work ? PRSM_MAX_WORK : PRSM_MAX_SPEED;
+        if (!angle && !work) {
+            double bound = speed_bound(m, i, n);
+            if (fabs(x[i]) <= bound) continue;
+            prsm_fmt_num(v, sizeof v, x[i]);
+            prsm_fmt_num(w, sizeof w, bound);
+            prsm_fmt_num(q, sizeof q, PRSM_KINETIC_ENERGY_MAX);
+            snprintf(msg, (size_t)len, "state x[%d] (speed) = %s rad/s is out of range: must be in "
+                     "[-%s, %s] rad/s (kinetic energy at most %s J)", i, v, w, w, q);
+            return -1;
+        }
+        double bound = angle ? PRSM_MAX_ANGLE : PRSM_MAX_WORK;
         if (fabs(x[i]) <= bound) continue;
         prsm_fmt_num(v, sizeof v, x[i]);
         prsm_fmt_num(w, sizeof w, bound);
-        const char *unit = angle ? "rad" : work ? "J" : "rad/s";
+        const char *unit = angle ? "rad" : "J";
         snprintf(msg, (size_t)len, "state x[%d] (%s) = %s %s is out of range: must be in [-%s, %s] %s",
-                 i, angle ? "angle" : work ? "work" : "speed", v, unit, w, w, unit);
+                 i, angle ? "angle" : "work", v, unit, w, w, unit);
         return -1;
     }
     double omega = x[1], w_in = x[n - 3], w_out = x[n - 2];
@@ -910,7 +930,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
         snprintf(reason, sizeof reason, "integration failed: %s", msg);
         return refuse_call(c, t, h, reason);
     }
-    if (state_violation(x_new, c->model.nx, msg, sizeof msg)) {   /* outputs could overflow */
+    if (state_violation(x_new, &c->model, msg, sizeof msg)) {   /* outputs could overflow */
         c->s.mem = mem_before;
         c->s.amem = amem_before;
         snprintf(reason, sizeof reason, "the step would end out of the state's bounds: %s", msg);
@@ -1075,7 +1095,7 @@ static int check_snapshot(const snapshot *s, prsm_model *m, prsm_auto *au, int *
             snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
             return -1;
         }
-        if (state_violation(s->x, m->nx, msg, len)) return -1;
+        if (state_violation(s->x, m, msg, len)) return -1;
         if (*is_auto && !auto_memory_ok(&s->amem)) {
             snprintf(msg, (size_t)len, "bad memory of fidelity auto");
             return -1;
