@@ -55,8 +55,8 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     """All outputs on the macro grid; header ``time [s],prsm.rod_position [m],...`` (UTF-8).
 
     Every value reads back as the same double, bit for bit (15 significant digits where they
-    suffice, else 17; :mod:`prsm_fmu.csv_format`, formatted with numpy: ~0.1 s for a
-    15 001-row run)."""
+    suffice, else 17; formatted with numpy, :mod:`prsm_fmu.csv_format`; its cost against the
+    old writer: ``benchmarks/command_cost.py``, item 3)."""
     cols = ordered_columns(res, first)
     path = Path(path)
     header = io.StringIO()
