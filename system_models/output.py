@@ -96,10 +96,10 @@ def _stages(res: Result) -> int:
 
 
 def figure_writer(out_dir: str | Path, scene: str):
-    """(plt, save, files): ``plt.subplots`` makes a figure with fixed margins
-    (:mod:`prsm_fmu.figures`: no pyplot, no extra layout draw); ``save(fig, name)`` writes
-    ``<out_dir>/<scene>_<name>.png`` (110 dpi) and appends the path to ``files``."""
-    from prsm_fmu.figures import Pyplotless, save as save_png
+    """(save, files): ``save(fig, name)`` writes ``<out_dir>/<scene>_<name>.png``
+    (:func:`prsm_fmu.figures.save`) and appends the path to ``files``.  Figures are made with
+    :func:`prsm_fmu.figures.subplots` (no pyplot, fixed margins, one draw)."""
+    from prsm_fmu.figures import save as save_png
 
     out = Path(out_dir)
     files: list[Path] = []
@@ -107,7 +107,7 @@ def figure_writer(out_dir: str | Path, scene: str):
     def save(fig, name: str) -> None:
         files.append(save_png(fig, out / f"{scene}_{name}.png"))
 
-    return Pyplotless(), save, files
+    return save, files
 
 
 def length_scale(max_abs: float) -> tuple[float, str]:
@@ -352,14 +352,22 @@ def figures(res: Result, scene: str, reference=None, mode: str = "position",
     return out
 
 
-def _draw_some(args: tuple) -> list[Path]:
-    """Worker side of :func:`write_plots_parallel`: build and save the figures named."""
-    names, res, out_dir, scene, reference, mode, current_limit, kw = args
-    _, save, files = figure_writer(out_dir, scene)
-    for name, fig in figures(res, scene, reference, mode, current_limit, only=names,
+def _save_figures(res: Result, out_dir: str | Path, scene: str, reference, mode: str,
+                  current_limit: float | None, kw: dict[str, Any],
+                  only: Iterable[str] | None = None) -> list[Path]:
+    """Build and save the figures (``only``: those named); their paths in :data:`FIGURES`
+    order.  :func:`write_plots` here, :meth:`FigureWorkers.write_plots` in each worker."""
+    save, files = figure_writer(out_dir, scene)
+    for name, fig in figures(res, scene, reference, mode, current_limit, only=only,
                              **kw).items():
         save(fig, name)
     return files
+
+
+def _draw_some(args: tuple) -> list[Path]:
+    """Worker side of :meth:`FigureWorkers.write_plots`: the figures named."""
+    names, res, out_dir, scene, reference, mode, current_limit, kw = args
+    return _save_figures(res, out_dir, scene, reference, mode, current_limit, kw, only=names)
 
 
 def _warm() -> None:
@@ -448,10 +456,6 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
         Stage -> the carriers' equilibrium speed ratio (the steady-state solver's), drawn on
         ``<scene>_carriers.png``; the figure is written when the ratios are recorded and given.
     """
-    _, save, files = figure_writer(out_dir, scene)
-    for name, fig in figures(res, scene, reference, mode, current_limit,
-                             description=description, voltage_limit=voltage_limit,
-                             n_rollers=n_rollers,
-                             carrier_equilibrium=carrier_equilibrium).items():
-        save(fig, name)
-    return files
+    return _save_figures(res, out_dir, scene, reference, mode, current_limit,
+                         dict(description=description, voltage_limit=voltage_limit,
+                              n_rollers=n_rollers, carrier_equilibrium=carrier_equilibrium))
