@@ -391,19 +391,10 @@ class FigureWorkers:
         self.pool = None
 
     def start(self) -> "FigureWorkers":
-        if self.n < 2:
-            return self
-        try:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
+        if self.n >= 2:
+            from prsm_fmu.workers import started_pool
 
-            # spawn: fresh interpreters (nothing of this process's FMU or fmpy state copied)
-            self.pool = ProcessPoolExecutor(self.n, mp_context=multiprocessing.get_context("spawn"),
-                                            initializer=_warm)
-            for _ in range(self.n):           # start the workers now, not at the first task
-                self.pool.submit(int)
-        except (OSError, RuntimeError, ImportError):
-            self.pool = None
+            self.pool = started_pool(self.n, _warm)
         return self
 
     def write_plots(self, res: Result, out_dir: str | Path, scene: str, reference=None,
