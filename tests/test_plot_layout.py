@@ -226,3 +226,22 @@ def test_geared_figures_show_the_error_against_the_reference_carried_to_the_rod(
     (line,) = error_axes.get_lines()
     # rod − reference × c/N = −3 µm throughout
     np.testing.assert_allclose(line.get_ydata(), -3.0, atol=1e-9)
+
+
+def test_figure_processes_only_where_a_core_is_idle(monkeypatch):
+    """Two drawing processes on an idle 2-core machine; none under a load of 8 (the figures
+    are then drawn in the command's process) nor on one core."""
+    import os
+
+    from system_models.output import FigureWorkers
+
+    for cores, load, expected in ((2, 0.2, 2), (2, 0.6, 0), (2, 8.0, 0), (1, 0.0, 0),
+                                  (8, 3.0, 2)):
+        monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
+        monkeypatch.setattr(os, "getloadavg", lambda lo=load: (lo, lo, lo))
+        assert FigureWorkers().n == expected, (cores, load)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(os, "getloadavg", lambda: (8.0, 8.0, 8.0))
+    workers = FigureWorkers().start()
+    assert workers.pool is None                     # nothing started
+    workers.close()
