@@ -787,14 +787,15 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             except ValueError as exc:
                 parser.error(f"argument --fmu: {exc}")
         else:
+            # the cases' processes start now and import what a run needs while the FMU is
+            # built (or read) and the baselines are read
+            if not args.update:
+                pool = regress.case_workers(min(os.cpu_count() or 1, len(args.case or known)))
             fmu = out / "fmu" / "PRSM2.fmu"
             why = regress.why_build(fmu)
             if why is None:
                 print(f"using {fmu} (built from the current sources)", flush=True)
             else:
-                # the cases' processes start now and import what a run needs during the build
-                if not args.update:
-                    pool = regress.case_workers()
                 print(f"building {fmu} ({why}; python -m fmu_build, child process) ...",
                       flush=True)
                 try:
