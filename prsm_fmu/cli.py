@@ -758,6 +758,7 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     from pathlib import Path
 
     from . import regress
+    from .workers import IDLE_CORE, idle_cores
 
     out = Path(args.out)
     where = Path(args.baselines) if args.baselines else regress.DEFAULT_DIR
@@ -788,8 +789,9 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
                 parser.error(f"argument --fmu: {exc}")
         else:
             # the cases' processes start now and import what a run needs while the FMU is
-            # built (or read) and the baselines are read
-            if not args.update:
+            # built (or read) and the baselines are read; one per case and core where cores
+            # are idle, else none (the cases then run here, one after the other)
+            if not args.update and idle_cores() >= IDLE_CORE:
                 pool = regress.case_workers(min(os.cpu_count() or 1, len(args.case or known)))
             fmu = out / "fmu" / "PRSM2.fmu"
             why = regress.why_build(fmu)
@@ -819,6 +821,7 @@ def _regress_checked(args, parser, fmu, fmu_vars, where, out, pool) -> int:
     processes when started, :func:`prsm_fmu.regress.case_workers`)."""
     from . import regress
     from .regress.report import verdict_table, write_report
+    from .workers import IDLE_CORE, idle_cores
 
     for name, value in args.set or ():
         problem = _parameter_problem(fmu_vars, name, value)
@@ -836,7 +839,9 @@ def _regress_checked(args, parser, fmu, fmu_vars, where, out, pool) -> int:
               "them into the FMU by rebuilding it (python -m fmu_build)")
         return 0
     params = dict(args.set) if args.set else None
-    results = regress.check(fmu, where, args.case, parameters=params, pool=pool)
+    workers = None if pool is not None or idle_cores() >= IDLE_CORE else 1
+    results = regress.check(fmu, where, args.case, parameters=params, workers=workers,
+                            pool=pool)
     print(verdict_table(results))
     failed = [r.case.name for r in results if not r.passed]
     if failed:

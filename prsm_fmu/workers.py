@@ -12,7 +12,25 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable
 
-__all__ = ["started_pool"]
+__all__ = ["started_pool", "idle_cores", "IDLE_CORE"]
+
+#: idle cores (:func:`idle_cores`) from which worker processes beside this one pay: each one's
+#: own start (a Python, numpy and what the work imports: ~0.8 s CPU) is paid back only by a
+#: core that would otherwise idle; on a busy machine the work ends sooner in this process
+IDLE_CORE = 1.5
+
+
+def idle_cores() -> float:
+    """The cores less the 1-minute load average (the cores not busy lately; all of them where
+    the system keeps no load average, e.g. Windows)."""
+    import os
+
+    cores = os.cpu_count() or 1
+    try:
+        load = os.getloadavg()[0]
+    except (OSError, AttributeError):
+        load = 0.0
+    return cores - load
 
 
 def started_pool(n: int, initializer: Callable[[], None] | None = None

@@ -378,19 +378,13 @@ def _warm() -> None:
 
 
 def spare_workers() -> int:
-    """Figure processes worth starting: 2 where a core is idle beside the run (cores less the
-    1-minute load average at least 1.5), else 0.  Each process's own start (Python, numpy,
-    matplotlib: ~0.8 s CPU) is paid back only by a core that would otherwise idle; on a busy
-    machine drawing in this process ends sooner (position_step under a load of ~8 on 2 cores:
+    """Figure processes worth starting: 2 where a core is idle beside the run
+    (:func:`prsm_fmu.workers.idle_cores` at least :data:`prsm_fmu.workers.IDLE_CORE`), else 0:
+    drawing in this process then ends sooner (position_step under a load of ~8 on 2 cores:
     5.5-6.2 s wall in-process against 6.0-8.9 s with two processes, three runs each)."""
-    import os
+    from prsm_fmu.workers import IDLE_CORE, idle_cores
 
-    cores = os.cpu_count() or 1
-    try:
-        load = os.getloadavg()[0]
-    except (OSError, AttributeError):           # no load average here (Windows)
-        load = 0.0
-    return 2 if cores - load >= 1.5 else 0
+    return 2 if idle_cores() >= IDLE_CORE else 0
 
 
 class FigureWorkers:
