@@ -120,6 +120,8 @@ def _digits(a: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 _P10_SPLIT_HI, _P10_SPLIT_LO = _split(_P10_HI)
+#: 10^k less the relative margin (1e-12) of step 2
+_P10_SAFE = _P10_HI * (1.0 - 1e-12)
 
 
 def _half_gap(a: np.ndarray) -> np.ndarray:
@@ -142,18 +144,20 @@ def _shortest(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if redo.size:
         e[redo] += off[redo]
         d[redo], r[redo] = _digits(a[redo], 16 - e[redo])
+        # still out of range (log10 two off: not seen) -> repr, through a rest no text passes
+        bad = redo[(d[redo] < _D16) | (d[redo] >= _D17)]
+        d[bad], r[bad] = _D16, np.inf
     # the threshold is known to ~1e-16 relative, the rest r to ~1e-15 digits
-    limit = _half_gap(a) * _P10_HI[16 - e + _KMAX] * (1.0 - 1e-12) - 1e-12
-    valid = (d >= _D16) & (d < _D17)
+    limit = _half_gap(a) * np.take(_P10_SAFE, 16 - e + _KMAX) - 1e-12
     q = d // 100
     rem = d - 100 * q
     up = (rem + r) > 50.0                            # the 15 digits rounded to nearest
-    ok15 = valid & (np.abs((100 * up - rem) - r) < limit)
+    ok15 = np.abs((100 * up - rem) - r) < limit
     d17 = np.where(ok15, 100 * (q + up), d)
     carry = d17 == _D17                              # 15 digits rounded up to 10^15
     d17[carry] = _D16
     e += carry
-    return d17, e, ok15 | (valid & (np.abs(r) < limit))
+    return d17, e, ok15 | (np.abs(r) < limit)
 
 
 def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.ndarray,
@@ -168,15 +172,15 @@ def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.nda
     g1 = hi - g0 * 10000
     g2 = lo // 10000
     g3 = lo - g2 * 10000
-    m = np.maximum(np.maximum(_LAST[0][g0], _LAST[1][g1]),
-                   np.maximum(_LAST[2][g2], _LAST[3][g3]))
-    words[:, 0] = _HEAD[first]
-    words[:, 1] = _GROUPS[g0] | (_GROUPS[g1] << np.uint64(32))
-    words[:, 2] = _GROUPS[g2] | (_GROUPS[g3] << np.uint64(32))
-    words[:, 3] = _TAIL[e + 99]
-    keep[:, 0] = _KEEP_HEAD[2 * negative + (m > 0)]
-    keep[:, 1] = _KEEP_DIGITS[0][m]
-    keep[:, 2] = _KEEP_DIGITS[1][m]
+    m = np.maximum(np.maximum(np.take(_LAST[0], g0), np.take(_LAST[1], g1)),
+                   np.maximum(np.take(_LAST[2], g2), np.take(_LAST[3], g3)))
+    words[:, 0] = np.take(_HEAD, first)
+    words[:, 1] = np.take(_GROUPS, g0) | (np.take(_GROUPS, g1) << np.uint64(32))
+    words[:, 2] = np.take(_GROUPS, g2) | (np.take(_GROUPS, g3) << np.uint64(32))
+    words[:, 3] = np.take(_TAIL, e + 99)
+    keep[:, 0] = np.take(_KEEP_HEAD, 2 * negative + (m > 0))
+    keep[:, 1] = np.take(_KEEP_DIGITS[0], m)
+    keep[:, 2] = np.take(_KEEP_DIGITS[1], m)
     keep[:, 3] = _KEEP_TAIL
 
 
