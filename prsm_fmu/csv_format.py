@@ -50,8 +50,7 @@ _LO, _HI = 2e-99, 9e99
 _KMAX = 120
 #: values formatted at once by format_table
 _BLOCK = 8192
-_WORD = np.dtype("<u4")       # little-endian: byte i of a word is at address 4·w + i
-_QUAD = np.dtype("<u8")
+_QUAD = np.dtype("<u8")       # little-endian: byte i of a word is at address 8·w + i
 
 
 def _pow10_table() -> tuple[np.ndarray, np.ndarray]:
@@ -66,9 +65,9 @@ def _pow10_table() -> tuple[np.ndarray, np.ndarray]:
     return hi, lo
 
 
-def _table(rows, dtype=_QUAD) -> np.ndarray:
-    """Rows of bytes (or lists of ints) as little-endian words."""
-    return np.frombuffer(b"".join(bytes(r) for r in rows), dtype=dtype).copy()
+def _table(rows) -> np.ndarray:
+    """Rows of 8 bytes (or lists of 8 ints) as little-endian 8-byte words."""
+    return np.frombuffer(b"".join(bytes(r) for r in rows), dtype=_QUAD).copy()
 
 
 _P10_HI, _P10_LO = _pow10_table()
