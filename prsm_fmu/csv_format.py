@@ -31,10 +31,11 @@ The tests read values back with ``float()`` and compare the bits (tests/test_csv
 from __future__ import annotations
 
 from fractions import Fraction
+from typing import Iterator
 
 import numpy as np
 
-__all__ = ["format_cells", "format_values", "format_table", "ROW"]
+__all__ = ["format_cells", "format_values", "format_table", "format_blocks", "ROW"]
 
 #: bytes per value in the working layout (four 8-byte words): 5 ``-``, 6 the first digit, 7
 #: ``.``, 8..23 the other 16 digits, 24 ``e``, 25 the exponent's sign, 26..27 its two digits,
@@ -222,9 +223,10 @@ def format_values(x: np.ndarray) -> list[str]:
     return format_table(x).decode("ascii").split("\n")[:-1]
 
 
-def format_table(data: np.ndarray) -> bytes:
+def format_blocks(data: np.ndarray) -> Iterator[np.ndarray]:
     """Rows of a 2-D array as CSV lines, ASCII (``,`` between values, ``\\n`` after each row),
-    every value exact (:func:`format_cells`)."""
+    every value exact (:func:`format_cells`): uint8 arrays of consecutive lines, to be written
+    one after the other (no copy into one bytes object)."""
     data = np.asarray(data, dtype=np.float64)
     if data.ndim != 2:
         raise ValueError(f"data: a 2-D array expected, got shape {data.shape}")
@@ -232,11 +234,14 @@ def format_table(data: np.ndarray) -> bytes:
     # blocks of ~8000 values: the temporary arrays then stay in the CPU's cache (whole columns
     # of a long run would stream through memory for every operation)
     step = max(1, _BLOCK // max(cols, 1))
-    parts = []
     for r0 in range(0, rows, step):
         block = data[r0:r0 + step]
         chars, kept = format_cells(block)
         last = chars.view(_QUAD).reshape(block.shape[0], cols, ROW // 8)[:, -1, 3]
         last ^= _COMMA ^ _NEWLINE                     # the last value's separator
-        parts.append(chars[kept].tobytes())
-    return b"".join(parts)
+        yield chars[kept]
+
+
+def format_table(data: np.ndarray) -> bytes:
+    """:func:`format_blocks` as one bytes object."""
+    return b"".join(block.tobytes() for block in format_blocks(data))
