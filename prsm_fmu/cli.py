@@ -746,7 +746,8 @@ def _parameter_problem(variables: Mapping[str, Variable], name: str,
 
 
 def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    """Build the FMU (child process), run the regression cases, compare or update baselines.
+    """Build the FMU if missing or older than its sources (child process; the cases' worker
+    processes start meanwhile), run the regression cases, compare or update baselines.
 
     Returns
     -------
@@ -757,7 +758,7 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     from pathlib import Path
 
     from . import regress
-    from .regress.report import verdict_table, write_report
+    from .workers import IDLE_CORE, idle_cores
 
     out = Path(args.out)
     where = Path(args.baselines) if args.baselines else regress.DEFAULT_DIR
@@ -778,21 +779,50 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     # the fmu extra, before anything is built or run: pythonfmu builds the FMU and runs inside
     # it, fmpy steps it
     require("fmpy", "pythonfmu", purpose="regress (building and running the FMU)")
-    if args.fmu:
-        fmu = Path(args.fmu)
-        try:
+    pool = None
+    try:
+        if args.fmu:
+            fmu = Path(args.fmu)
+            try:
+                fmu_vars = fmu_variables(fmu)
+            except ValueError as exc:
+                parser.error(f"argument --fmu: {exc}")
+        else:
+            # the cases' processes start now and import what a run needs while the FMU is
+            # built (or read) and the baselines are read; one per case and core where cores
+            # are idle, else none (the cases then run here, one after the other)
+            if not args.update and idle_cores() >= IDLE_CORE:
+                pool = regress.case_workers(min(os.cpu_count() or 1, len(args.case or known)))
+            fmu = out / "fmu" / "PRSM2.fmu"
+            why = regress.why_build(fmu)
+            if why is None:
+                print(f"using {fmu} (built from the current sources)", flush=True)
+            else:
+                print(f"building {fmu} ({why}; python -m fmu_build, child process) ...",
+                      flush=True)
+                try:
+                    regress.build_fmu(fmu.parent)
+                except RuntimeError as exc:
+                    print(f"prsm-fmu: error: {one_line(exc)}", file=sys.stderr)
+                    return 1
             fmu_vars = fmu_variables(fmu)
-        except ValueError as exc:
-            parser.error(f"argument --fmu: {exc}")
-    else:
-        print(f"building PRSM2.fmu into {out / 'fmu'} (python -m fmu_build, child process) ...",
-              flush=True)
-        try:
-            fmu = regress.build_fmu(out / "fmu")
-        except RuntimeError as exc:
-            print(f"prsm-fmu: error: {one_line(exc)}", file=sys.stderr)
-            return 1
-        fmu_vars = fmu_variables(fmu)
+        return _regress_checked(args, parser, fmu, fmu_vars, where, out, pool)
+    finally:
+        _close(pool)
+
+
+def _close(pool) -> None:
+    if pool is not None:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _regress_checked(args, parser, fmu, fmu_vars, where, out, pool) -> int:
+    """``regress`` once the FMU is there: its fit, then --update or the check (in ``pool``'s
+    processes when started, :func:`prsm_fmu.regress.case_workers`)."""
+    from . import regress
+    from .regress.report import verdict_table, write_report
+    from .workers import IDLE_CORE, idle_cores
+
     for name, value in args.set or ():
         problem = _parameter_problem(fmu_vars, name, value)
         if problem:
@@ -809,7 +839,9 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
               "them into the FMU by rebuilding it (python -m fmu_build)")
         return 0
     params = dict(args.set) if args.set else None
-    results = regress.check(fmu, where, args.case, parameters=params)
+    workers = None if pool is not None or idle_cores() >= IDLE_CORE else 1
+    results = regress.check(fmu, where, args.case, parameters=params, workers=workers,
+                            pool=pool)
     print(verdict_table(results))
     failed = [r.case.name for r in results if not r.passed]
     if failed:

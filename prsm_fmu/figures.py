@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-__all__ = ["new_figure", "subplots", "set_margins", "save", "legend_outside", "Pyplotless"]
+__all__ = ["new_figure", "subplots", "set_margins", "save", "legend_outside"]
 
 #: margins [in]: left (tick labels + y label), right, bottom (tick labels + x label), top (two
 #: title lines)
@@ -58,30 +58,17 @@ def legend_outside(ax, **kw: Any):
     return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kw)
 
 
+#: zlib level of the PNGs: 1 compresses ~3x faster than Pillow's default 6 for files ~15 %
+#: larger; the pixels are the same
+PNG_COMPRESS_LEVEL = 1
+
+
 def save(fig, path: str | Path, dpi: int = 110) -> Path:
     """Write the figure as PNG (one draw), whole or not at all (:func:`prsm_fmu.atomic.atomic_path`:
     an interrupted run leaves no half-written file)."""
     from .atomic import atomic_path
 
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
+        fig.savefig(tmp, dpi=dpi, format="png",
+                    pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     return Path(path)
-
-
-class Pyplotless:
-    """The two calls of ``pyplot`` the figure writers use (``subplots``, ``rcParams``), made on
-    :func:`subplots` with the default margins."""
-
-    @staticmethod
-    def subplots(nrows: int = 1, ncols: int = 1, **kw: Any):
-        return subplots(nrows, ncols, **kw)
-
-    @property
-    def rcParams(self):
-        import matplotlib
-
-        return matplotlib.rcParams
-
-    @staticmethod
-    def close(fig) -> None:
-        """Nothing to release: the figure is not registered anywhere."""

@@ -46,7 +46,7 @@ _ROOT = Path(__file__).resolve().parents[1]
 
 def _sources() -> list[Path]:
     """The files an FMU is built from: prsm_fmu and fmu_build (Python sources, and the C
-    sources of the native FMU)."""
+    sources of the native FMU), and the regression baselines it packs (``extra/``)."""
     files: list[Path] = []
     for pkg in ("prsm_fmu", "fmu_build"):
         d = _ROOT / pkg
@@ -55,6 +55,9 @@ def _sources() -> list[Path]:
     native = _ROOT / "fmu_build" / "native"
     if native.is_dir():
         files += sorted(native.glob("*.[ch]"))
+    baselines = _ROOT / "baselines"
+    if baselines.is_dir():
+        files += sorted(p for p in baselines.iterdir() if p.is_file())
     return files
 
 

@@ -33,7 +33,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from prsm_fmu.atomic import atomic_path
-from prsm_fmu.csv_format import format_table
+from prsm_fmu.csv_format import format_blocks
 from prsm_fmu.figures import legend_outside, subplots
 from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MICROMETRE,
                             MILLIMETRE, MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
@@ -42,7 +42,8 @@ from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MIC
 from .master import Result
 
 __all__ = ["write_csv", "write_plots", "write_summary", "ordered_columns", "figure_writer", "figures",
-           "length_scale", "power_flows", "reference_values", "FigureWorkers", "FIGURES"]
+           "length_scale", "power_flows", "reference_values", "FigureWorkers", "FIGURES",
+           "spare_workers"]
 
 
 def ordered_columns(res: Result, first: Iterable[str] = ()) -> list[str]:
@@ -55,8 +56,8 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     """All outputs on the macro grid; header ``time [s],prsm.rod_position [m],...`` (UTF-8).
 
     Every value reads back as the same double, bit for bit (15 significant digits where they
-    suffice, else 17; :mod:`prsm_fmu.csv_format`, formatted with numpy: ~0.1 s for a
-    15 001-row run)."""
+    suffice, else 17; formatted with numpy, :mod:`prsm_fmu.csv_format`; its cost against the
+    old writer: ``benchmarks/command_cost.py``, item 3)."""
     cols = ordered_columns(res, first)
     path = Path(path)
     header = io.StringIO()
@@ -65,7 +66,8 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     data = np.column_stack([res.time] + [res[c] for c in cols])
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         fh.write(header.getvalue().encode("utf-8"))
-        fh.write(format_table(data))
+        for block in format_blocks(data):
+            fh.write(block)
     return path
 
 
@@ -96,10 +98,10 @@ def _stages(res: Result) -> int:
 
 
 def figure_writer(out_dir: str | Path, scene: str):
-    """(plt, save, files): ``plt.subplots`` makes a figure with fixed margins
-    (:mod:`prsm_fmu.figures`: no pyplot, no extra layout draw); ``save(fig, name)`` writes
-    ``<out_dir>/<scene>_<name>.png`` (110 dpi) and appends the path to ``files``."""
-    from prsm_fmu.figures import Pyplotless, save as save_png
+    """(save, files): ``save(fig, name)`` writes ``<out_dir>/<scene>_<name>.png``
+    (:func:`prsm_fmu.figures.save`) and appends the path to ``files``.  Figures are made with
+    :func:`prsm_fmu.figures.subplots` (no pyplot, fixed margins, one draw)."""
+    from prsm_fmu.figures import save as save_png
 
     out = Path(out_dir)
     files: list[Path] = []
@@ -107,7 +109,7 @@ def figure_writer(out_dir: str | Path, scene: str):
     def save(fig, name: str) -> None:
         files.append(save_png(fig, out / f"{scene}_{name}.png"))
 
-    return Pyplotless(), save, files
+    return save, files
 
 
 def length_scale(max_abs: float) -> tuple[float, str]:
@@ -352,14 +354,22 @@ def figures(res: Result, scene: str, reference=None, mode: str = "position",
     return out
 
 
-def _draw_some(args: tuple) -> list[Path]:
-    """Worker side of :func:`write_plots_parallel`: build and save the figures named."""
-    names, res, out_dir, scene, reference, mode, current_limit, kw = args
-    _, save, files = figure_writer(out_dir, scene)
-    for name, fig in figures(res, scene, reference, mode, current_limit, only=names,
+def _save_figures(res: Result, out_dir: str | Path, scene: str, reference, mode: str,
+                  current_limit: float | None, kw: dict[str, Any],
+                  only: Iterable[str] | None = None) -> list[Path]:
+    """Build and save the figures (``only``: those named); their paths in :data:`FIGURES`
+    order.  :func:`write_plots` here, :meth:`FigureWorkers.write_plots` in each worker."""
+    save, files = figure_writer(out_dir, scene)
+    for name, fig in figures(res, scene, reference, mode, current_limit, only=only,
                              **kw).items():
         save(fig, name)
     return files
+
+
+def _draw_some(args: tuple) -> list[Path]:
+    """Worker side of :meth:`FigureWorkers.write_plots`: the figures named."""
+    names, res, out_dir, scene, reference, mode, current_limit, kw = args
+    return _save_figures(res, out_dir, scene, reference, mode, current_limit, kw, only=names)
 
 
 def _warm() -> None:
@@ -368,34 +378,34 @@ def _warm() -> None:
     import matplotlib.figure  # noqa: F401
 
 
+def spare_workers() -> int:
+    """Figure processes worth starting: 2 where a core is idle beside the run
+    (:func:`prsm_fmu.workers.idle_cores` at least :data:`prsm_fmu.workers.IDLE_CORE`), else 0:
+    drawing in this process then ends sooner (position_step under a load of ~8 on 2 cores:
+    5.5-6.2 s wall in-process against 6.0-8.9 s with two processes, three runs each)."""
+    from prsm_fmu.workers import IDLE_CORE, idle_cores
+
+    return 2 if idle_cores() >= IDLE_CORE else 0
+
+
 class FigureWorkers:
     """Processes that draw a run's figures beside the parent (which writes the CSV meanwhile).
 
     Started before the run (:meth:`start`), they import matplotlib on the other core while the
-    co-simulation runs; :meth:`write_plots` then splits the figures between them.  On a
-    machine with one core, or if the processes cannot start, the figures are drawn in this
-    process (same files, same content)."""
+    co-simulation runs; :meth:`write_plots` then splits the figures between them.  With
+    ``workers`` < 2 (by default on a machine without a core to spare, :func:`spare_workers`),
+    or if the processes cannot start, the figures are drawn in this process (same files, same
+    content)."""
 
     def __init__(self, workers: int | None = None) -> None:
-        import os
-
-        self.n = workers if workers is not None else min(2, os.cpu_count() or 1)
+        self.n = workers if workers is not None else spare_workers()
         self.pool = None
 
     def start(self) -> "FigureWorkers":
-        if self.n < 2:
-            return self
-        try:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
+        if self.n >= 2:
+            from prsm_fmu.workers import started_pool
 
-            # spawn: fresh interpreters (nothing of this process's FMU or fmpy state copied)
-            self.pool = ProcessPoolExecutor(self.n, mp_context=multiprocessing.get_context("spawn"),
-                                            initializer=_warm)
-            for _ in range(self.n):           # start the workers now, not at the first task
-                self.pool.submit(int)
-        except (OSError, RuntimeError, ImportError):
-            self.pool = None
+            self.pool = started_pool(self.n, _warm)
         return self
 
     def write_plots(self, res: Result, out_dir: str | Path, scene: str, reference=None,
@@ -448,10 +458,6 @@ def write_plots(res: Result, out_dir: str | Path, scene: str, reference=None, mo
         Stage -> the carriers' equilibrium speed ratio (the steady-state solver's), drawn on
         ``<scene>_carriers.png``; the figure is written when the ratios are recorded and given.
     """
-    _, save, files = figure_writer(out_dir, scene)
-    for name, fig in figures(res, scene, reference, mode, current_limit,
-                             description=description, voltage_limit=voltage_limit,
-                             n_rollers=n_rollers,
-                             carrier_equilibrium=carrier_equilibrium).items():
-        save(fig, name)
-    return files
+    return _save_figures(res, out_dir, scene, reference, mode, current_limit,
+                         dict(description=description, voltage_limit=voltage_limit,
+                              n_rollers=n_rollers, carrier_equilibrium=carrier_equilibrium))

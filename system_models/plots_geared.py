@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from prsm_fmu.figures import subplots
 from prsm_fmu.units import AMPERE, KILONEWTON, MICROMETRE, MILLIMETRE, NEWTON_METRE, SECOND, label
 
 from .master import Result
@@ -33,12 +34,12 @@ def write_geared_plots(res: Result, out_dir: str | Path, scene: str, reference=N
     [m/rad] carry it to the rod (r c / N); ``backlash`` b [rad] and ``current_limit`` [A] are
     drawn as labelled lines.
     """
-    plt, save, files = figure_writer(out_dir, scene)
+    save, files = figure_writer(out_dir, scene)
     t = res.time
     sub = f"\n{description}" if description else ""
 
     k = lead_per_radian / ratio
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True,
+    fig, (a1, a2) = subplots(2, 1, figsize=(8, 6), sharex=True,
                                  gridspec_kw={"height_ratios": [2, 1]})
     x = res["prsm.rod_position"]
     a1.plot(t, 1e3 * x, label="rod position")
@@ -57,7 +58,7 @@ def write_geared_plots(res: Result, out_dir: str | Path, scene: str, reference=N
     a1.set_title(f"{scene}: rod position{sub}", fontsize=10)
     save(fig, "position")
 
-    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(8, 8.5), sharex=True)
+    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
     a1.plot(t, res["controller.current_command"], lw=0.6, label="current command i*")
     a1.plot(t, res["motor.current"], lw=0.8, label="current after the bus delay")
     if math.isfinite(current_limit):
@@ -79,7 +80,7 @@ def write_geared_plots(res: Result, out_dir: str | Path, scene: str, reference=N
     a1.set_title(f"{scene}: motor current, torque and angle sensor{sub}", fontsize=10)
     save(fig, "motor")
 
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, (a1, a2) = subplots(2, 1, figsize=(8, 6), sharex=True)
     a1.plot(t, 1e3 * res["gear.phi_rel"], label="angle over the gear φ_rel (output side)")
     if backlash > 0:
         a1.axhline(0.5e3 * backlash, color="k", ls=":", lw=0.9,
@@ -98,7 +99,7 @@ def write_geared_plots(res: Result, out_dir: str | Path, scene: str, reference=N
     a1.set_title(f"{scene}: gear backlash, compliance and losses{sub}", fontsize=10)
     save(fig, "gear")
 
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = subplots(figsize=(8, 4))
     ax.plot(t, 1e-3 * res["load.contact_force"], lw=0.8, label="contact force rod ↔ load")
     ax.plot(t, 1e-3 * res["load.external_force"], "k--", lw=0.9,
             label="external force on the load (positive resists extension)")

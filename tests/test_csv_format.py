@@ -102,3 +102,23 @@ def test_write_csv_reads_back_bit_for_bit(tmp_path):
                                       ("motor.i_q", "prsm.rod_position", "prsm.efficiency",
                                        "load.force")]):
         assert _same_bits(col, back[:, j])
+
+
+def test_values_where_the_exponent_gets_a_third_digit_round_trip():
+    # the exponent's digits: two up to |e| = 99, three beyond (1e-100, 1e+100); 200 neighbours
+    # each side of 1e-99, 2e-99, 9e99, 1e100 and 9.999...e99 (which 15 digits round up to
+    # 1e+100), both signs
+    edges = np.array([1e-100, 1e-99, 2e-99, 9e99, 9.9999999999999999e99, 1e100])
+    x = [edges]
+    for direction in (0.0, np.inf):
+        y = edges.copy()
+        for _ in range(200):
+            y = np.nextafter(y, direction)
+            x.append(y)
+    x = np.concatenate(x)
+    x = np.concatenate([x, -x])
+    print(f"{x.size} values around the two-digit exponents' ends")
+    texts = format_values(x)
+    assert _same_bits(x, _read_back(texts))
+    # two exponent digits where they suffice, as %e writes them
+    assert format_values(np.array([1e-99, 1e99, 1e100])) == ["1e-99", "1e+99", "1e+100"]

@@ -50,17 +50,21 @@ GEOMETRY = ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "screw_
 
 
 @functools.cache
-def built_native() -> dict[str, Path]:
-    """Build PRSM2/PRSM3-native.fmu once per test session (shared by pytest-xdist's workers:
-    tests/conftest.py), in a child process."""
+def built_native(platforms: tuple[str, ...] = ("linux64",)) -> dict[str, Path]:
+    """Build PRSM1/2/3-native.fmu once per test session for ``platforms`` (shared by
+    pytest-xdist's workers: tests/conftest.py), in a child process.  By default for linux64
+    only, the binary the tests run: the cross-compiled win64 and darwin64 ones (on a fresh
+    machine Zig first builds its runtimes for them, minutes) are built and read by
+    tests/test_platform_binaries.py alone."""
     def build(dest: Path) -> None:
-        proc = subprocess.run([sys.executable, "-m", "fmu_build", "--native", *NATIVE, "--dest",
-                               str(dest)], env=subprocess_env(), capture_output=True, text=True,
-                              timeout=300)
+        chosen = [a for p in platforms for a in ("--platform", p)]
+        proc = subprocess.run([sys.executable, "-m", "fmu_build", "--native", *chosen, *NATIVE,
+                               "--dest", str(dest)], env=subprocess_env(), capture_output=True,
+                              text=True, timeout=600)
         assert proc.returncode == 0, \
             f"python -m fmu_build --native failed:\n{proc.stdout}\n{proc.stderr}"
 
-    dest = shared_build("prsm_native", build)
+    dest = shared_build("prsm_native_" + "_".join(platforms), build)
     return {n: dest / f"{n}-native.fmu" for n in NATIVE}
 
 

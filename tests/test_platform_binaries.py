@@ -1,8 +1,9 @@
 """The native FMU's binaries for linux64, win64 and darwin64, and the engine library, read back.
 
-The FMU is the one tests/test_native_fmu.py builds (once per session, ``python -m fmu_build
---native``: every platform by default); fmpy and the C host of tests/test_fmu_c_host.py run its
-linux64 binary there.  Here each binary is read with fmu_build.binary_check and, where the
+The FMU is built here for every platform (once per session, ``python -m fmu_build --native
+--platform linux64 --platform win64 --platform darwin64``: tests/test_native_fmu.py's
+``built_native``, whose other users build linux64 only); fmpy and the C host of
+tests/test_fmu_c_host.py run its linux64 binary there.  Here each binary is read with fmu_build.binary_check and, where the
 machine has one, with an independent tool (binutils' readelf/objdump, LLVM's llvm-nm/llvm-objdump).
 
 Expected values come from the FMI 2.0 standard (the functions a co-simulation FMU exports,
@@ -34,6 +35,9 @@ from fmu_build.builder import BuildError  # noqa: E402
 
 from test_native_fmu import built_native  # noqa: E402
 
+#: the platforms built here (FMI 2.0 folder names)
+EVERY_PLATFORM = ("linux64", "win64", "darwin64")
+
 #: FMI 2.0.4 §2.1.2 (common functions, 25) and §4.2 (co-simulation, 9): 34 functions
 FMI2_CS = """fmi2GetTypesPlatform fmi2GetVersion fmi2SetDebugLogging fmi2Instantiate fmi2FreeInstance
 fmi2SetupExperiment fmi2EnterInitializationMode fmi2ExitInitializationMode fmi2Terminate fmi2Reset
@@ -48,7 +52,7 @@ fmi2GetRealStatus fmi2GetIntegerStatus fmi2GetBooleanStatus fmi2GetStringStatus"
 def binaries(tmp_path_factory) -> dict[str, Path]:
     """The native PRSM2 FMU's binaries, extracted: platform folder -> library."""
     d = tmp_path_factory.mktemp("native_binaries")
-    with zipfile.ZipFile(built_native()["PRSM2"]) as z:
+    with zipfile.ZipFile(built_native(EVERY_PLATFORM)["PRSM2"]) as z:
         names = [n for n in z.namelist() if n.startswith("binaries/")]
         z.extractall(d, names)
     return {Path(n).parent.name: d / n for n in names}
@@ -182,3 +186,12 @@ def test_engine_library_for_pythonfmus_platforms(platform, tmp_path):
         dll = ctypes.CDLL(str(lib))
         # two stages: 9 reals per stage + 6 = 24; 2 ints per stage + 4 = 8
         assert (dll.prsm_api_n_reals(), dll.prsm_api_n_ints()) == (24, 8)
+
+
+def test_the_fmi3_fmu_carries_every_platform_each_exporting_fmi3(tmp_path):
+    from test_fmi3 import check_fmi3_binaries
+
+    fmu3 = built_native(EVERY_PLATFORM)["PRSM2"].with_name("PRSM2-native-fmi3.fmu")
+    # FMI 3.0 names a folder per architecture: darwin64's universal file becomes two
+    assert check_fmi3_binaries(fmu3, tmp_path) == ["aarch64-darwin", "x86_64-darwin",
+                                                   "x86_64-linux", "x86_64-windows"]

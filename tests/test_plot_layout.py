@@ -198,3 +198,50 @@ def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path):
     assert [p.name for p in there] == [p.name for p in here]
     for a, b in zip(here, there):
         assert a.read_bytes() == b.read_bytes(), a.name
+
+
+def test_geared_figures_show_the_error_against_the_reference_carried_to_the_rod(saved,
+                                                                                tmp_path):
+    from system_models.plots_geared import write_geared_plots
+
+    n = 201
+    t = np.linspace(0.0, 0.02, n)
+    theta_ref = 50.0 * t                              # motor-angle reference [rad]
+    ratio, lead = 10.0, 0.5e-3                        # gear N, rod per screw radian c [m/rad]
+    # the rod 3 µm behind the reference carried to the rod: 50 t · 0.5e-3 / 10 = 2.5e-3 t [m]
+    x = 2.5e-3 * t - 3e-6
+    z = np.zeros(n)
+    vals = {"prsm.rod_position": x, "load.load_position": x, "controller.current_command": z,
+            "motor.current": z, "motor.torque": z, "controller.measured_angle": z,
+            "gear.motor_angle": z, "gear.phi_rel": z, "gear.loss_torque": z,
+            "gear.output_torque": z, "load.contact_force": z, "load.external_force": z,
+            "load.stop_force": z}
+    files = write_geared_plots(Result(t, vals, {k: "" for k in vals}), tmp_path, "g",
+                               lambda s: 50.0 * s, ratio=ratio, lead_per_radian=lead,
+                               backlash=1e-3, current_limit=20.0)
+    assert [p.name for p in files] == ["g_position.png", "g_motor.png", "g_gear.png",
+                                       "g_forces.png"]
+    error_axes = saved["g_position.png"].axes[1]
+    assert error_axes.get_ylabel() == "error [µm]"
+    (line,) = error_axes.get_lines()
+    # rod − reference × c/N = −3 µm throughout
+    np.testing.assert_allclose(line.get_ydata(), -3.0, atol=1e-9)
+
+
+def test_figure_processes_only_where_a_core_is_idle(monkeypatch):
+    """Two drawing processes on an idle 2-core machine; none under a load of 8 (the figures
+    are then drawn in the command's process) nor on one core."""
+    import os
+
+    from system_models.output import FigureWorkers
+
+    for cores, load, expected in ((2, 0.2, 2), (2, 0.6, 0), (2, 8.0, 0), (1, 0.0, 0),
+                                  (8, 3.0, 2)):
+        monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
+        monkeypatch.setattr(os, "getloadavg", lambda lo=load: (lo, lo, lo))
+        assert FigureWorkers().n == expected, (cores, load)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(os, "getloadavg", lambda: (8.0, 8.0, 8.0))
+    workers = FigureWorkers().start()
+    assert workers.pool is None                     # nothing started
+    workers.close()

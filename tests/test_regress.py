@@ -2,7 +2,7 @@
 
 * the tube itself on synthetic signals (value and time tolerance);
 * ``prsm-fmu regress`` builds the FMU in a child process and every case passes (a rebuilt FMU
-  with no change passes);
+  with no change passes); a second run uses that FMU, one older than its sources is stale;
 * the FMU carries the baselines in ``extra/baselines`` and they check the same way;
 * µ_SR + 1 % (an FMU start value changed for the run, the baselines untouched) fails exactly on
   the outputs friction acts on and passes on those it cannot reach (table in the module);
@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import zipfile
 from pathlib import Path
@@ -122,13 +123,22 @@ def test_tube_with_undefined_samples():
 
 
 def test_regress_builds_and_a_rebuilt_fmu_passes(tmp_path, capsys):
-    """The command itself: FMU built in a child process, every case inside its tubes."""
+    """The command itself: FMU built in a child process, every case inside its tubes; a second
+    run uses that FMU, and one dated before its sources would be built again."""
     code = cli.main(["regress", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert code == 0, out
     assert "PASS: 7 cases" in out
-    assert (tmp_path / "fmu" / "PRSM2.fmu").is_file()
+    fmu = tmp_path / "fmu" / "PRSM2.fmu"
+    assert fmu.is_file() and "(missing;" in out
     assert not (tmp_path / "report.html").exists()
+    built = fmu.stat().st_mtime_ns
+    assert cli.main(["regress", "--out", str(tmp_path), "--case", "startup_li2021_kinematic"]) == 0
+    again = capsys.readouterr().out
+    assert f"using {fmu}" in again and "building" not in again, again
+    assert fmu.stat().st_mtime_ns == built                # not rewritten
+    os.utime(fmu, (0, 0))                                 # 1970: older than every source
+    assert regress.why_build(fmu).startswith("older than ")
 
 
 def _renamed_output(src: Path, dest: Path, old: str, new: str) -> Path:

@@ -32,7 +32,8 @@ from ..command import child_failure, deferred_interrupt
 from .tube import Tolerance, TubeResult, compare
 
 __all__ = ["ROOT", "DEFAULT_DIR", "OUTPUTS", "Case", "Baseline", "CaseResult", "load_cases",
-           "read_csv", "write_csv", "read_baselines", "build_fmu", "simulate_case",
+           "read_csv", "write_csv", "read_baselines", "baseline_columns", "build_fmu",
+           "why_build", "case_workers", "simulate_case",
            "check_case", "check", "update"]
 
 #: the repository (parent of the prsm_fmu package)
@@ -137,16 +138,32 @@ def load_cases(where=DEFAULT_DIR) -> list[Case]:
     return cases
 
 
-def read_csv(text: str) -> Baseline:
-    """Parse a baseline CSV (header ``name [unit]``, first column ``time [s]``)."""
-    rows = list(csv.reader(io.StringIO(text)))
+def _columns(header: str) -> tuple[list[str], dict[str, str]]:
+    """Names and units of a baseline's header line ``name [unit],...``."""
     names, units = [], {}
-    for h in rows[0]:
+    for h in next(csv.reader([header])):
         n, _, u = h.partition(" [")
         names.append(n)
         units[n] = u.rstrip("]")
-    data = np.array([[float(v) for v in r] for r in rows[1:] if r], dtype=float)
+    return names, units
+
+
+def read_csv(text: str) -> Baseline:
+    """Parse a baseline CSV (header ``name [unit]``, first column ``time [s]``); the numbers
+    by numpy's parser (correctly rounded, as ``float()``)."""
+    header, _, body = text.partition("\n")
+    names, units = _columns(header)
+    data = np.loadtxt(io.StringIO(body), delimiter=",", dtype=float, ndmin=2)
     return Baseline(data[:, 0], {n: data[:, j] for j, n in enumerate(names) if j > 0}, units)
+
+
+def baseline_columns(where, case: str) -> list[str] | None:
+    """The output names of a case's baseline (its header), None if it has none."""
+    try:
+        header = _read_text(where, f"{case}.csv").partition("\n")[0]
+    except FileNotFoundError:
+        return None
+    return _columns(header)[0][1:]
 
 
 def write_csv(path: Path, time: np.ndarray, values: dict[str, np.ndarray],
@@ -205,12 +222,11 @@ def fmu_mismatch(variables: Mapping[str, Any], where=DEFAULT_DIR,
 
     n_fmu = _stage_count(variables)
     chosen = [c for c in load_cases(where) if cases is None or c.name in cases]
-    bases = read_baselines(where, chosen)
     for c in chosen:
-        b = bases.get(c.name)
-        if b is None:
+        columns = baseline_columns(where, c.name)
+        if columns is None:
             continue
-        prsm = [n.removeprefix("prsm.") for n in b.values if n.startswith("prsm.")]
+        prsm = [n.removeprefix("prsm.") for n in columns if n.startswith("prsm.")]
         n_case = _stage_count(prsm)
         if n_case != n_fmu:
             return (f"the FMU is a {n_fmu}-stage PRSM but case {c.name} is a {n_case}-stage "
@@ -249,6 +265,29 @@ def build_fmu(dest: Path, name: str = "PRSM2") -> Path:
         raise RuntimeError(child_failure(f"python -m fmu_build {name}", proc.returncode,
                                          proc.stderr, proc.stdout))
     return fmu
+
+
+def why_build(fmu: Path) -> str | None:
+    """Why ``fmu`` must be (re)built ("missing", or older than a file it is built from:
+    :func:`system_models.fmu.fmu_is_stale`), None if it is up to date."""
+    from system_models.fmu import fmu_is_stale
+
+    return fmu_is_stale(fmu)
+
+
+def _warm() -> None:
+    """A case worker's start: what a run imports, while the parent builds the FMU."""
+    import fmpy.fmi2  # noqa: F401
+    import system_models.run  # noqa: F401
+
+
+def case_workers(n: int | None = None):
+    """Started worker processes for :func:`check` (``n``, default the cores), importing what the
+    cases need now; None for one core or if processes cannot start."""
+    from ..workers import started_pool
+
+    n = n if n is not None else (os.cpu_count() or 1)
+    return started_pool(n, _warm) if n > 1 else None
 
 
 def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
@@ -295,11 +334,12 @@ def check_case(case: Case, baseline: Baseline, result) -> CaseResult:
 
 
 def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
-          parameters: dict[str, Any] | None = None, workers: int | None = None
-          ) -> list[CaseResult]:
+          parameters: dict[str, Any] | None = None, workers: int | None = None,
+          pool=None) -> list[CaseResult]:
     """Run every case (or those named) on ``fmu`` and compare with the baselines at ``where``
     (a directory or an FMU with ``extra/baselines``); the cases run in ``workers`` processes
-    (default: the cores; 1: in this process)."""
+    (default: the cores; 1: in this process), or in ``pool`` (:func:`case_workers`, started
+    earlier; the caller shuts it down)."""
     all_cases = load_cases(where)
     chosen = [c for c in all_cases if cases is None or c.name in cases]
     unknown = set(cases or ()) - {c.name for c in all_cases}
@@ -307,9 +347,11 @@ def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
         raise ValueError(f"unknown case(s) {sorted(unknown)}: the cases are "
                          f"{', '.join(c.name for c in all_cases)}")
     bases = read_baselines(where, chosen)
-    runnable = [c for c in chosen if c.name in bases]
+    # the longest first (by the baseline's points): the last case to start is a short one
+    runnable = sorted((c for c in chosen if c.name in bases),
+                      key=lambda c: -bases[c.name].time.size)
     runs = dict(zip((c.name for c in runnable),
-                    _run_cases(runnable, fmu, parameters, workers)))
+                    _run_cases(runnable, fmu, parameters, workers, pool)))
     out = []
     for c in chosen:
         if c.name not in bases:
@@ -340,24 +382,26 @@ def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None, progress
 
 
 def _run_cases(cases: list[Case], fmu: Path, parameters: dict[str, Any] | None,
-               workers: int | None) -> list:
+               workers: int | None, pool=None) -> list:
     """The cases' Results (or failure messages), in order: the cases are independent, so with
-    ``workers`` > 1 they run in that many fresh processes (each loads the FMU once per case as
-    the serial run does), else one after the other in this process."""
+    ``workers`` > 1 (or a ``pool``) they run in that many fresh processes (each loads the FMU
+    once per case as the serial run does), else one after the other in this process."""
     n = min(workers if workers is not None else (os.cpu_count() or 1), len(cases))
-    if n <= 1:
+    if pool is None and n <= 1:
         # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
         # FMU's fatal error, recorded as a failing case, and the next case would run)
         with deferred_interrupt() as interrupted:
             return [_run_case(c, fmu, parameters, lambda t, t_end: interrupted())
                     for c in cases]
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    # spawn: a fresh interpreter per worker (no FMU or fmpy state copied from this process)
-    with ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return list(pool.map(_run_case, cases, [fmu] * len(cases),
-                             [parameters] * len(cases)))
+    own = pool is None
+    pool = pool if pool is not None else case_workers(n)
+    if pool is None:                               # processes cannot start here
+        return _run_cases(cases, fmu, parameters, 1)
+    try:
+        return list(pool.map(_run_case, cases, [fmu] * len(cases), [parameters] * len(cases)))
+    finally:
+        if own:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None) -> str:
