@@ -21,12 +21,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
-from weakref import WeakKeyDictionary
 
 __all__ = ["Range", "fmt", "STAGE_RANGES", "MECHANISM_RANGES", "SOLVER_RANGES", "FmuRule",
            "fmu_rules", "max_rollers", "spline_rule", "bearing_rule", "INPUT_BOUNDS",
            "STATE_BOUNDS", "SMALLEST", "MAX_QUOTIENT", "input_violation", "state_violation",
-           "SPLINE_RADIUS_MIN_FRACTION", "KINETIC_ENERGY_MAX", "speed_bounds", "model_speed_bounds"]
+           "SPLINE_RADIUS_MIN_FRACTION", "KINETIC_ENERGY_MAX", "speed_bounds"]
 
 #: the smallest spline radius relative to the screw's pitch radius (Li et al. (2021), eq. 12:
 #: the spline friction µ_SS |M| / r_SS grows without bound as r_SS -> 0; below r_S/100 the bore
@@ -289,34 +288,10 @@ def speed_bounds(inertias: Sequence[float]) -> tuple[float, ...]:
                  for j in inertias)
 
 
-_SPEED_BOUNDS: WeakKeyDictionary = WeakKeyDictionary()
-
-
-def model_speed_bounds(model: Any, n: int) -> tuple[float, ...]:
-    """:func:`speed_bounds` of ``model``'s state of length ``n`` (speeds x[1] .. x[n-4]): J_i is
-    twice the kinetic energy (``Model.kinetic_energy`` of the model's own level, for ``auto``
-    the dynamic level's) of the state with speed i at 1 rad/s and everything else 0; cached
-    per model.  The native FMU computes the same J_i from its model's equivalent and carrier
-    inertias with the same operations (prsm_fmi2.c)."""
-    key = _SPEED_BOUNDS.get(model)
-    if key is not None and key[0] == n:
-        return key[1]
-    from .models.base import Model
-
-    inertias = []
-    for i in range(1, n - 3):
-        x = [0.0] * n
-        x[i] = 1.0
-        inertias.append(2.0 * Model.kinetic_energy(model, x, (0.0, 0.0)))
-    bounds = speed_bounds(inertias)
-    _SPEED_BOUNDS[model] = (n, bounds)
-    return bounds
-
-
 def state_violation(x, speeds: Sequence[float] | None = None) -> str | None:
     """Why the model state x = (angle, speed, [carrier speeds], input, output and friction
     work) is out of :data:`STATE_BOUNDS`, out of the speed bounds ``speeds`` (one per speed
-    state, :func:`model_speed_bounds`; None: not checked) or would make a quotient among the
+    state, :func:`prsm_fmu.models.base.model_speed_bounds`; None: not checked) or would make a quotient among the
     outputs exceed :data:`MAX_QUOTIENT`, or None."""
     n = len(x)
     for i, v in enumerate(x):

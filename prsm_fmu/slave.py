@@ -64,12 +64,12 @@ from .configure import (ATOL_FACTOR, AUTO_FIDELITY, ENUMERATIONS, FIDELITY_CHOIC
                         FIDELITY_ITEMS, LEVEL_CODES, MAX_INITIAL_ANGLE, MAX_INITIAL_SPEED,
                         MAX_SUBSTEPS_RANGE, STEPPER_CHOICES, STEPPER_ITEMS, TOLERANCE_RANGE,
                         active_level, configure, fidelity_name)
-from .param_ranges import input_violation, model_speed_bounds, state_violation
+from .param_ranges import input_violation, state_violation
 from .params import (MAX_MU_DIFFERENTIAL, MAX_MU_VISCOUS, MAX_THREADS_PER_ROLLER,
                      MechanismParams, StageParams, stage_field_names)
 from .engine import (ENGINE_ENV, fallback_reason, is_engine, library_name,
                      library_solves_geometry, platform_folder)
-from .models.base import undefined_allowed
+from .models.base import model_speed_bounds, undefined_allowed
 from .simulate import DEFAULT_STEPPER
 from .steppers import StepFailure
 

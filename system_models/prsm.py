@@ -20,7 +20,8 @@ from typing import Any
 
 from prsm_fmu import presets
 from prsm_fmu.configure import ATOL_FACTOR, AUTO_FIDELITY, active_level, configure
-from prsm_fmu.param_ranges import input_violation, model_speed_bounds, state_violation
+from prsm_fmu.models.base import model_speed_bounds
+from prsm_fmu.param_ranges import input_violation, state_violation
 from prsm_fmu.params import MECHANISM_FIELD_NAMES, MechanismParams, stage_field_names
 from prsm_fmu.simulate import DEFAULT_STEPPER
 from prsm_fmu.steppers import StepFailure

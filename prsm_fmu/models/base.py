@@ -22,8 +22,11 @@ from __future__ import annotations
 import math
 import sys
 from abc import ABC
+from typing import Any
+from weakref import WeakKeyDictionary
 
 from ..mechanics import Mechanism
+from ..param_ranges import speed_bounds
 from ..params import MAX_SCREW_SPEED, MechanismParams
 
 DRIVES = ("torque", "speed")
@@ -333,3 +336,25 @@ def overall_efficiency(input_work: float, output_work: float) -> float:
 def is_finite_state(x) -> bool:
     """Whether every state component is finite."""
     return all(math.isfinite(v) for v in x)
+
+
+_SPEED_BOUNDS: WeakKeyDictionary = WeakKeyDictionary()
+
+
+def model_speed_bounds(model: Any, n: int) -> tuple[float, ...]:
+    """:func:`prsm_fmu.param_ranges.speed_bounds` of ``model``'s state of length ``n`` (speeds x[1] .. x[n-4]): J_i is
+    twice the kinetic energy (``Model.kinetic_energy`` of the model's own level, for ``auto``
+    the dynamic level's) of the state with speed i at 1 rad/s and everything else 0; cached
+    per model.  The native FMU computes the same J_i from its model's equivalent and carrier
+    inertias with the same operations (prsm_fmi2.c)."""
+    key = _SPEED_BOUNDS.get(model)
+    if key is not None and key[0] == n:
+        return key[1]
+    inertias = []
+    for i in range(1, n - 3):
+        x = [0.0] * n
+        x[i] = 1.0
+        inertias.append(2.0 * Model.kinetic_energy(model, x, (0.0, 0.0)))
+    bounds = speed_bounds(inertias)
+    _SPEED_BOUNDS[model] = (n, bounds)
+    return bounds
