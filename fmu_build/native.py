@@ -64,7 +64,7 @@ from prsm_fmu.steppers.base import _SQRT_EPS
 
 from . import model_description, platforms
 from .builder import BuildError, build_fmu, validate
-from .native_ranges import ranges_header
+from .native_ranges import bounds_defines, ranges_header
 
 __all__ = ["build_native", "native_name", "structural_start", "NATIVE_LEVELS", "STRUCTURAL",
            "SOURCES", "COMPILE_FLAGS", "FMI2_COMMON", "FMI2_COSIMULATION", "fmi2_functions"]
@@ -74,7 +74,7 @@ NATIVE_LEVELS = ("kinematic", "quasi-static", "dynamic")
 #: the C sources (fmu_build/native)
 SOURCE_DIR = Path(__file__).resolve().parent / "native"
 SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_fmi2_me.c")
-HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_quantity.h")
+HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_quantity.h", "prsm_bounds.h")
 #: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
 INCLUDED = ("prsm_fmi2.c",)
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
@@ -243,6 +243,8 @@ def constants_header(params: MechanismParams) -> str:
 
 /* |screw speed| [rad/s] at or below which no power flows (prsm_fmu.models.base.STANDSTILL_SPEED) */
 #define PRSM_STANDSTILL_SPEED {_hex(STANDSTILL_SPEED)}
+
+{bounds_defines()}
 
 /* per stage, flank "+" then "-": slip Jacobians a (x, y, z) and b (x, y), contact point (x, y),
    axial normal n_z and [P x n]_z (prsm_fmu.mechanics._Flank.consts) */

@@ -35,6 +35,7 @@
 #include "fmi2Functions.h"
 #include "prsm_model.h"
 #include "prsm_quantity.h"
+#include "prsm_bounds.h"
 
 enum { T_REAL, T_INTEGER, T_BOOLEAN, T_STRING, T_ENUM };
 enum { K_INPUT, K_OUTPUT, K_COUNTER, K_PARAM, K_STRUCTURAL };
@@ -200,60 +201,6 @@ static int check_ranges(const snapshot *s, char *msg, int len) {
                  r->lo_open ? "(" : "[", lo, has_hi ? up : "inf",
                  !has_hi ? ")" : r->hi_open ? ")" : "]", sp, r->unit,
                  r->note[0] ? " (" : "", r->note, r->note[0] ? ")" : "");
-        return -1;
-    }
-    return 0;
-}
-
-/* ---- bounds of the inputs and of the state (param_ranges.input_violation, state_violation) -- */
-static int in_bounds(double v, double bound) {
-    return v == 0.0 || (PRSM_SMALLEST <= fabs(v) && fabs(v) <= bound);
-}
-
-static int input_violation(const double u[2], char *msg, int len) {
-    static const char *const names[2] = {"screw_torque", "load_force"}, *const units[2] = {"N.m", "N"};
-    const double bounds[2] = {PRSM_MAX_TORQUE, PRSM_MAX_LOAD};
-    for (int i = 0; i < 2; i++) {
-        if (in_bounds(u[i], bounds[i])) continue;
-        char v[40], lo[40], hi[40];
-        prsm_fmt_num(v, sizeof v, u[i]);
-        prsm_fmt_num(lo, sizeof lo, PRSM_SMALLEST);
-        prsm_fmt_num(hi, sizeof hi, bounds[i]);
-        snprintf(msg, (size_t)len, "input %s = %s %s is out of range: must be 0 or of magnitude in "
-                 "[%s, %s] %s", names[i], v, units[i], lo, hi, units[i]);
-        return -1;
-    }
-    return 0;
-}
-
-static int state_violation(const double *x, int n, char *msg, int len) {
-    char v[40], w[40], q[40];
-    for (int i = 0; i < n; i++) {
-        int angle = i == 0, work = i >= n - 3;
-        double bound = angle ? PRSM_MAX_ANGLE : work ? PRSM_MAX_WORK : PRSM_MAX_SPEED;
-        if (fabs(x[i]) <= bound) continue;
-        prsm_fmt_num(v, sizeof v, x[i]);
-        prsm_fmt_num(w, sizeof w, bound);
-        const char *unit = angle ? "rad" : work ? "J" : "rad/s";
-        snprintf(msg, (size_t)len, "state x[%d] (%s) = %s %s is out of range: must be in [-%s, %s] %s",
-                 i, angle ? "angle" : work ? "work" : "speed", v, unit, w, w, unit);
-        return -1;
-    }
-    double omega = x[1], w_in = x[n - 3], w_out = x[n - 2];
-    prsm_fmt_num(q, sizeof q, PRSM_MAX_QUOTIENT);
-    for (int i = 2; i < n - 3; i++)
-        if (omega != 0.0 && fabs(x[i]) > PRSM_MAX_QUOTIENT * fabs(omega)) {
-            prsm_fmt_num(v, sizeof v, x[i]);
-            prsm_fmt_num(w, sizeof w, omega);
-            snprintf(msg, (size_t)len, "state x[%d] (carrier speed) = %s rad/s is out of range for the "
-                     "screw speed %s rad/s: carrier_speed_ratio must stay within %s", i, v, w, q);
-            return -1;
-        }
-    if (w_in > 0.0 && fabs(w_out) > PRSM_MAX_QUOTIENT * w_in) {
-        prsm_fmt_num(v, sizeof v, w_out);
-        prsm_fmt_num(w, sizeof w, w_in);
-        snprintf(msg, (size_t)len, "state x[%d] (output work) = %s J is out of range for the input "
-                 "work %s J: overall_efficiency must stay within %s", n - 2, v, w, q);
         return -1;
     }
     return 0;
@@ -738,7 +685,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
                 t, c->s.t);
         return fmi2Error;
     }
-    if (input_violation(u, reason, sizeof reason)) return refuse_call(c, t, h, reason);
+    if (prsm_input_violation(u, reason, sizeof reason)) return refuse_call(c, t, h, reason);
     double x_new[PRSM_NX_MAX] = {0.0};
     prsm_stats stats;
     char msg[700];
@@ -747,7 +694,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
         snprintf(reason, sizeof reason, "integration failed: %s", msg);
         return refuse_call(c, t, h, reason);
     }
-    if (state_violation(x_new, c->model.nx, msg, sizeof msg)) {   /* outputs could overflow */
+    if (prsm_state_violation(x_new, c->model.nx, msg, sizeof msg)) {   /* outputs could overflow */
         c->s.mem = mem_before;
         snprintf(reason, sizeof reason, "the step would end out of the state's bounds: %s", msg);
         return refuse_call(c, t, h, reason);
@@ -888,13 +835,13 @@ static int check_snapshot(const snapshot *s, prsm_model *m, char *msg, int len) 
             snprintf(msg, (size_t)len, "state vector or held inputs not finite");
             return -1;
         }
-        if (input_violation(s->u_held, msg, len)) return -1;
+        if (prsm_input_violation(s->u_held, msg, len)) return -1;
         char why[600];
         if (build_model(s, m, why, sizeof why)) {
             snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
             return -1;
         }
-        if (state_violation(s->x, m->nx, msg, len)) return -1;
+        if (prsm_state_violation(s->x, m->nx, msg, len)) return -1;
         if (s->stats[2] != model_level(m)) {
             snprintf(msg, (size_t)len, "step_fidelity %d does not match the fidelity parameter", s->stats[2]);
             return -1;
