@@ -516,6 +516,12 @@ class PRSMSlave(Fmi2Slave):
         self._out_index: dict[int, int] = {}
         #: what fmi2GetReal read last and where its values are (_read_plan)
         self._last_read: tuple = (None, None, None, None)
+        #: value references of the step counters -> their place in _counters(); what
+        #: fmi2GetInteger read last and their places (None: not a step counter)
+        self._counter_index: dict[int, int] = {}
+        self._last_counters: tuple = (None, [None])
+        #: the value references of the inputs screw_torque and load_force
+        self._input_vrs: list[int] = []
         #: value reference of an Integer or Enumeration output -> its getter (fmi2GetInteger's)
         self._iget: dict[int, Callable[[], int]] = {}
         self._rset: dict[int, Callable[[Any], None]] = {}
@@ -577,6 +583,11 @@ class PRSMSlave(Fmi2Slave):
                     self._out_index[var.value_reference] = i_out[row.name]
                 elif row.type in _ACCESS["Integer"]:
                     self._iget[var.value_reference] = getter
+                    counter = list(STEP_COUNTERS).index(row.name)
+                    if counter < 3:         # rhs calls, substeps, level: _counters()
+                        self._counter_index[var.value_reference] = counter
+            elif row.causality == "input":
+                self._input_vrs.append(var.value_reference)
             if row.type == "Real":
                 self._rget[var.value_reference] = getter
                 if setter is not None:
@@ -691,8 +702,23 @@ class PRSMSlave(Fmi2Slave):
             positions = ALL_OUTPUTS
         return vrs, positions, from_state, states
 
-    @_guarded("fmi2SetReal")
     def set_real(self, vrs, values):
+        """fmi2SetReal: a host's step loop sets both inputs, in their order, every step: those
+        are written here; any other call goes through :meth:`_set_real`."""
+        if vrs == self._input_vrs and self._phase != "terminated":
+            try:
+                torque, load = float(values[0]), float(values[1])
+            except Exception:  # noqa: BLE001 - _set_real says what is wrong
+                pass
+            else:
+                u = self._u
+                u[0] = torque
+                u[1] = load
+                return
+        self._set_real(vrs, values)
+
+    @_guarded("fmi2SetReal")
+    def _set_real(self, vrs, values):
         s = self._rset
         for vr, value in zip(vrs, values):
             setter = s.get(vr)
@@ -701,8 +727,21 @@ class PRSMSlave(Fmi2Slave):
             else:
                 setter(value)
 
-    @_guarded("fmi2GetInteger", lambda self, vrs: [0] * len(vrs))
     def get_integer(self, vrs):
+        """fmi2GetInteger: the step counters after a step (what a host's step loop reads) are
+        read here; any other call goes through :meth:`_get_integer`."""
+        last = self._last_counters
+        if vrs != last[0]:
+            where = self._counter_index
+            last = self._last_counters = (list(vrs), [where.get(vr) for vr in vrs])
+        index = last[1]
+        if self._model is not None and None not in index:
+            counters = self._counters()
+            return [int(counters[i]) for i in index]
+        return self._get_integer(vrs)
+
+    @_guarded("fmi2GetInteger", lambda self, vrs: [0] * len(vrs))
+    def _get_integer(self, vrs):
         g = self._iget
         getters = [g.get(vr) for vr in vrs]
         if None in getters:         # not only outputs: by type, refusing what does not fit
