@@ -987,11 +987,13 @@ class PRSMSlave(Fmi2Slave):
         if fast is not None and self._phase == "stepping" and not self._refused:
             try:
                 io, step, x, _ = fast
-                if self._x is not x:      # a state from the checked step or a restore
+                # io holds the time and state of the last one-call step; the checked step, a
+                # restore and the start leave a list in self._x (and set self._t)
+                if self._x is not x:
                     x[:] = self._x
+                    io[0] = self._t
                     self._x = x
                 u = self._u
-                io[0] = self._t
                 io[1] = current_time
                 io[2] = step_size
                 io[3] = u[0]
