@@ -994,13 +994,14 @@ class PRSMSlave(Fmi2Slave):
                     io[0] = self._t
                     self._x = x
                 u = self._u
+                torque, load = u[0], u[1]
                 io[1] = current_time
                 io[2] = step_size
-                io[3] = u[0]
-                io[4] = u[1]
+                io[3] = torque
+                io[4] = load
                 if not step(io):
-                    self._t = io[0]
-                    self._u_held = (io[3], io[4])
+                    self._t = current_time + step_size      # = io[0], the same sum in C
+                    self._u_held = (torque, load)
                     self._stats = None          # in io until read (_counters)
                     self._y = None
                     return True
