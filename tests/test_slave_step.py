@@ -126,7 +126,9 @@ def test_one_call_step_equals_the_checked_step(engine, fidelity):
     assert one_call == STEPS
 
 
-#: (what is wrong, communication point(t) [s], step size [s], inputs): each refused
+#: (what is wrong, communication point(t) [s], step size [s], inputs): each refused; the inputs'
+#: bounds are docs/fmu.md's (0 or |T| in [1e-150, 1e6] N.m, 0 or |F| in [1e-150, 1e8] N), the
+#: state's speed bound 1e5 rad/s
 BAD_STEPS = [
     ("point off the FMU's time", lambda t: t + 1e-6, H, (19.747, 5000.0)),
     ("point before the FMU's time", lambda t: t - 1e-3, H, (19.747, 5000.0)),
