@@ -46,9 +46,11 @@ static inline int prsm_state_violation(const double *x, int n, char *msg, int le
         return -1;
     }
     double omega = x[1], w_in = x[n - 3], w_out = x[n - 2];
-    prsm_fmt_num(q, sizeof q, PRSM_MAX_QUOTIENT);
+    /* (the numbers are written only for a message: prsm_fmt_num's snprintf and strtod would
+       cost every step far more than the checks) */
     for (int i = 2; i < n - 3; i++)
         if (omega != 0.0 && fabs(x[i]) > PRSM_MAX_QUOTIENT * fabs(omega)) {
+            prsm_fmt_num(q, sizeof q, PRSM_MAX_QUOTIENT);
             prsm_fmt_num(v, sizeof v, x[i]);
             prsm_fmt_num(w, sizeof w, omega);
             snprintf(msg, (size_t)len, "state x[%d] (carrier speed) = %s rad/s is out of range for the "
@@ -56,6 +58,7 @@ static inline int prsm_state_violation(const double *x, int n, char *msg, int le
             return -1;
         }
     if (w_in > 0.0 && fabs(w_out) > PRSM_MAX_QUOTIENT * w_in) {
+        prsm_fmt_num(q, sizeof q, PRSM_MAX_QUOTIENT);
         prsm_fmt_num(v, sizeof v, w_out);
         prsm_fmt_num(w, sizeof w, w_in);
         snprintf(msg, (size_t)len, "state x[%d] (output work) = %s J is out of range for the input "
