@@ -46,9 +46,11 @@ The issue's target for the loop is ≤ 0.35 CPU s per simulated second (floor �
 
 The one-engine goal (printed last; alone with ``--goal-only``): the default loop (README's first
 command: the pythonfmu FMU, which now runs the compiled engine, under the Python master, every
-output recorded) with the position step held to 1.5 s costs ≥ 4× less CPU than the 7.14 CPU s
-of 2026-11-23 (floor 2×); main before the engine (707572e, checked out in a temporary git
-worktree, its FMU built by its own code) is run in the same run for comparison.
+output recorded) with the position step held to 1.5 s costs ≥ 4× less CPU than main on
+2026-11-23 (floor 2×).  That main (707572e, before the engine: checked out in a temporary git
+worktree, its FMU built by its own code) is run in the same run, interleaved, and the goal is
+judged on the ratio of the two: the 7.14 CPU s it took on 2026-11-23 were measured on another
+machine and are printed for reference only.
 
 Run: ``python benchmarks/loop_cost.py [--scene position_step] [--rounds 3]`` (builds the FMUs in
 child processes first; about a minute).
@@ -229,7 +231,8 @@ def max_difference(a, b, names=None) -> tuple[float, str]:
 
 
 #: the revision the default loop's goal is measured against (main before the engine was the
-#: default: 707572e), and its CPU seconds on 2026-11-23 (the issue's baseline)
+#: default: 707572e), and its CPU seconds on 2026-11-23 on the machine of then (printed for
+#: reference; the goal is judged against the revision run in the same run)
 AGAINST = "707572e"
 CPU_2026_11_23 = 7.14
 #: the simulated time of the goal's run [s]: the position step held to 1.5 s
@@ -289,11 +292,16 @@ def goal_against(rev: str = AGAINST, rounds: int = 3) -> None:
     then, now = min(cpu[rev]), min(cpu["this tree"])
     print(f"default position_step loop held to {GOAL_T_END:g} s (pythonfmu PRSM2 through fmpy, "
           f"Python master; CPU s of the loop, best of {rounds}, measured in this run): "
-          f"{rev} {then:.2f} s, this tree {now:.2f} s ({then / now:.2f}x less)")
-    ratio = CPU_2026_11_23 / now
-    print(f"  against 2026-11-23 ({CPU_2026_11_23} CPU s then): {ratio:.2f}x less (goal >= 4x, "
-          f"floor >= 2x: {'goal met' if ratio >= 4 else 'floor met' if ratio >= 2 else 'NOT met'})"
-          f"; {rev} in this run was {CPU_2026_11_23 / then:.2f}x less than then")
+          f"{rev} {then:.2f} s, this tree {now:.2f} s")
+    # the goal is judged on the ratio measured in this run: 2026-11-23's 7.14 CPU s were
+    # measured on another machine (and load), so 7.14 / now would credit this tree with the
+    # machine's speed
+    ratio = then / now
+    print(f"  this tree against {rev} (main on 2026-11-23), same run: {ratio:.2f}x less CPU "
+          f"(goal >= 4x, floor >= 2x: "
+          f"{'goal met' if ratio >= 4 else 'floor met' if ratio >= 2 else 'NOT met'}); "
+          f"for reference, {CPU_2026_11_23} CPU s then on another machine is "
+          f"{CPU_2026_11_23 / now:.2f}x this tree's and {CPU_2026_11_23 / then:.2f}x {rev}'s here")
 
 
 def main() -> None:

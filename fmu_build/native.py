@@ -63,7 +63,7 @@ from prsm_fmu.steppers.base import _SQRT_EPS
 
 from . import model_description, platforms
 from .builder import BuildError, build_fmu, validate
-from .native_ranges import ranges_header
+from .native_ranges import bounds_defines, ranges_header
 from .native_stepper import GEOMETRY_REALS
 
 __all__ = ["build_native", "native_name", "NATIVE_LEVELS", "STRUCTURAL",
@@ -77,7 +77,7 @@ SOURCE_DIR = Path(__file__).resolve().parent / "native"
 SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_auto.c",
            "prsm_fmi2_me.c")
 HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_geometry.h", "prsm_quantity.h",
-           "prsm_auto.h")
+           "prsm_auto.h", "prsm_bounds.h")
 #: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
 INCLUDED = ("prsm_fmi2.c",)
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
@@ -232,6 +232,8 @@ def constants_header(params: MechanismParams) -> str:
 
 /* |screw speed| [rad/s] at or below which no power flows (prsm_fmu.models.base.STANDSTILL_SPEED) */
 #define PRSM_STANDSTILL_SPEED {_hex(STANDSTILL_SPEED)}
+
+{bounds_defines()}
 
 /* the built-in geometry, per stage: screw_radius, roller_radius, nut_radius, screw_lead [m],
    flank_angle [rad] (fmu_build.native_stepper.GEOMETRY_REALS); and screw_starts */

@@ -24,7 +24,7 @@ from prsm_fmu.params import GEOMETRY_RTOL, MechanismParams
 #: FmuRule.derived -> its code in the C's rows (0: constant bounds)
 _DERIVED = {None: 0, "max_rollers": 1, "spline": 2}
 
-__all__ = ["ranges_header"]
+__all__ = ["ranges_header", "bounds_defines"]
 
 
 def _c_string(s: str | None) -> str:
@@ -85,15 +85,23 @@ def ranges_header(params: MechanismParams) -> str:
         "static const prsm_range PRSM_RANGES[PRSM_N_RANGES] = {",
         *rows,
         "};",
+        "#endif",
+        ""])
+
+
+def bounds_defines() -> str:
+    """The C macros of the inputs' and the state's bounds (param_ranges.INPUT_BOUNDS,
+    STATE_BOUNDS, SMALLEST, MAX_QUOTIENT) that ``prsm_bounds.h`` checks; written into
+    ``prsm_constants.h`` (fmu_build.native.constants_header), which the native FMU and the
+    engine library both compile."""
+    return "\n".join([
         "/* bounds of the inputs and of the state (param_ranges.INPUT_BOUNDS, STATE_BOUNDS,",
         " * KINETIC_ENERGY_MAX: the speeds' bounds follow from it and the inertias,",
-        " * SMALLEST): a step that starts or would end beyond them is refused */",
+        " * SMALLEST, MAX_QUOTIENT): a step that starts or would end beyond them is refused */",
         f"#define PRSM_MAX_TORQUE {_num(INPUT_BOUNDS['screw_torque'][0])}",
         f"#define PRSM_MAX_LOAD {_num(INPUT_BOUNDS['load_force'][0])}",
         f"#define PRSM_MAX_ANGLE {_num(STATE_BOUNDS['angle'][0])}",
         f"#define PRSM_KINETIC_ENERGY_MAX {_num(KINETIC_ENERGY_MAX)}",
         f"#define PRSM_MAX_WORK {_num(STATE_BOUNDS['work'][0])}",
         f"#define PRSM_SMALLEST {_num(SMALLEST)}",
-        f"#define PRSM_MAX_QUOTIENT {_num(MAX_QUOTIENT)}",
-        "#endif",
-        ""])
+        f"#define PRSM_MAX_QUOTIENT {_num(MAX_QUOTIENT)}"])

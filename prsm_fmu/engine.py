@@ -229,6 +229,18 @@ def engine_stepper(model: Any, level: str, stepper: str, rtol: float, atol: floa
 _ENGINE_CLASS: list[type] = []
 
 
+def _doubles(array) -> memoryview:
+    """A memoryview of the doubles of a ctypes array (``tolist`` reads them all at once,
+    several times faster than slicing the array)."""
+    return memoryview(array).cast("B").cast("d")
+
+#: the places in ``prsm_api_step``'s block of doubles (prsm_api.c, PRSM_IO_*; the state's and
+#: the outputs' the C tells): the FMU's time, the communication point, the step size, the
+#: inputs, the counts, the time match
+STEP_IO_T, STEP_IO_CURRENT, STEP_IO_STEP, STEP_IO_U, STEP_IO_STATS, STEP_IO_MATCH = (
+    0, 1, 2, 3, 5, 8)
+
+
 def _engine_class() -> type:
     """:class:`fmu_build.native_stepper.NativeStepper` with a lean :meth:`advance` for the
     doors' hot path (an FMU's doStep): one ctypes call into preallocated arrays, no numpy, no
@@ -270,35 +282,99 @@ def _engine_class() -> type:
             stats = StepStats(rhs_calls=counts[0], substeps=counts[1], rejected=counts[2])
             return self._row[:], stats
 
+        def step_block(self, time_match: float, names: tuple[str, ...]):
+            """The engine's one-call step of an FMU's doStep (``prsm_api_step``) and its
+            outputs, or None for a library without them.
+
+            Parameters
+            ----------
+            time_match : float
+                How far [-] a communication point may lie from the FMU's time, relative to
+                max(1 s, |time|), and still be the same point.
+            names : tuple of str
+                The FMU's Real outputs, in its order.
+
+            Returns
+            -------
+            tuple or None
+                ``(io, step, x, outputs)``: ``io`` the C's block of doubles (a ctypes array
+                over the handle's memory, laid out as ``prsm_api.c`` says: [0] the FMU's time
+                [s], [1] the communication point [s], [2] the step size [s], [3:5] the inputs,
+                [5:8] the last step's rhs calls, accepted and rejected substeps, [8]
+                ``time_match``, then the state); ``step(io)`` takes the step and returns 0,
+                else 1 (not taken: time, step size or inputs) or 2 (the integration fails or
+                ends out of the state's bounds), nothing changed; ``x`` the state's part of
+                ``io``; ``outputs()`` the values of ``names`` at ``io``'s state and inputs
+                (``prsm_api_step_outputs``: after a step, the outputs at its end), None where
+                the C does not compute them all.  ``io`` keeps this stepper (and so the
+                handle) alive.
+            """
+            lib = self._lib
+            if not hasattr(lib, "prsm_api_step"):   # an engine library packed before it
+                return None
+            block = type(lib.prsm_api_step_io)(("prsm_api_step_io", lib))
+            block.restype, block.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
+            io = (ctypes.c_double * lib.prsm_api_step_io_size()).from_address(
+                block(self._handle))
+            io.owner = self
+            io[STEP_IO_MATCH] = time_match
+            size = ctypes.sizeof(ctypes.c_double)
+            x = (ctypes.c_double * self.n_states).from_address(
+                ctypes.addressof(io) + lib.prsm_api_step_io_x() * size)
+            x.owner = io
+            # no declared argument types: the array passes as its pointer, nothing converted
+            step = type(lib.prsm_api_step)(("prsm_api_step", lib))
+            step.restype = ctypes.c_int
+            pick = self._picker(names)
+            outputs = None
+            if pick is not None:
+                compute = type(lib.prsm_api_step_outputs)(("prsm_api_step_outputs", lib))
+                compute.restype = None
+                out = (ctypes.c_double * len(self.output_names)).from_address(
+                    ctypes.addressof(io) + lib.prsm_api_step_io_out() * size)
+                out.owner = io
+                values = _doubles(out)
+
+                def outputs() -> list[float]:
+                    compute(io)
+                    return pick(values.tolist())
+
+            return io, step, x, outputs
+
+        def _picker(self, names: tuple[str, ...]):
+            """A function that picks the values of ``names`` out of the list of the C's
+            outputs (in the order of :attr:`output_names`), or None when the C does not
+            compute every one of them."""
+            position = {name: i for i, name in enumerate(self.output_names)}
+            if not names or any(name not in position for name in names):
+                return None
+            index = [position[name] for name in names]
+            if index == list(range(len(position))):
+                return lambda values: values
+            return lambda values: [values[i] for i in index]
+
         def output_reader(self, names: tuple[str, ...]):
             """A function ``(t, x, u) -> list`` of the values of the outputs ``names`` at
             state ``x`` with inputs ``u``, computed by the C in one call
             (``prsm_api_outputs``) into preallocated arrays, equal to the model's
             ``outputs`` bit for bit (tests/test_engine_outputs.py); None when the C does not
             compute every one of them (or the library has no prsm_api_outputs)."""
-            position = {name: i for i, name in enumerate(self.output_names)}
-            if not names or any(name not in position for name in names):
+            pick = self._picker(names) if self.output_names else None
+            if pick is None:
                 return None
             lib = self._lib
             call = type(lib.prsm_api_outputs)(("prsm_api_outputs", lib))
             call.restype = None
-            out = (ctypes.c_double * len(position))()
+            out = (ctypes.c_double * len(self.output_names))()
+            values = _doubles(out)
             xi, ui, handle, double = self._x, self._u, self._handle, self._double
-            index = [position[name] for name in names]
-
-            if index == list(range(len(position))):
-                def pick(values):
-                    return values
-            else:
-                def pick(values):
-                    return [values[i] for i in index]
 
             def read(t: float, x: list[float], u: tuple) -> list[float]:
                 xi[:] = x
                 ui[0] = u[0]
                 ui[1] = u[1]
                 call(handle, double(t), xi, ui, out)
-                return pick(out[:])
+                return pick(values.tolist())
 
             return read
 

@@ -518,6 +518,14 @@ class PRSMSlave(Fmi2Slave):
         self._rget: dict[int, Callable[[], float]] = {}
         #: value reference of a Real output -> its position in the outputs (fmi2GetReal's path)
         self._out_index: dict[int, int] = {}
+        #: what fmi2GetReal read last and where its values are (_read_plan)
+        self._last_read: tuple = (None, None, None, None)
+        #: value references of the step counters -> their place in _counters(); what
+        #: fmi2GetInteger read last and their places (None: not a step counter)
+        self._counter_index: dict[int, int] = {}
+        self._last_counters: tuple = (None, [None])
+        #: the value references of the inputs screw_torque and load_force
+        self._input_vrs: list[int] = []
         #: value reference of an Integer or Enumeration output -> its getter (fmi2GetInteger's)
         self._iget: dict[int, Callable[[], int]] = {}
         self._rset: dict[int, Callable[[Any], None]] = {}
@@ -536,6 +544,9 @@ class PRSMSlave(Fmi2Slave):
         self._state_outputs: dict[int, int] = {}
         #: the engine's outputs in C (EngineStepper.output_reader), or None: Model.outputs
         self._engine_outputs = None
+        #: the engine's one-call step (EngineStepper.step_block: its block, step, state part),
+        #: or None: every doStep is the checked one
+        self._engine_step: tuple | None = None
         self._config: tuple = ()
         self._init_error: str | None = None
         self._y: list[float] | None = None
@@ -576,6 +587,11 @@ class PRSMSlave(Fmi2Slave):
                     self._out_index[var.value_reference] = i_out[row.name]
                 elif row.type in _ACCESS["Integer"]:
                     self._iget[var.value_reference] = getter
+                    counter = list(STEP_COUNTERS).index(row.name)
+                    if counter < 3:         # rhs calls, substeps, level: _counters()
+                        self._counter_index[var.value_reference] = counter
+            elif row.causality == "input":
+                self._input_vrs.append(var.value_reference)
             if row.type == "Real":
                 self._rget[var.value_reference] = getter
                 if setter is not None:
@@ -629,7 +645,7 @@ class PRSMSlave(Fmi2Slave):
         if i == 2:          # step_fidelity: before initialization, the level asked for
             def level():
                 if self._model is not None:
-                    return self._stats[2]
+                    return self._counters()[2]
                 try:
                     name = fidelity_name(self._par["fidelity"])
                 except ValueError:
@@ -643,9 +659,9 @@ class PRSMSlave(Fmi2Slave):
                 u = (self._u[0], self._u[1])
                 if not (math.isfinite(u[0]) and math.isfinite(u[1])):
                     return 0
-                return 0 if self._model.contact_diagnosis(self._x, u) is None else 1
+                return 0 if self._model.contact_diagnosis(list(self._x), u) is None else 1
             return contact
-        return lambda: self._stats[i]
+        return lambda: self._counters()[i]
 
     # Value access by reference.  The base class raises on a wrong type or a variable without
     # setter, which pythonfmu turns into fmi2Fatal; here a host's mistake is refused instead:
@@ -653,10 +669,13 @@ class PRSMSlave(Fmi2Slave):
     # value written is ignored, and the next doStep is refused (fmi2Discard) naming it.
     @_guarded("fmi2GetReal", lambda self, vrs: [math.nan] * len(vrs))
     def get_real(self, vrs):
-        index = self._out_index
-        try:                        # only outputs (a host's step loop): one list, no getters
-            positions = [index[vr] for vr in vrs]
-        except KeyError:
+        last = self._last_read
+        states = self._state_outputs
+        # a host's step loop reads the same outputs every step: where they are, worked out once
+        if vrs != last[0] or states is not last[3]:
+            last = self._last_read = self._read_plan(list(vrs), states)
+        _, positions, from_state, _ = last
+        if positions is None:
             g = self._rget
             try:
                 return [g[vr]() for vr in vrs]
@@ -665,17 +684,45 @@ class PRSMSlave(Fmi2Slave):
         y = self._y
         if y is None:
             x = self._x
-            states = self._state_outputs
-            if x is not None and states:        # outputs that are states: no Model.outputs
-                try:
-                    return [x[states[vr]] for vr in vrs]
-                except KeyError:
-                    pass
+            if x is not None and from_state is not None:   # only states: no Model.outputs
+                return [x[i] for i in from_state]
             y = self._compute_outputs()
+        if positions is ALL_OUTPUTS:
+            return y[:]
         return [y[k] for k in positions]
 
-    @_guarded("fmi2SetReal")
+    def _read_plan(self, vrs: list, states: dict) -> tuple:
+        """What fmi2GetReal of ``vrs`` reads: (vrs, their positions in the outputs (None: not
+        only outputs; ALL_OUTPUTS: all of them in order), their indices in the state vector
+        where all are states (else None), ``states``)."""
+        index = self._out_index
+        try:
+            positions = [index[vr] for vr in vrs]
+        except KeyError:
+            return vrs, None, None, states
+        from_state = ([states[vr] for vr in vrs] if states and all(vr in states for vr in vrs)
+                      else None)
+        if positions == list(range(len(self._out_names))):
+            positions = ALL_OUTPUTS
+        return vrs, positions, from_state, states
+
     def set_real(self, vrs, values):
+        """fmi2SetReal: a host's step loop sets both inputs, in their order, every step: those
+        are written here; any other call goes through :meth:`_set_real`."""
+        if vrs == self._input_vrs and self._phase != "terminated":
+            try:
+                torque, load = float(values[0]), float(values[1])
+            except Exception:  # noqa: BLE001 - _set_real says what is wrong
+                pass
+            else:
+                u = self._u
+                u[0] = torque
+                u[1] = load
+                return
+        self._set_real(vrs, values)
+
+    @_guarded("fmi2SetReal")
+    def _set_real(self, vrs, values):
         s = self._rset
         for vr, value in zip(vrs, values):
             setter = s.get(vr)
@@ -684,8 +731,21 @@ class PRSMSlave(Fmi2Slave):
             else:
                 setter(value)
 
-    @_guarded("fmi2GetInteger", lambda self, vrs: [0] * len(vrs))
     def get_integer(self, vrs):
+        """fmi2GetInteger: the step counters after a step (what a host's step loop reads) are
+        read here; any other call goes through :meth:`_get_integer`."""
+        last = self._last_counters
+        if vrs != last[0]:
+            where = self._counter_index
+            last = self._last_counters = (list(vrs), [where.get(vr) for vr in vrs])
+        index = last[1]
+        if self._model is not None and None not in index:
+            counters = self._counters()
+            return [int(counters[i]) for i in index]
+        return self._get_integer(vrs)
+
+    @_guarded("fmi2GetInteger", lambda self, vrs: [0] * len(vrs))
+    def _get_integer(self, vrs):
         g = self._iget
         getters = [g.get(vr) for vr in vrs]
         if None in getters:         # not only outputs: by type, refusing what does not fit
@@ -827,7 +887,11 @@ class PRSMSlave(Fmi2Slave):
                 u = tuple(self._u)
                 values = [float(v) for v in self._pick_outputs(model.outputs(self._t, x, u))]
             elif self._engine_outputs is not None:
-                values = self._engine_outputs(self._t, x, u)
+                fast = self._engine_step
+                if fast is not None and x is fast[2] and fast[3] is not None:
+                    values = fast[3]()    # the state and inputs of the last one-call step
+                else:
+                    values = self._engine_outputs(self._t, x, u)
             else:
                 values = [float(v) for v in self._pick_outputs(model.outputs(self._t, x, u))]
         except Exception as exc:  # noqa: BLE001 - an exception here would be fmi2Fatal
@@ -901,10 +965,64 @@ class PRSMSlave(Fmi2Slave):
         self._config = self._config_key()
         self._stats = (0, 0, active_level(model))
         self._y = None
+        self._arm_engine_step()
         self._phase = "stepping"
 
-    @_guarded("fmi2DoStep", False)
+    def _arm_engine_step(self) -> None:
+        """The engine's one-call step for :meth:`do_step` (EngineStepper.step_block), where the
+        engine runs a level that never changes; else None (every step the checked one)."""
+        stepper = self._stepper
+        block = getattr(stepper, "step_block", None) if is_engine(stepper) else None
+        self._engine_step = (block(TIME_MATCH, self._out_names)
+                             if block is not None and self._level is not None else None)
+        if self._engine_step is not None and self._x is not None:
+            self._x = list(self._x)       # (do_step copies it into the engine's block)
+
+    def _counters(self) -> tuple[int, int, int]:
+        """(rhs calls, accepted substeps, level) of the last step: after the engine's one-call
+        step, read from its block."""
+        stats = self._stats
+        if stats is None:
+            io = self._engine_step[0]
+            stats = self._stats = (int(io[5]), int(io[6]), self._level)
+        return stats
+
     def do_step(self, current_time: float, step_size: float) -> bool:
+        """fmi2DoStep: the engine's one-call step where it runs (:meth:`_arm_engine_step`),
+        else, and wherever that step is not taken, :meth:`_checked_step` (which refuses
+        naming why, the state unchanged)."""
+        fast = self._engine_step
+        if fast is not None and self._phase == "stepping" and not self._refused:
+            try:
+                io, step, x, _ = fast
+                # io holds the time and state of the last one-call step; the checked step, a
+                # restore and the start leave a list in self._x (and set self._t)
+                if self._x is not x:
+                    x[:] = self._x
+                    io[0] = self._t
+                    self._x = x
+                u = self._u
+                torque, load = u[0], u[1]
+                io[1] = current_time
+                io[2] = step_size
+                io[3] = torque
+                io[4] = load
+                if not step(io):
+                    self._t = current_time + step_size      # = io[0], the same sum in C
+                    self._u_held = (torque, load)
+                    self._stats = None          # in io until read (_counters)
+                    self._y = None
+                    return True
+            except Exception:  # noqa: BLE001 - the checked step says what is wrong
+                pass
+        return self._checked_step(current_time, step_size)
+
+    @_guarded("fmi2DoStep", False)
+    def _checked_step(self, current_time: float, step_size: float) -> bool:
+        """fmi2DoStep with every check in Python, through the stepper's ``advance``."""
+        if self._x is not None and self._engine_step is not None and \
+                self._x is self._engine_step[2]:
+            self._x = self._x[:]          # the C's block changes in place: a list of its own
         u = (self._u[0], self._u[1])
         h = step_size
         phase = self._phase
@@ -987,7 +1105,7 @@ class PRSMSlave(Fmi2Slave):
             self._config_key()
         state = (fmu_state.TAG, type(self).__name__, self.n_stages, config,
                  (self._u[0], self._u[1]), self._phase, self._t, x, self._u_held, memory,
-                 self._stats, self._init_error)
+                 self._counters(), self._init_error)
         self._own_states.append(state)
         return state
 
@@ -1036,6 +1154,10 @@ class PRSMSlave(Fmi2Slave):
         if stepper is not self._stepper:
             self._engine_outputs = self._engine_output_reader(stepper)
         self._model, self._stepper = model, stepper
+        if stepper is None:
+            self._engine_step = None
+        elif self._engine_step is None or self._engine_step[0].owner is not stepper:
+            self._arm_engine_step()
         self._config = config if stepper is not None else ()
         self._u[0], self._u[1] = f["inputs"]
         self._phase = f["phase"]
@@ -1056,6 +1178,9 @@ class PRSMSlave(Fmi2Slave):
     def _fmu_state_from_bytes(data: bytes):
         return fmu_state.from_bytes(data)
 
+
+#: fmi2GetReal's positions when it reads every Real output in their order (a copy of the list)
+ALL_OUTPUTS = object()
 
 #: how many of its latest FMU states an instance recognises as its own (restored unchecked)
 OWN_STATES = 8

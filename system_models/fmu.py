@@ -240,6 +240,10 @@ class FMUBlock(Block):
         self._arr_real = (fmi2ValueReference * len(vr_real))(*vr_real)
         self._buf_int = (fmi2Integer * len(self._vr_int))()
         self._arr_int = (fmi2ValueReference * len(self._vr_int))(*self._vr_int)
+        # the buffers' values as memoryviews: tolist() reads them all at once, several times
+        # faster than slicing a ctypes array
+        self._real_values = memoryview(self._buf_real).cast("B").cast("d")
+        self._int_values = memoryview(self._buf_int).cast("B").cast("i")
         #: the Real values first, then the Integer ones: where each selected output is in
         #: that list (None: they are in order already)
         merged = real + ints
@@ -299,10 +303,10 @@ class FMUBlock(Block):
         if len(real):
             self._check("getReal", self._c_get_real(comp, self._arr_real, len(real), real), n0)
         if not self._vr_int:
-            return real[:]
+            return self._real_values.tolist()
         ints = self._buf_int
         self._check("getInteger", self._c_get_integer(comp, self._arr_int, len(ints), ints), n0)
-        out = real[:] + [float(v) for v in ints[:]]
+        out = self._real_values.tolist() + [float(v) for v in self._int_values.tolist()]
         order = self._order
         return out if order is None else [out[k] for k in order]
 

@@ -5,8 +5,29 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <stddef.h>
+
 #include "prsm_auto.h"
 #include "prsm_model.h"
+#include "prsm_bounds.h"
+
+/* The block of doubles prsm_api_step reads its arguments from and writes its result to (the
+ * pythonfmu FMU writes into it and reads from it through a ctypes array over it: one call per
+ * doStep, nothing converted):
+ *   [0] the FMU's time t [s] (becomes current + step after a step), [1] the communication point
+ *   current [s], [2] the step size [s], [3..4] the inputs (torque [N.m], load [N]), [5..7] the
+ *   last step's rhs calls, accepted and rejected substeps, [8] how far current may lie from t,
+ *   relative to max(1 s, |t|) (prsm_fmu.slave.TIME_MATCH), [9..9+nx) the state at time t;
+ *   from [9 + PRSM_NX_MAX] the outputs prsm_api_step_outputs writes. */
+#define PRSM_IO_T 0
+#define PRSM_IO_CURRENT 1
+#define PRSM_IO_STEP 2
+#define PRSM_IO_U 3
+#define PRSM_IO_STATS 5
+#define PRSM_IO_MATCH 8
+#define PRSM_IO_X 9
+#define PRSM_IO_OUT (PRSM_IO_X + PRSM_NX_MAX)
+#define PRSM_IO_SIZE (PRSM_IO_OUT + PRSM_API_N_OUTPUTS)
 
 /* fidelity = auto: the switching stepper and its memory (now and before the last advance) */
 typedef struct {
@@ -19,6 +40,7 @@ typedef struct {
     prsm_memory memory;
     prsm_memory before;        /* the memory before the last prsm_api_advance_many */
     prsm_auto_part *au;        /* fidelity = auto (prsm_api_new_auto), else NULL */
+    double io[PRSM_IO_SIZE];   /* prsm_api_step's arguments and result */
 } prsm_handle;
 
 /* the model whose states, right-hand side and tolerances a handle has: auto's dynamic level */
@@ -262,6 +284,50 @@ int prsm_api_advance_many(void *handle, double t0, const double *x, const double
     return 0;
 }
 
+/* The block of prsm_api_step (PRSM_IO_SIZE doubles, laid out as its comment says), its size and
+ * where in it the state and the outputs begin. */
+double *prsm_api_step_io(void *handle) { return ((prsm_handle *)handle)->io; }
+int prsm_api_step_io_size(void) { return PRSM_IO_SIZE; }
+int prsm_api_step_io_x(void) { return PRSM_IO_X; }
+int prsm_api_step_io_out(void) { return PRSM_IO_OUT; }
+
+/* One communication step of the pythonfmu FMU's doStep, from the block io of
+ * prsm_api_step_io: the state io[9..] at time io[0] advanced from the communication point io[1]
+ * over io[2] with the inputs io[3..4] held.  Returns 0 after the step (io[0] = io[1] + io[2], the
+ * new state in io[9..], the step's counts in io[5..7]); else nothing changed (the stepper's memory
+ * included) and it returns
+ *   1 when the step is not taken: io[1] is farther from io[0] than io[8] max(1 s, |io[0]|), the
+ *     step size is not finite and > 0 or does not advance the time, or an input is out of its
+ *     bounds (prsm_bounds.h, which refuses non-finite inputs too);
+ *   2 when the integration fails or would end out of the state's bounds.
+ * The caller, which owns the messages, then takes its checked step (which refuses naming why). */
+int prsm_api_step(double *io) {
+    prsm_handle *h = (prsm_handle *)(void *)((char *)io - offsetof(prsm_handle, io));
+    double t = io[PRSM_IO_CURRENT], step = io[PRSM_IO_STEP];
+    const double *u = io + PRSM_IO_U;
+    char msg[600];
+    double t_fmu = io[PRSM_IO_T];
+    if (!(fabs(t - t_fmu) <= io[PRSM_IO_MATCH] * fmax(1.0, fabs(t_fmu)))
+        || !(0.0 < step && step < INFINITY) || !(t + step > t)
+        || prsm_input_violation(u, msg, sizeof msg))
+        return 1;
+    double xo[PRSM_NX_MAX] = {0.0};
+    prsm_stats st;
+    h->before = h->memory;
+    if (prsm_advance(&h->model, &h->memory, t, io + PRSM_IO_X, u, step, xo, &st, msg, sizeof msg))
+        return 2;
+    if (prsm_model_state_violation(xo, &h->model, msg, sizeof msg)) {
+        h->memory = h->before;
+        return 2;
+    }
+    memcpy(io + PRSM_IO_X, xo, sizeof(double) * (size_t)h->model.nx);
+    io[PRSM_IO_T] = t + step;
+    io[PRSM_IO_STATS] = st.rhs_calls;
+    io[PRSM_IO_STATS + 1] = st.substeps;
+    io[PRSM_IO_STATS + 2] = st.rejected;
+    return 0;
+}
+
 /* Put the memory back as it was before the last prsm_api_advance_many: a caller that refuses
  * the step's result (e.g. a state beyond its bounds) takes the whole advance back. */
 void prsm_api_undo_advance(void *handle) {
@@ -371,4 +437,11 @@ int prsm_api_contact_geometry(double r_s, double r_r, double lead, int n_s, doub
     prsm_contact_solve(r_s, r_r, lead, n_s, beta, o);
     memcpy(out, o, sizeof o);
     return prsm_contact_near(r_s, r_r, beta, o);
+}
+
+/* prsm_api_outputs at the state and inputs of prsm_api_step's block io (after a step: the
+ * outputs at its end, with the inputs held over it), into the block from io[PRSM_IO_OUT]. */
+void prsm_api_step_outputs(double *io) {
+    prsm_handle *h = (prsm_handle *)(void *)((char *)io - offsetof(prsm_handle, io));
+    prsm_api_outputs(h, io[PRSM_IO_T], io + PRSM_IO_X, io + PRSM_IO_U, io + PRSM_IO_OUT);
 }

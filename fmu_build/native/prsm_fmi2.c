@@ -36,6 +36,7 @@
 #include "prsm_auto.h"
 #include "prsm_model.h"
 #include "prsm_quantity.h"
+#include "prsm_bounds.h"
 
 enum { T_REAL, T_INTEGER, T_BOOLEAN, T_STRING, T_ENUM };
 enum { K_INPUT, K_OUTPUT, K_COUNTER, K_PARAM };
@@ -222,80 +223,6 @@ static int check_ranges(const snapshot *s, char *msg, int len) {
                  r->lo_open ? "(" : "[", lo_s, has_hi ? up : "inf",
                  !has_hi ? ")" : r->hi_open ? ")" : "]", sp, r->unit,
                  r->note[0] ? " (" : "", r->note, r->note[0] ? ")" : "");
-        return -1;
-    }
-    return 0;
-}
-
-/* ---- bounds of the inputs and of the state (param_ranges.input_violation, state_violation) -- */
-static int in_bounds(double v, double bound) {
-    return v == 0.0 || (PRSM_SMALLEST <= fabs(v) && fabs(v) <= bound);
-}
-
-static int input_violation(const double u[2], char *msg, int len) {
-    static const char *const names[2] = {"screw_torque", "load_force"}, *const units[2] = {"N.m", "N"};
-    const double bounds[2] = {PRSM_MAX_TORQUE, PRSM_MAX_LOAD};
-    for (int i = 0; i < 2; i++) {
-        if (in_bounds(u[i], bounds[i])) continue;
-        char v[40], lo[40], hi[40];
-        prsm_fmt_num(v, sizeof v, u[i]);
-        prsm_fmt_num(lo, sizeof lo, PRSM_SMALLEST);
-        prsm_fmt_num(hi, sizeof hi, bounds[i]);
-        snprintf(msg, (size_t)len, "input %s = %s %s is out of range: must be 0 or of magnitude in "
-                 "[%s, %s] %s", names[i], v, units[i], lo, hi, units[i]);
-        return -1;
-    }
-    return 0;
-}
-
-/* the bound of speed state i (1 .. n-4) [rad/s]: param_ranges.speed_bounds of the inertias
- * model_speed_bounds takes from the kinetic energy (2 x the energy at 1 rad/s: the same
- * operations, so the same double), sqrt(2 E / (n_speeds J_i)), E = PRSM_KINETIC_ENERGY_MAX */
-static double speed_bound(const prsm_model *m, int i, int n) {
-    double inertia = i == 1 ? m->equivalent_inertia : m->st[i - 2].j_carrier;
-    double j = 2.0 * (0.5 * inertia * 1.0 * 1.0);
-    return j > 0.0 ? sqrt(2.0 * PRSM_KINETIC_ENERGY_MAX / ((double)(n - 4) * j)) : INFINITY;
-}
-
-static int state_violation(const double *x, const prsm_model *m, char *msg, int len) {
-    int n = m->nx;
-    char v[40], w[40], q[40];
-    for (int i = 0; i < n; i++) {
-        int angle = i == 0, work = i >= n - 3;
-        if (!angle && !work) {
-            double bound = speed_bound(m, i, n);
-            if (fabs(x[i]) <= bound) continue;
-            prsm_fmt_num(v, sizeof v, x[i]);
-            prsm_fmt_num(w, sizeof w, bound);
-            prsm_fmt_num(q, sizeof q, PRSM_KINETIC_ENERGY_MAX);
-            snprintf(msg, (size_t)len, "state x[%d] (speed) = %s rad/s is out of range: must be in "
-                     "[-%s, %s] rad/s (kinetic energy at most %s J)", i, v, w, w, q);
-            return -1;
-        }
-        double bound = angle ? PRSM_MAX_ANGLE : PRSM_MAX_WORK;
-        if (fabs(x[i]) <= bound) continue;
-        prsm_fmt_num(v, sizeof v, x[i]);
-        prsm_fmt_num(w, sizeof w, bound);
-        const char *unit = angle ? "rad" : "J";
-        snprintf(msg, (size_t)len, "state x[%d] (%s) = %s %s is out of range: must be in [-%s, %s] %s",
-                 i, angle ? "angle" : "work", v, unit, w, w, unit);
-        return -1;
-    }
-    double omega = x[1], w_in = x[n - 3], w_out = x[n - 2];
-    prsm_fmt_num(q, sizeof q, PRSM_MAX_QUOTIENT);
-    for (int i = 2; i < n - 3; i++)
-        if (omega != 0.0 && fabs(x[i]) > PRSM_MAX_QUOTIENT * fabs(omega)) {
-            prsm_fmt_num(v, sizeof v, x[i]);
-            prsm_fmt_num(w, sizeof w, omega);
-            snprintf(msg, (size_t)len, "state x[%d] (carrier speed) = %s rad/s is out of range for the "
-                     "screw speed %s rad/s: carrier_speed_ratio must stay within %s", i, v, w, q);
-            return -1;
-        }
-    if (w_in > 0.0 && fabs(w_out) > PRSM_MAX_QUOTIENT * w_in) {
-        prsm_fmt_num(v, sizeof v, w_out);
-        prsm_fmt_num(w, sizeof w, w_in);
-        snprintf(msg, (size_t)len, "state x[%d] (output work) = %s J is out of range for the input "
-                 "work %s J: overall_efficiency must stay within %s", n - 2, v, w, q);
         return -1;
     }
     return 0;
@@ -917,7 +844,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
                 t, c->s.t);
         return fmi2Error;
     }
-    if (input_violation(u, reason, sizeof reason)) return refuse_call(c, t, h, reason);
+    if (prsm_input_violation(u, reason, sizeof reason)) return refuse_call(c, t, h, reason);
     double x_new[PRSM_NX_MAX] = {0.0};
     prsm_stats stats;
     char msg[700];
@@ -930,7 +857,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
         snprintf(reason, sizeof reason, "integration failed: %s", msg);
         return refuse_call(c, t, h, reason);
     }
-    if (state_violation(x_new, &c->model, msg, sizeof msg)) {   /* outputs could overflow */
+    if (prsm_model_state_violation(x_new, &c->model, msg, sizeof msg)) {   /* outputs could overflow */
         c->s.mem = mem_before;
         c->s.amem = amem_before;
         snprintf(reason, sizeof reason, "the step would end out of the state's bounds: %s", msg);
@@ -1089,13 +1016,13 @@ static int check_snapshot(const snapshot *s, prsm_model *m, prsm_auto *au, int *
             snprintf(msg, (size_t)len, "state vector or held inputs not finite");
             return -1;
         }
-        if (input_violation(s->u_held, msg, len)) return -1;
+        if (prsm_input_violation(s->u_held, msg, len)) return -1;
         char why[600];
         if (build_model(s, m, au, is_auto, why, sizeof why)) {
             snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
             return -1;
         }
-        if (state_violation(s->x, m, msg, len)) return -1;
+        if (prsm_model_state_violation(s->x, m, msg, len)) return -1;
         if (*is_auto && !auto_memory_ok(&s->amem)) {
             snprintf(msg, (size_t)len, "bad memory of fidelity auto");
             return -1;
