@@ -895,16 +895,14 @@ static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const dou
         double hs = mem->has_h_prop ? mem->h_prop : starting_step(m, x, k1, u, h, stats);
         double tau = 0.0;
         int attempts = 0, just_rejected = 0;
-        /* kink landing (control.KinkLanding): sliding velocities at the accepted point and at
-         * the trial's end, the cuts of this internal step and the step the first one shortened */
-        const prsm_ros *r = &m->ros;
-        int kinks = r->slip != NULL, have_v0 = 0, have_v_new = 0, cuts = 0;
-        double v0[PRSM_SLIP_DIM * PRSM_MAX_LAWS], v_new[PRSM_SLIP_DIM * PRSM_MAX_LAWS];
-        double h_uncut = 0.0;
+        /* kink landing (prsm_step.h) with the model's laws */
+        int kinks = m->ros.slip != NULL;
+        prsm_landing landing;
+        prsm_landing_init(&landing, &m->ros, m, m->h_min);
         for (;;) {
             double rem = h - tau;
             /* a step cut to end on a kink has exactly the cut size, never stretched to t + h */
-            int last = !cuts && hs * 1.05 >= rem;
+            int last = !landing.cuts && hs * 1.05 >= rem;
             double h_step = last ? rem : hs;
             attempts += 1;
             if (attempts > m->max_substeps) {
@@ -917,39 +915,17 @@ static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const dou
             int bad = trial_dp5(m, y, k1, h_step, u, yn, kn, &err);
             stats->rhs_calls += 6;
             if (bad) err = INFINITY;
-            have_v_new = 0;
-            if (kinks && !bad && cuts < PRSM_MAX_KINK_CUTS) {
-                double s_cut;
-                if (!have_v0) {
-                    memset(v0, 0, sizeof v0);
-                    r->slip(m, y, v0);
-                    have_v0 = 1;
-                }
-                memset(v_new, 0, sizeof v_new);
-                r->slip(m, yn, v_new);
-                have_v_new = 1;
-                if (prsm_kink_fraction(r->n_laws, r->law_dim, r->band, v0, v_new, &s_cut)
-                    && h_step * s_cut >= m->h_min) {
-                    /* the step would cross a kink of the friction law: end it on the kink */
-                    if (!cuts) h_uncut = h_step;
-                    cuts += 1;
-                    stats->rejected += 1;
-                    hs = h_step * s_cut;
-                    continue;
-                }
+            double h_cut;
+            if (kinks && !bad && prsm_landing_cut(&landing, y, yn, h_step, stats, &h_cut)) {
+                hs = h_cut;     /* it would cross a kink of the friction law: ends on it */
+                continue;
             }
             if (err <= 1.0) {
                 stats->substeps += 1;
                 double fac = err_factor(m, err);
                 if (just_rejected && fac > 1.0) fac = 1.0;
                 double h_new = h_step * fac;
-                if (cuts) {
-                    /* landed on a kink: go on with the step the cut shortened */
-                    if (fac >= 1.0) h_new = pmax(h_new, h_uncut);
-                    cuts = 0;
-                }
-                have_v0 = have_v_new;
-                if (have_v_new) memcpy(v0, v_new, sizeof v0);
+                if (kinks) h_new = prsm_landing_accepted(&landing, h_new, fac);
                 memcpy(y, yn, sizeof yn);
                 memcpy(k1, kn, sizeof kn);
                 just_rejected = 0;
@@ -964,7 +940,7 @@ static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const dou
             } else {
                 stats->rejected += 1;
                 just_rejected = 1;
-                h_uncut = 0.0;  /* a cut step that fails its error test: no return to the uncut */
+                if (kinks) prsm_landing_rejected(&landing);
                 hs = h_step * err_factor(m, err);
                 if (hs < m->h_min) {
                     char what[160];

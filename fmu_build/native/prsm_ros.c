@@ -404,10 +404,10 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
     memcpy(y, x, sizeof(double) * (size_t)n);
     int attempts = 0, just_rejected = 0, have_f0 = 0, have_jac = 0, jac_at_y = 0, has_h_mem = 0;
     int i_fixed = 0;
-    /* kink landing: sliding velocities at the accepted point and at the trial's end, the cuts of
-     * this internal step and the step the first one shortened */
-    int kinks = !fixed && r->slip != NULL, have_v0 = 0, have_v_new = 0, cuts = 0;
-    double v0[PRSM_SLIP_DIM * PRSM_MAX_LAWS], v_new[PRSM_SLIP_DIM * PRSM_MAX_LAWS], h_uncut = 0.0;
+    /* kink landing (prsm_step.h) */
+    int kinks = !fixed && r->slip != NULL;
+    prsm_landing landing;
+    prsm_landing_init(&landing, r, ctx, r->h_min);
     ros_jac jac;
     ros_lu lu;
     char reason[160] = "", what[320];
@@ -458,7 +458,7 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         }
         if (!fixed) {
             double rem = h - tau;
-            last = !cuts && hs * 1.05 >= rem;
+            last = !landing.cuts && hs * 1.05 >= rem;
             h_step = last ? rem : hs;
             attempts += 1;
             if (attempts > r->max_substeps) {
@@ -478,12 +478,8 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         int singular = lu_factor(jac.dd, r->nd, 1.0 / (h_step * PRSM_ROS_GAMMA), &lu);
         if (singular)
             return ros_fail(msg, len, "singular iteration matrix I/(h gamma) - J", ti, h_step, t, h);
-        if (kinks && !have_v0) {
-            memset(v0, 0, sizeof v0);
-            r->slip(ctx, y, v0);
-            have_v0 = 1;
-        }
-        int bad = trial(r, f, ctx, y, f0, &lu, &jac, h_step, u, kinks ? v0 : NULL, y_new, &err);
+        int bad = trial(r, f, ctx, y, f0, &lu, &jac, h_step, u,
+                        kinks ? prsm_landing_start(&landing, y) : NULL, y_new, &err);
         stats->rhs_calls += 3;
         if (bad) {
             bad_text(bad, reason, sizeof reason);
@@ -500,34 +496,17 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
             i_fixed += 1;
             continue;
         }
-        have_v_new = 0;
-        if (kinks && !bad && cuts < PRSM_MAX_KINK_CUTS) {
-            double s_cut;
-            memset(v_new, 0, sizeof v_new);
-            r->slip(ctx, y_new, v_new);
-            have_v_new = 1;
-            if (prsm_kink_fraction(r->n_laws, r->law_dim, r->band, v0, v_new, &s_cut)
-                && h_step * s_cut >= r->h_min) {
-                /* the step would cross a kink of the friction law: end it on the kink */
-                if (!cuts) h_uncut = h_step;
-                cuts += 1;
-                stats->rejected += 1;
-                hs = h_step * s_cut;
-                continue;
-            }
+        double h_cut;
+        if (kinks && !bad && prsm_landing_cut(&landing, y, y_new, h_step, stats, &h_cut)) {
+            hs = h_cut;     /* it would cross a kink of the friction law: ends on it instead */
+            continue;
         }
         if (err <= 1.0) {
             stats->substeps += 1;
             double fac = factor(r, err);
             if (just_rejected && fac > 1.0) fac = 1.0;
             double h_new = h_step * fac;
-            if (cuts) {
-                /* landed on a kink: go on with the step the cut shortened */
-                if (fac >= 1.0) h_new = pmax(h_new, h_uncut);
-                cuts = 0;
-            }
-            have_v0 = have_v_new;
-            if (have_v_new) memcpy(v0, v_new, sizeof v0);
+            if (kinks) h_new = prsm_landing_accepted(&landing, h_new, fac);
             if (!has_h_mem) {
                 h_mem = last && h_new >= h_step ? pmax(h_new, hs) : h_new;
                 has_h_mem = 1;
@@ -553,7 +532,7 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         } else {
             stats->rejected += 1;
             just_rejected = 1;
-            h_uncut = 0.0;  /* a cut step that fails its error test: no return to the uncut */
+            if (kinks) prsm_landing_rejected(&landing);
             hs = h_step * factor(r, err);
             if (hs < r->h_min) {
                 snprintf(what, sizeof what, "step size %.17g s below h_min = %.17g s after "

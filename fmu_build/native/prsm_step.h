@@ -9,6 +9,7 @@
 #define PRSM_STEP_H
 
 #include <math.h>
+#include <string.h>
 
 #include "prsm_model.h"
 
@@ -115,6 +116,77 @@ static inline int prsm_kink_fraction(int n_laws, const int *law_dim, double band
     if (!(best < 1.0)) return 0;
     *frac = best;
     return 1;
+}
+
+/* control.KinkLanding: one advance's landing on the kinks of the laws of r (its slip function
+ * with context ctx, its laws and v_eps): the sliding velocities at the accepted point (v0) and at
+ * the trial's end (v_new), the cuts of the internal step being tried and the step size [s] the
+ * first cut shortened */
+typedef struct {
+    const prsm_ros *r;
+    const void *ctx;
+    double h_min;
+    int have_v0, have_v_new, cuts;
+    double v0[PRSM_SLIP_DIM * PRSM_MAX_LAWS], v_new[PRSM_SLIP_DIM * PRSM_MAX_LAWS], h_uncut;
+} prsm_landing;
+
+static inline void prsm_landing_init(prsm_landing *l, const prsm_ros *r, const void *ctx,
+                                     double h_min) {
+    l->r = r;
+    l->ctx = ctx;
+    l->h_min = h_min;
+    l->have_v0 = l->have_v_new = l->cuts = 0;
+    l->h_uncut = 0.0;
+}
+
+/* KinkLanding.start: the sliding velocities at the accepted point y (computed once per point) */
+static inline const double *prsm_landing_start(prsm_landing *l, const double *y) {
+    if (!l->have_v0) {
+        memset(l->v0, 0, sizeof l->v0);
+        l->r->slip(l->ctx, y, l->v0);
+        l->have_v0 = 1;
+    }
+    return l->v0;
+}
+
+/* KinkLanding.cut: 1 and the size [s] to retry the trial from y to y_new of size h_step with
+ * (counted in stats->rejected), or 0, as well once PRSM_MAX_KINK_CUTS cuts were made or below
+ * h_min */
+static inline int prsm_landing_cut(prsm_landing *l, const double *y, const double *y_new,
+                                   double h_step, prsm_stats *stats, double *h_cut) {
+    double s_cut;
+    l->have_v_new = 0;
+    if (l->cuts >= PRSM_MAX_KINK_CUTS) return 0;
+    prsm_landing_start(l, y);
+    memset(l->v_new, 0, sizeof l->v_new);
+    l->r->slip(l->ctx, y_new, l->v_new);
+    l->have_v_new = 1;
+    if (!prsm_kink_fraction(l->r->n_laws, l->r->law_dim, l->r->band, l->v0, l->v_new, &s_cut)
+        || !(h_step * s_cut >= l->h_min))
+        return 0;
+    if (!l->cuts) l->h_uncut = h_step;
+    l->cuts += 1;
+    stats->rejected += 1;
+    *h_cut = h_step * s_cut;
+    return 1;
+}
+
+/* KinkLanding.accepted: the next step's size [s] after an accepted one whose controller proposed
+ * h_new with factor fac: after a landing the size the cut shortened, unless the controller asks
+ * for less */
+static inline double prsm_landing_accepted(prsm_landing *l, double h_new, double fac) {
+    if (l->cuts) {
+        if (fac >= 1.0) h_new = pmax(h_new, l->h_uncut);
+        l->cuts = 0;
+    }
+    l->have_v0 = l->have_v_new;
+    if (l->have_v_new) memcpy(l->v0, l->v_new, sizeof l->v0);
+    return h_new;
+}
+
+/* KinkLanding.rejected: a trial failed its error test, no return to the uncut size after it */
+static inline void prsm_landing_rejected(prsm_landing *l) {
+    l->h_uncut = 0.0;
 }
 
 #endif
