@@ -1,6 +1,6 @@
 """Shared machinery of the adaptive steppers: tolerances, error weights, the first-step norms,
-the elementary step-size controller (memory: the proposal for the next internal step) and the
-landing on the friction law's kinks.
+the elementary step-size controller (memory: the proposal for the next internal step), the
+landing on the friction law's kinks and the slip error norm (:func:`slip_error`, ROS34PW2's).
 
 Kink landing: a model may report ``sliding_velocities(x)`` (one tuple of components [m/s] per
 regularised friction law) and ``kink_speeds`` (per law the sliding speeds [m/s] where the law is
