@@ -77,7 +77,7 @@ SOURCE_DIR = Path(__file__).resolve().parent / "native"
 SOURCES = ("prsm_model.c", "prsm_ros.c", "prsm_band.c", "prsm_geometry.c", "prsm_auto.c",
            "prsm_fmi2_me.c")
 HEADERS = ("prsm_model.h", "prsm_ros.h", "prsm_band.h", "prsm_geometry.h", "prsm_quantity.h",
-           "prsm_auto.h", "prsm_bounds.h")
+           "prsm_auto.h", "prsm_bounds.h", "prsm_step.h")
 #: C included, not compiled alone: the FMI 2.0 interface prsm_fmi2_me.c builds on
 INCLUDED = ("prsm_fmi2.c",)
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")

@@ -937,9 +937,9 @@ def _record_trials(s) -> list:
     trials = []
     trial = s._trial
 
-    def record(f, t, x, f0, fac, hs, u):
+    def record(f, t, x, f0, fac, hs, u, *rest):
         trials.append((t, hs))
-        return trial(f, t, x, f0, fac, hs, u)
+        return trial(f, t, x, f0, fac, hs, u, *rest)
 
     s._trial = record
     return trials

@@ -4,6 +4,7 @@
  * prsm_model.c (no fast-math, no FMA contraction).
  */
 #include "prsm_band.h"
+#include "prsm_step.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -40,10 +41,9 @@ static int phi_functions(double z, double *p) {
     return 0;
 }
 
+/* AdaptiveBase._factor with the exponent 1/3 of the embedded order 2 */
 static double factor(const prsm_band *b, double err) {
-    if (err == 0.0) return b->fac_max;
-    if (!(err < INFINITY)) return b->fac_min;
-    return pmin(b->fac_max, pmax(b->fac_min, b->safety * prsm_pow(err, -1.0 / 3.0)));
+    return prsm_step_factor(err, -1.0 / 3.0, b->safety, b->fac_min, b->fac_max);
 }
 
 /* ScalarExponential._linearise: f0 and the Jacobian column (2 rhs calls) */
@@ -86,9 +86,8 @@ static int trial(const prsm_band *b, prsm_rhs_fn f, const void *ctx, const doubl
     est[FREE] = e_w;
     for (int k = 0; k < N; k++) x1[k] = u2[k] + est[k];
     double sq = 0.0;
-    for (int k = 0; k < N; k++)
-        sq += prsm_pow(est[k] / (b->atol + b->rtol * pmax(fabs(x[k]), fabs(x1[k]))), 2.0);
-    double e = sqrt(sq / (double)N);
+    for (int k = 0; k < N; k++) sq += prsm_err_term(est[k], x[k], x1[k], b->atol, b->rtol);
+    double e = prsm_rms(sq, N);
     if (!(finite_sum(x1, N) && isfinite(e))) return 0;
     *err = e;
     return 1;
@@ -111,12 +110,11 @@ static int breaks_ahead(const prsm_band *b, double w0, double g0, double *ahead)
     return n;
 }
 
-/* ScalarExponential._break_time: 1 and *tau if a step of size hs should end at a break */
-static int break_time(const prsm_band *b, double w0, double g0, double lam, double hs,
+/* ScalarExponential._break_time: 1 and *tau if a step of size hs should end at a break; ahead:
+ * the n breaks ahead of w0 (breaks_ahead, sorted once per accepted point) */
+static int break_time(const double *ahead, int n, double w0, double g0, double lam, double hs,
                       double *tau_out) {
-    if (g0 == 0.0 || b->n_breaks == 0) return 0;
-    double ahead[PRSM_MAX_BREAKS];
-    int n = breaks_ahead(b, w0, g0, ahead);
+    if (g0 == 0.0) return 0;
     for (int j = 0; j < n; j++) {
         double d = ahead[j] - w0;
         double a = lam * d / g0;
@@ -132,14 +130,13 @@ static int break_time(const prsm_band *b, double w0, double g0, double lam, doub
     return 0;
 }
 
-/* ScalarExponential._traverse: 1 and (time, state at the break, err), or 0 */
+/* ScalarExponential._traverse: 1 and (time, state at the break, err), or 0; ahead: the n breaks
+ * ahead of x's speed (as break_time's) */
 static int traverse(const prsm_band *b, prsm_rhs_fn f, const void *ctx, const double *x,
-                    const double *u, const double *f0, const double *col, double rem,
-                    double *dt, double *y, double *err, prsm_stats *stats) {
+                    const double *u, const double *f0, const double *col, const double *ahead,
+                    int n, double rem, double *dt, double *y, double *err, prsm_stats *stats) {
     double w0 = x[FREE], g0 = f0[FREE], lam = col[FREE];
     if (g0 == 0.0) return 0;
-    double ahead[PRSM_MAX_BREAKS];
-    int n = breaks_ahead(b, w0, g0, ahead);
     if (!n) return 0;
     double bk = ahead[0];                         /* min(ahead, key=|v - w0|): the first */
     double d = bk - w0;
@@ -185,9 +182,8 @@ static int traverse(const prsm_band *b, prsm_rhs_fn f, const void *ctx, const do
         for (int k = 0; k < N; k++) est[k] = acc[0][k] - acc[1][k];
         est[FREE] = g0 * (t5 - t3);
         double sq = 0.0;
-        for (int k = 0; k < N; k++)
-            sq += prsm_pow(est[k] / (b->atol + b->rtol * pmax(fabs(x[k]), fabs(yy[k]))), 2.0);
-        double e = sqrt(sq / (double)N);
+        for (int k = 0; k < N; k++) sq += prsm_err_term(est[k], x[k], yy[k], b->atol, b->rtol);
+        double e = prsm_rms(sq, N);
         if (e <= 1.0) {
             if (d == bk - w0) yy[FREE] = bk;
             *dt = t5;
@@ -254,8 +250,12 @@ int prsm_band_advance(const prsm_band *b, prsm_rhs_fn f, prsm_exact_fn exact, vo
     for (;;) {
         double ti = t + tau;
         if (checked_linearise(b, f, ctx, y, u, f0, col, stats, ti, t, h, hs, msg, len)) return -1;
+        /* the breaks ahead of this point, nearest first: sorted once for the traversal and every
+         * trial's break_time from it */
+        double ahead[PRSM_MAX_BREAKS];
+        int n_ahead = f0[FREE] != 0.0 ? breaks_ahead(b, y[FREE], f0[FREE], ahead) : 0;
         double dt;
-        if (traverse(b, f, ctx, y, u, f0, col, h - tau, &dt, y_new, &err, stats)) {
+        if (traverse(b, f, ctx, y, u, f0, col, ahead, n_ahead, h - tau, &dt, y_new, &err, stats)) {
             memcpy(y, y_new, sizeof(double) * N);
             stats->substeps += 1;
             tau += dt;
@@ -273,7 +273,7 @@ int prsm_band_advance(const prsm_band *b, prsm_rhs_fn f, prsm_exact_fn exact, vo
             last = hs * 1.05 >= rem;
             h_step = last ? rem : hs;
             double cut;
-            if (break_time(b, y[FREE], f0[FREE], col[FREE], h_step, &cut)) {
+            if (break_time(ahead, n_ahead, y[FREE], f0[FREE], col[FREE], h_step, &cut)) {
                 h_step = cut;
                 last = 0;
             }

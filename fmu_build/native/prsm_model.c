@@ -10,6 +10,7 @@
 #include "prsm_ros.h"
 #include "prsm_band.h"
 #include "prsm_geometry.h"
+#include "prsm_step.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -351,16 +352,18 @@ static void rhs(const prsm_model *m, const double *x, const double *u, double *d
     dx[ie + 2] = p_fric + loss * omega;
 }
 
-/* Model.sliding_velocities at the dynamic level (Mechanism.sliding_velocities: per stage the
- * thread flanks' slip velocities, then the spline's and the bearing's speeds, where they have
- * friction), PRSM_SLIP_DIM slots per law, with the signature of prsm_ros's slip */
+/* Model.sliding_velocities (Mechanism.sliding_velocities: per stage the thread flanks' slip
+ * velocities, then the spline's and the bearing's speeds, where they have friction; then the
+ * kinematic level's own loss), PRSM_SLIP_DIM slots per law, with the signature of prsm_ros's
+ * slip */
 static void slip_ctx(const void *ctx, const double *x, double *v) {
     const prsm_model *m = (const prsm_model *)ctx;
-    double omega = x[1];
+    double omega = x[1], wps[NS];
+    speeds_of(m, x, wps);
     int j = 0;
     for (int k = 0; k < NS; k++) {
         const prsm_stage *s = &m->st[k];
-        double wp = x[2 + k];
+        double wp = wps[k];
         for (int f = 0; f < 2; f++) {
             const prsm_flank *fl = &m->fl[k][f];
             if (m->mu != 0.0) {
@@ -374,6 +377,7 @@ static void slip_ctx(const void *ctx, const double *x, double *v) {
         if (s->e_spline != 0.0) { v[j] = omega * s->spline_f; j += PRSM_SLIP_DIM; }
         if (s->g_bearing != 0.0) { v[j] = omega * s->bearing_f; j += PRSM_SLIP_DIM; }
     }
+    if (m->coulomb_loss) v[j] = omega * m->c_out;
 }
 
 /* rhs with the signature of prsm_ros.h's right-hand side */
@@ -693,8 +697,9 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
         if (m->st[k].e_spline != 0.0) r->law_dim[r->n_laws++] = 1;
         if (m->st[k].g_bearing != 0.0) r->law_dim[r->n_laws++] = 1;
     }
+    if (m->coulomb_loss) r->law_dim[r->n_laws++] = 1;
     r->band = m->v_eps;
-    r->slip = m->dynamic && r->n_laws ? slip_ctx : NULL;
+    r->slip = r->n_laws ? slip_ctx : NULL;
     return 0;
 }
 
@@ -782,10 +787,9 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
 }
 
 /* ---- steppers/explicit.py: Dormand-Prince 5(4) with step-size control ------------------------ */
+/* AdaptiveBase._factor with the exponent 1/5 of the embedded order 4 */
 static double err_factor(const prsm_model *m, double err) {
-    if (err == 0.0) return m->fac_max;
-    if (!(err < INFINITY)) return m->fac_min;
-    return fmin(m->fac_max, fmax(m->fac_min, m->safety * prsm_pow(err, -1.0 / 5.0)));
+    return prsm_step_factor(err, -1.0 / 5.0, m->safety, m->fac_min, m->fac_max);
 }
 
 /* one trial step: xn, k7 = f(xn), err; returns 0, or nonzero if a value is not finite */
@@ -819,12 +823,10 @@ static int trial_dp5(const prsm_model *m, const double *x, const double *k1, dou
     double e1 = hs * PRSM_DP_E[0], e3 = hs * PRSM_DP_E[1], e4 = hs * PRSM_DP_E[2],
            e5 = hs * PRSM_DP_E[3], e6 = hs * PRSM_DP_E[4], e7 = hs * PRSM_DP_E[5];
     double sq = 0.0;
-    for (int i = 0; i < PRSM_NX; i++) {
-        double d = (e1 * k1[i] + e3 * k3[i] + e4 * k4[i] + e5 * k5[i] + e6 * k6[i] + e7 * k7[i])
-                   / (m->atol + m->rtol * pmax(fabs(x[i]), fabs(xn[i])));
-        sq += prsm_pow(d, 2.0);
-    }
-    *err = sqrt(sq / (double)PRSM_NX);
+    for (int i = 0; i < PRSM_NX; i++)
+        sq += prsm_err_term(e1 * k1[i] + e3 * k3[i] + e4 * k4[i] + e5 * k5[i] + e6 * k6[i]
+                            + e7 * k7[i], x[i], xn[i], m->atol, m->rtol);
+    *err = prsm_rms(sq, PRSM_NX);
     int ok = finite_sum(k2, PRSM_NX) && finite_sum(k3, PRSM_NX) && finite_sum(k4, PRSM_NX) &&
              finite_sum(k5, PRSM_NX) && finite_sum(k6, PRSM_NX) && finite_sum(k7, PRSM_NX) &&
              finite_sum(xn, PRSM_NX) && isfinite(*err);
@@ -906,9 +908,14 @@ static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const dou
         double hs = mem->has_h_prop ? mem->h_prop : starting_step(m, x, k1, u, h, stats);
         double tau = 0.0;
         int attempts = 0, just_rejected = 0;
+        /* kink landing (prsm_step.h) with the model's laws */
+        int kinks = m->ros.slip != NULL;
+        prsm_landing landing;
+        prsm_landing_init(&landing, &m->ros, m, m->h_min);
         for (;;) {
             double rem = h - tau;
-            int last = hs * 1.05 >= rem;
+            /* a step cut to end on a kink has exactly the cut size, never stretched to t + h */
+            int last = !landing.cuts && hs * 1.05 >= rem;
             double h_step = last ? rem : hs;
             attempts += 1;
             if (attempts > m->max_substeps) {
@@ -921,11 +928,17 @@ static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const dou
             int bad = trial_dp5(m, y, k1, h_step, u, yn, kn, &err);
             stats->rhs_calls += 6;
             if (bad) err = INFINITY;
+            double h_cut;
+            if (kinks && !bad && prsm_landing_cut(&landing, y, yn, h_step, stats, &h_cut)) {
+                hs = h_cut;     /* it would cross a kink of the friction law: ends on it */
+                continue;
+            }
             if (err <= 1.0) {
                 stats->substeps += 1;
                 double fac = err_factor(m, err);
                 if (just_rejected && fac > 1.0) fac = 1.0;
                 double h_new = h_step * fac;
+                if (kinks) h_new = prsm_landing_accepted(&landing, h_new, fac);
                 memcpy(y, yn, sizeof yn);
                 memcpy(k1, kn, sizeof kn);
                 just_rejected = 0;
@@ -938,7 +951,9 @@ static int explicit_advance(prsm_model *m, prsm_memory *mem, double t, const dou
                 tau += h_step;
                 hs = h_new;
             } else {
+                stats->rejected += 1;
                 just_rejected = 1;
+                if (kinks) prsm_landing_rejected(&landing);
                 hs = h_step * err_factor(m, err);
                 if (hs < m->h_min) {
                     char what[160];

@@ -86,10 +86,10 @@ typedef struct {
     int screw_starts;
 } prsm_stage_values;
 
-/* friction laws with a sliding velocity (Mechanism.sliding_velocities): per stage both thread
- * flanks' slip and differential sliding, the spline and the bearing face; three components
- * each at most */
-#define PRSM_MAX_LAWS (6 * PRSM_N_STAGES)
+/* friction laws with a sliding velocity (Model.sliding_velocities): per stage both thread
+ * flanks' slip and differential sliding, the spline and the bearing face, then the kinematic
+ * level's own loss; three components each at most */
+#define PRSM_MAX_LAWS (6 * PRSM_N_STAGES + 1)
 #define PRSM_SLIP_DIM 3
 
 /* the dynamic level's stepper ROS34PW2 (prsm_ros.h): Rosenbrock.__init__ with the FMU's options */
@@ -99,9 +99,11 @@ typedef struct {
     double rtol, atol, h_min, safety, fac_min, fac_max;
     double jacobian_reuse, first_step_stiffness;
     int max_substeps, fixed_substeps;    /* fixed_substeps 0: adaptive */
-    /* kink landing (control.kink_fraction): the model's sliding velocities, PRSM_SLIP_DIM
-     * components per law (slip NULL: no landing), per law its components (1 or 3) and whether
-     * its kinks include 0 (one-component laws: kinks 0 and v_eps; three-component: v_eps) */
+    /* kink landing (control.kink_fraction) and the slip error norm (control.slip_error): the
+     * model's sliding velocities, PRSM_SLIP_DIM components per law (slip NULL: no landing), per
+     * law its components (1 or 3) and whether its kinks include 0 (one-component laws: kinks 0
+     * and v_eps; three-component: v_eps); the slaved levels' Dormand-Prince lands with the same
+     * (prsm_model.c, explicit_advance) */
     void (*slip)(const void *ctx, const double *x, double *v);
     int n_laws, law_dim[PRSM_MAX_LAWS];
     double band;                         /* v_eps [m/s] */

@@ -5,6 +5,7 @@
  * floats are pmin/pmax (prsm_model.h).
  */
 #include "prsm_ros.h"
+#include "prsm_step.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -248,9 +249,7 @@ static double drift(const prsm_ros *r, const double *y, const double *y_jac) {
 
 /* AdaptiveBase._factor with the exponent 1/3 of the embedded order 2 */
 static double factor(const prsm_ros *r, double err) {
-    if (err == 0.0) return r->fac_max;
-    if (!(err < INFINITY)) return r->fac_min;
-    return pmin(r->fac_max, pmax(r->fac_min, r->safety * prsm_pow(err, -1.0 / 3.0)));
+    return prsm_step_factor(err, -1.0 / 3.0, r->safety, r->fac_min, r->fac_max);
 }
 
 /* Rosenbrock._initial_step_stiff (with AdaptiveBase._initial_step) */
@@ -283,10 +282,11 @@ static double initial_step_stiff(const prsm_ros *r, const double *x, const doubl
 }
 
 /* Rosenbrock._trial: 0, the first stage (2..4) with a non-finite value, or -1 for a non-finite
- * result; xn and err are set in every case */
+ * result; xn and err are set in every case.  v0: the sliding velocities at x (NULL: none), with
+ * which err is at least the estimate's slip error norm (control.slip_error) */
 static int trial(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double *x,
                  const double *f0, const ros_lu *lu, const ros_jac *jac, double hs,
-                 const double *u, double *xn, double *err) {
+                 const double *u, const double *v0, double *xn, double *err) {
     const double *T = PRSM_ROS_TRIAL;
     double a21 = T[0], a31 = T[1], a32 = T[2], a41 = T[3], a42 = T[4], a43 = T[5];
     double c21 = T[6], c31 = T[7], c32 = T[8], c41 = T[9], c42 = T[10], c43 = T[11];
@@ -321,11 +321,12 @@ static int trial(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double
     double e1 = PRSM_ROS_E[0], e2 = PRSM_ROS_E[1], e3 = PRSM_ROS_E[2], e4 = PRSM_ROS_E[3];
     double w1 = PRSM_ROS_WQ[0], w2 = PRSM_ROS_WQ[1], w3 = PRSM_ROS_WQ[2], w4 = PRSM_ROS_WQ[3];
     double v1 = PRSM_ROS_EQ[0], v2 = PRSM_ROS_EQ[1], v3 = PRSM_ROS_EQ[2], v4 = PRSM_ROS_EQ[3];
-    double rtol = r->rtol, at = r->atol, sq = 0.0, uw[ND], ue[ND];
+    double rtol = r->rtol, at = r->atol, sq = 0.0, uw[ND], ue[ND], ed[ND];
     for (int k = 0; k < nd; k++) {
         double p = xd[k], q = u1[k], rr = u2[k], s = u3[k], v = u4[k];
         double pn = p + m1 * q + m2 * rr + m3 * s + m4 * v;
-        sq += prsm_pow((e1 * q + e2 * rr + e3 * s + e4 * v) / (at + rtol * pmax(fabs(p), fabs(pn))), 2.0);
+        ed[k] = e1 * q + e2 * rr + e3 * s + e4 * v;
+        sq += prsm_err_term(ed[k], p, pn, at, rtol);
         xn[dyn[k]] = pn;
         uw[k] = w1 * q + w2 * rr + w3 * s + w4 * v;
         ue[k] = v1 * q + v2 * rr + v3 * s + v4 * v;
@@ -338,10 +339,18 @@ static int trial(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double
         for (int c = 0; c < nd; c++) se += jac->qd[j][c] * ue[c];
         double pn = p + hs * (w1 * g1 + w2 * g2 + w3 * g3 + w4 * g4 + sw);
         double eq = hs * (v1 * g1 + v2 * g2 + v3 * g3 + v4 * g4 + se);
-        sq += prsm_pow(eq / (at + rtol * pmax(fabs(p), fabs(pn))), 2.0);
+        sq += prsm_err_term(eq, p, pn, at, rtol);
         xn[i] = pn;
     }
-    *err = sqrt(sq / (double)n);
+    *err = prsm_rms(sq, n);
+    if (v0 != NULL) {
+        /* the estimate's sliding velocities: the quadrature components enter none */
+        double ef[NX] = {0.0}, ds[PRSM_SLIP_DIM * PRSM_MAX_LAWS] = {0.0};
+        for (int k = 0; k < nd; k++) ef[dyn[k]] = ed[k];
+        r->slip(ctx, ef, ds);
+        double slip = prsm_slip_error(r->n_laws, r->law_dim, r->band, ds, v0, rtol, at);
+        if (slip > *err) *err = slip;
+    }
     double chk = 0.0;
     for (int i = 0; i < n; i++) chk += xn[i];
     chk += *err;
@@ -352,64 +361,6 @@ static int trial(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, const double
         return -1;
     }
     return 0;
-}
-
-/* control.kink_fraction: the fraction of the step in (0, 1) at which it should end (returned
- * through *frac with 1), or 0 if the step may stand; v0, v1 the sliding velocities of r->slip */
-static int kink_fraction(const prsm_ros *r, const double *v0, const double *v1, double *frac) {
-    double band = r->band;
-    double tol = PRSM_KINK_BAND * band;
-    double best = 2.0;
-    for (int l = 0; l < r->n_laws; l++) {
-        const double *s0 = v0 + PRSM_SLIP_DIM * l, *s1 = v1 + PRSM_SLIP_DIM * l;
-        double r0, r1;
-        if (r->law_dim[l] == 1) {
-            double a0 = s0[0], a1 = s1[0];
-            double d = a1 - a0;
-            double dn = fabs(d);
-            if (!(dn > tol)) continue;
-            r0 = fabs(a0);
-            r1 = fabs(a1);
-            if (a0 * a1 <= 0.0 || r0 <= band || r1 <= band) {
-                /* kinks 0 and v_eps: the roots -a0/d, then (v_eps - a0)/d and (-v_eps - a0)/d */
-                double roots[3] = {-a0 / d, (band - a0) / d, (-band - a0) / d};
-                for (int i = 0; i < 3; i++) {
-                    double root = roots[i];
-                    if (0.0 < root && root < 1.0 && root * dn > tol && (1.0 - root) * dn > tol
-                        && root < best)
-                        best = root;
-                }
-            }
-        } else {
-            double x0 = s0[0], y0 = s0[1], z0 = s0[2];
-            double dx = s1[0] - x0, dy = s1[1] - y0, dz = s1[2] - z0;
-            double aa = dx * dx + dy * dy + dz * dz;
-            double dn = sqrt(aa);
-            if (!(dn > tol)) continue;
-            double rr0 = x0 * x0 + y0 * y0 + z0 * z0;
-            r0 = sqrt(rr0);
-            r1 = sqrt(s1[0] * s1[0] + s1[1] * s1[1] + s1[2] * s1[2]);
-            double b = x0 * dx + y0 * dy + z0 * dz;
-            /* the kink v_eps: |s0 + theta dv| = v_eps, where |s| may reach it */
-            double disc = b * b - aa * (rr0 - band * band);
-            if (r0 + r1 - dn <= 2.0 * band && !(disc < 0.0)) {
-                double sq = sqrt(disc);
-                double roots[2] = {(-b - sq) / aa, (-b + sq) / aa};
-                for (int i = 0; i < 2; i++) {
-                    double root = roots[i];
-                    if (0.0 < root && root < 1.0 && root * dn > tol && (1.0 - root) * dn > tol
-                        && root < best)
-                        best = root;
-                }
-            }
-        }
-        double change = fabs(r1 - r0);
-        double limit = PRSM_APPROACH * pmax(band, r1 < r0 ? r0 / (1.0 + PRSM_APPROACH) : r0);
-        if (change > limit && limit / change < best) best = limit / change;
-    }
-    if (!(best < 1.0)) return 0;
-    *frac = best;
-    return 1;
 }
 
 static int ros_fail(char *msg, int len, const char *what, double t, double hs, double t0, double h) {
@@ -453,10 +404,10 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
     memcpy(y, x, sizeof(double) * (size_t)n);
     int attempts = 0, just_rejected = 0, have_f0 = 0, have_jac = 0, jac_at_y = 0, has_h_mem = 0;
     int i_fixed = 0;
-    /* kink landing: sliding velocities at the accepted point and at the trial's end, the cuts of
-     * this internal step and the step the first one shortened */
-    int kinks = !fixed && r->slip != NULL, have_v0 = 0, have_v_new = 0, cuts = 0;
-    double v0[PRSM_SLIP_DIM * PRSM_MAX_LAWS], v_new[PRSM_SLIP_DIM * PRSM_MAX_LAWS], h_uncut = 0.0;
+    /* kink landing (prsm_step.h) */
+    int kinks = !fixed && r->slip != NULL;
+    prsm_landing landing;
+    prsm_landing_init(&landing, r, ctx, r->h_min);
     ros_jac jac;
     ros_lu lu;
     char reason[160] = "", what[320];
@@ -507,7 +458,7 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         }
         if (!fixed) {
             double rem = h - tau;
-            last = !cuts && hs * 1.05 >= rem;
+            last = !landing.cuts && hs * 1.05 >= rem;
             h_step = last ? rem : hs;
             attempts += 1;
             if (attempts > r->max_substeps) {
@@ -527,7 +478,8 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         int singular = lu_factor(jac.dd, r->nd, 1.0 / (h_step * PRSM_ROS_GAMMA), &lu);
         if (singular)
             return ros_fail(msg, len, "singular iteration matrix I/(h gamma) - J", ti, h_step, t, h);
-        int bad = trial(r, f, ctx, y, f0, &lu, &jac, h_step, u, y_new, &err);
+        int bad = trial(r, f, ctx, y, f0, &lu, &jac, h_step, u,
+                        kinks ? prsm_landing_start(&landing, y) : NULL, y_new, &err);
         stats->rhs_calls += 3;
         if (bad) {
             bad_text(bad, reason, sizeof reason);
@@ -544,38 +496,17 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
             i_fixed += 1;
             continue;
         }
-        have_v_new = 0;
-        if (kinks && !bad && cuts < PRSM_MAX_KINK_CUTS) {
-            double s_cut;
-            if (!have_v0) {
-                memset(v0, 0, sizeof v0);
-                r->slip(ctx, y, v0);
-                have_v0 = 1;
-            }
-            memset(v_new, 0, sizeof v_new);
-            r->slip(ctx, y_new, v_new);
-            have_v_new = 1;
-            if (kink_fraction(r, v0, v_new, &s_cut) && h_step * s_cut >= r->h_min) {
-                /* the step would cross a kink of the friction law: end it on the kink */
-                if (!cuts) h_uncut = h_step;
-                cuts += 1;
-                stats->rejected += 1;
-                hs = h_step * s_cut;
-                continue;
-            }
+        double h_cut;
+        if (kinks && !bad && prsm_landing_cut(&landing, y, y_new, h_step, stats, &h_cut)) {
+            hs = h_cut;     /* it would cross a kink of the friction law: ends on it instead */
+            continue;
         }
         if (err <= 1.0) {
             stats->substeps += 1;
             double fac = factor(r, err);
             if (just_rejected && fac > 1.0) fac = 1.0;
             double h_new = h_step * fac;
-            if (cuts) {
-                /* landed on a kink: go on with the step the cut shortened */
-                if (fac >= 1.0) h_new = pmax(h_new, h_uncut);
-                cuts = 0;
-            }
-            have_v0 = have_v_new;
-            if (have_v_new) memcpy(v0, v_new, sizeof v0);
+            if (kinks) h_new = prsm_landing_accepted(&landing, h_new, fac);
             if (!has_h_mem) {
                 h_mem = last && h_new >= h_step ? pmax(h_new, hs) : h_new;
                 has_h_mem = 1;
@@ -601,7 +532,7 @@ int prsm_ros_advance(const prsm_ros *r, prsm_rhs_fn f, const void *ctx, prsm_mem
         } else {
             stats->rejected += 1;
             just_rejected = 1;
-            h_uncut = 0.0;  /* a cut step that fails its error test: no return to the uncut */
+            if (kinks) prsm_landing_rejected(&landing);
             hs = h_step * factor(r, err);
             if (hs < r->h_min) {
                 snprintf(what, sizeof what, "step size %.17g s below h_min = %.17g s after "

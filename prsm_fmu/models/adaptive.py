@@ -252,9 +252,9 @@ class SwitchingStepper(Stepper):
         :data:`prsm_fmu.steppers.options.TOLERANCE_FACTOR`. Why: the exponential stepper takes
         the fewest rhs calls at the loop scenes' 0.1 ms steps; through a zero-speed crossing,
         where every friction law passes the once-differentiable points of its band and every
-        stepper lands on them, ROS34PW2 takes about half of its rhs calls (593 against 1126 in
-        the speed reversal's crossing step at tolerance 1e-6, docs/accuracy.md §2, "Landing on
-        the friction law's kinks"). ``closed_form`` and ``closed_form_explicit`` mean
+        stepper lands on them, ROS34PW2 takes about 60 % of its rhs calls (685 against 1126 in
+        the speed reversal's crossing step at tolerance 1e-6, docs/accuracy.md §2, "Work of the
+        crossing step"). ``closed_form`` and ``closed_form_explicit`` mean
         ``rosenbrock``.
     **options
         That stepper's options; ``rtol``, ``atol`` and ``max_substeps`` also set the

@@ -89,6 +89,6 @@ class ClosedFormExplicit(ClosedForm):
     name = "closed_form_explicit"
 
     def __init__(self, model: Any, **band_options: Any) -> None:
-        # the native C FMU's slaved levels step the band with Dormand-Prince 5(4) without kink
-        # landing (prsm_model.c): so does this mirror of it
-        super().__init__(model, band="explicit", land_on_kinks=False, **band_options)
+        # Dormand-Prince 5(4) landing on the friction law's kinks, as the native C FMU's slaved
+        # levels step the band (prsm_model.c, explicit_advance)
+        super().__init__(model, band="explicit", **band_options)

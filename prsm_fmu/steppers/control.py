@@ -1,6 +1,6 @@
 """Shared machinery of the adaptive steppers: tolerances, error weights, the first-step norms,
-the elementary step-size controller (memory: the proposal for the next internal step) and the
-landing on the friction law's kinks.
+the elementary step-size controller (memory: the proposal for the next internal step), the
+landing on the friction law's kinks and the slip error norm (:func:`slip_error`, ROS34PW2's).
 
 Kink landing: a model may report ``sliding_velocities(x)`` (one tuple of components [m/s] per
 regularised friction law) and ``kink_speeds`` (per law the sliding speeds [m/s] where the law is
@@ -18,7 +18,8 @@ from typing import Any, Sequence
 
 from .base import Stepper, _INF, _check_count, _check_tol, _model_mask, _model_scale
 
-__all__ = ["AdaptiveBase", "KinkLanding", "KINK_BAND", "APPROACH", "MAX_KINK_CUTS", "kink_fraction"]
+__all__ = ["AdaptiveBase", "KinkLanding", "KINK_BAND", "APPROACH", "MAX_KINK_CUTS", "kink_fraction",
+           "slip_error"]
 
 #: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
 _TIME_MATCH = 4e-16
@@ -114,6 +115,50 @@ def kink_fraction(v0: Sequence[tuple], v1: Sequence[tuple], kinks: Sequence[tupl
     return best if best < 1.0 else None
 
 
+def slip_error(ds: Sequence[tuple], s0: Sequence[tuple], rtol: float, atol: float,
+               band: float) -> float:
+    """The largest weighted error of a step's sliding velocities (the slip error norm).
+
+    A friction force follows its sliding velocity s through the law's direction s/|s| and
+    magnitude, so its relative error is about |Δs| / max(|s|, v_ε): inside the band the law is
+    linear in s/v_ε, outside it the direction turns by |Δs|/|s|.  Where the thread contact
+    rolls almost purely, s = ω a + ω_P b is a small difference of the screw's and the carrier's
+    parts (near zero speed |ω_P b| ≈ 4.5 |s| for Li et al. (2021)'s stage 1), so an error in
+    the carrier speed within its own weight rtol·|ω_P| moves the forces several times as much
+    (docs/accuracy.md, "The slip error norm").  Weight of a law: atol·v_ε + rtol·max(|s|, v_ε).
+
+    Parameters
+    ----------
+    ds : sequence of tuple of float
+        The error estimate's sliding velocities [m/s] (``sliding_velocities`` of the estimate's
+        state vector: the velocities are linear in the speeds), one tuple per law.
+    s0 : sequence of tuple of float
+        The sliding velocities [m/s] at the step's start.
+    rtol, atol : float
+        The stepper's tolerances (atol relative to v_ε here).
+    band : float
+        v_ε [m/s].
+
+    Returns
+    -------
+    float
+        max over the laws of |Δs| / weight (0 without laws; nan propagates only through the
+        state norm, which the same estimate makes nan).
+    """
+    worst = 0.0
+    floor = atol * band
+    for d, s in zip(ds, s0):
+        if len(d) == 1:
+            dn, sn = abs(d[0]), abs(s[0])
+        else:
+            dn = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            sn = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+        e = dn / (floor + rtol * max(sn, band))
+        if e > worst:
+            worst = e
+    return worst
+
+
 class KinkLanding:
     """One advance's landing on the kinks of a model's friction laws (module docstring).
 
@@ -139,6 +184,13 @@ class KinkLanding:
         self.v0 = self.v_new = None
         self.cuts = 0
         self.h_uncut = 0.0
+
+    def start(self, y: Sequence[float]) -> list:
+        """The sliding velocities [m/s] at the accepted point ``y`` the next trial starts from
+        (computed once per point)."""
+        if self.v0 is None:
+            self.v0 = self.speeds(y)
+        return self.v0
 
     def cut(self, y: Sequence[float], y_new: Sequence[float], h_step: float,
             stats: Any) -> float | None:

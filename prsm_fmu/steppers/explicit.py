@@ -63,9 +63,6 @@ class ExplicitAdaptive(AdaptiveBase):
         5: Dormand-Prince 5(4); 3: Bogacki-Shampine 3(2).
     safety, fac_min, fac_max : float, optional
         Controller safety factor and limits of the step-size ratio.
-    land_on_kinks : bool, optional
-        End internal steps on the friction law's kinks where the model reports its sliding
-        velocities (default; :func:`.control.kink_fraction`); False: plain error control.
     """
 
     name = "explicit_adaptive"
@@ -83,11 +80,8 @@ class ExplicitAdaptive(AdaptiveBase):
         safety: float = 0.9,
         fac_min: float = 0.2,
         fac_max: float = 5.0,
-        land_on_kinks: bool = True,
     ) -> None:
         super().__init__(model, rtol, atol, h_min, max_substeps, fixed_substeps, safety, fac_min, fac_max)
-        if not land_on_kinks:
-            self._speeds = None
         if order == 5:
             self._trial = self._trial_dp5
             self._rhs_per_trial = 6
