@@ -304,27 +304,38 @@ static double solve(const prsm_model *m, const double *x, double load, double to
     return balance(m, x[1], wps, load, torque, cache, rec, consistent);
 }
 
+/* Model._solve of either drive: the screw acceleration, the carrier speeds, the sweep record, the
+ * consistency flag and the motor torque at x with inputs u and the level's extra loss torque.
+ * Torque drive: u[0] is the motor torque, the acceleration solves the balance; speed drive: u[0]
+ * is the prescribed acceleration and the motor torque follows (Mechanism._balance). */
+static double drive_balance(const prsm_model *m, const double *x, const double *u, double loss,
+                            double *wps, coef_cache *cache, sweep_rec *rec, int *consistent,
+                            double *motor) {
+    double load = u[1], omega = x[1];
+    if (m->speed_drive) {
+        double alpha = u[0];
+        memset(cache->have, 0, sizeof cache->have);
+        speeds_of(m, x, wps);
+        sweep(m, omega, wps, load, alpha, cache, rec);
+        *motor = rec->m0 + rec->m1 * alpha + loss;
+        *consistent = 1;
+        return alpha;
+    }
+    *motor = u[0];
+    return solve(m, x, load, u[0] - loss, wps, cache, rec, consistent);
+}
+
 /* Model.rhs: torque drive at every level, speed drive at the dynamic level (the carrier speeds
  * are states there, slaved to the screw otherwise; an extra loss at the kinematic level only) */
 static void rhs(const prsm_model *m, const double *x, const double *u, double *dx) {
     double load = u[1], omega = x[1];
     double loss = extra_loss(m, omega, load);
-    double motor = u[0];
+    double motor;
     double wps[NS];
     coef_cache cache;
     sweep_rec rec;
-    int consistent = 1;
-    double alpha;
-    if (m->speed_drive) {
-        /* the prescribed acceleration; the motor torque follows (Mechanism._balance) */
-        alpha = u[0];
-        memset(cache.have, 0, sizeof cache.have);
-        speeds_of(m, x, wps);
-        sweep(m, omega, wps, load, alpha, &cache, &rec);
-        motor = rec.m0 + rec.m1 * alpha + loss;
-    } else {
-        alpha = solve(m, x, load, motor - loss, wps, &cache, &rec, &consistent);
-    }
+    int consistent;
+    double alpha = drive_balance(m, x, u, loss, wps, &cache, &rec, &consistent, &motor);
     double p_fric = consistent ? rates_power(m, omega, alpha, &rec) : NAN;
     if (!consistent) alpha = NAN;
     if (m->dynamic)      /* Mechanism._rates: carrier generalized forces over their inertias */
@@ -708,14 +719,13 @@ static double efficiency(double p_in, double p_out, double omega) {
 void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[2], prsm_outputs *y) {
     double omega = x[1], load = u[1];
     double loss = extra_loss(m, omega, load);
-    double motor = u[0];
+    double motor;
     double wps[NS];
     coef_cache cache;
     sweep_rec rec;
     int consistent;
-    double alpha = solve(m, x, load, u[0] - loss, wps, &cache, &rec, &consistent);
+    double alpha = drive_balance(m, x, u, loss, wps, &cache, &rec, &consistent, &motor);
     /* Mechanism._assemble(detail=True) */
-    double motor_sol = rec.m0 + rec.m1 * alpha;
     double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0, p_viscous = 0.0, p_differential = 0.0;
     for (int k = 0; k < m->n; k++) {
         const rec_stage *r = &rec.s[k];
@@ -742,7 +752,6 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
         y->carrier_speed[k] = wps[k];
         y->carrier_speed_ratio[k] = omega != 0.0 ? wps[k] / omega : 0.0;
     }
-    (void)motor_sol;
     double v_rod = m->c_out * omega;
     double p_in = motor * omega, p_out = load * v_rod;
     y->alpha = alpha;
