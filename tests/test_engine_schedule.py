@@ -176,3 +176,23 @@ def test_advance_schedule_refuses_bad_arrays_naming_them():
     assert all(math.isfinite(v) for v in x_end) and stats.rhs_calls > 0
     assert struct.pack("<d", y[0][st.output_names.index("screw_speed")]) == \
         struct.pack("<d", 1.0)          # speed held: acceleration 0 over the step
+
+
+def test_a_constant_speed_splits_an_interval_as_the_general_profile(capsys):
+    """ConstantSpeed.pieces (one piece, acceleration 0.0, no calls) equals the base class's
+    (ω₀ − ω₀)/(t1 − t0) bit for bit, the sign of the zero included, on seeded random cases."""
+    from prsm_fmu.profiles import SpeedProfile
+
+    rng = random.Random(f"{SEED}-constant")
+    cases = 2000
+    for _ in range(cases):
+        w = rng.choice((-1.0, 1.0)) * 10.0 ** rng.uniform(-6.0, 4.0) if rng.random() > 0.05 \
+            else rng.choice((0.0, -0.0))
+        t0 = rng.uniform(0.0, 10.0)
+        t1 = t0 + 10.0 ** rng.uniform(-9.0, 0.0)
+        profile = ConstantSpeed(w)
+        got, ref = profile.pieces(t0, t1), SpeedProfile.pieces(profile, t0, t1)
+        assert len(got) == len(ref) == 1
+        assert [struct.pack("<d", v) for v in got[0]] == [struct.pack("<d", v) for v in ref[0]]
+    with capsys.disabled():
+        print(f"\n{cases} seeded (speed, interval) cases: one piece, equal bit for bit")

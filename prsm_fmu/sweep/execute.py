@@ -32,10 +32,17 @@ machine's file system (they need ``prsm_fmu``, numpy, scipy, fmpy and pythonfmu 
 A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points one after the
 other in this process (the reference the Dask overhead is measured against).
 
-A point is submitted once (``retries=0``, ``pure=False``); its result comes back as soon as it
-is done and is appended to the table at once, so an interrupted study keeps every finished
-point.  The progress bar shows the points done, failed and the time left; the Dask dashboard's
-progress shows the tasks (``prsm-point``) done of total.  A rerun with the same output directory skips the points whose id (a hash of the
+The points go to the workers in chunks (:func:`chunk_size`), each submitted once
+(``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of work each at the latest
+chunk's time per point (so the scheduler's cost per task stays near 1 % of the work; a point
+of more than that is a chunk of its own), shrinking to single points towards the end (so the
+workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as soon as one
+comes back.  A chunk's results are appended to the table as soon as it is done, so an
+interrupted study keeps every finished chunk; where the workers share this file system they
+save each point's series themselves (:mod:`~prsm_fmu.sweep.series_files`).  The progress bar
+shows the points done, failed and the time left; the Dask dashboard's progress shows the
+chunks (``prsm-points``) done of those submitted.  A rerun with the same output directory
+skips the points whose id (a hash of the
 point's preset, parameters, scenario and backend) is already in the table with status ``ok``
 and whose series file exists; failed points are run again.  A point whose worker dies is
 recorded as failed with the scheduler's message.
@@ -61,7 +68,8 @@ from ..atomic import atomic_path
 from ..command import child_failure, deferred_interrupt
 from ..extras import require
 from .metrics import standard_metrics
-from .points import FmuFile, PointResult, PointTask, run_point
+from .points import FmuFile, PointResult, PointTask, run_point, run_points
+from .series_files import load_series, save_series
 from .study import Study
 from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
                     write_table)
@@ -69,7 +77,7 @@ from .trends import TrendResult, evaluate
 
 __all__ = ["run_study", "claim_out_dir", "STUDY_MARKER", "SweepResult", "ensure_fmus",
            "metric_columns", "load_series", "EXECUTORS", "Progress", "local_cluster", "LOOPBACK",
-           "eta"]
+           "eta", "chunk_size", "CHUNK_SECONDS", "IN_FLIGHT"]
 
 EXECUTORS = ("dask", "loop")
 
@@ -95,6 +103,7 @@ class SweepResult:
     figures: list[str] = field(default_factory=list)
     wall_time: float = 0.0
     backend: str = ""
+    dask_tasks: int = 0                            # Dask tasks (chunks of points) submitted
 
     @property
     def failed(self) -> list[dict[str, Any]]:
@@ -159,15 +168,6 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
         for n in missing:
             paths[n] = os.path.join(dest, f"PRSM{n}.fmu")
     return paths
-
-
-def load_series(out_dir: str, point_id: str) -> dict[str, np.ndarray] | None:
-    """The saved series of a point, or None."""
-    path = os.path.join(out_dir, "series", f"{point_id}.npz")
-    if not os.path.exists(path):
-        return None
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
 
 
 class Progress:
@@ -269,9 +269,45 @@ def _quiet_logs() -> None:
     logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
+#: wall time [s] a Dask task (a chunk of points) aims at: the cost of a task to the scheduler
+#: and of its round trip (a few ms on a local cluster) stays near 1 % of it
+CHUNK_SECONDS = 0.25
+#: chunks in flight per worker: while one runs the next waits on the worker, so that no worker
+#: idles during a round trip to this process
+IN_FLIGHT = 2
+
+
+def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) -> int:
+    """Points of the next Dask task: about :data:`CHUNK_SECONDS` of work at
+    ``seconds_per_point`` (the latest chunk's mean: a worker's first point, which loads the FMU
+    or the engine, counts once only; None before the first: one point), at most ``remaining // (2 workers)`` (guided: the chunks shrink to single points
+    towards the end, so that the workers finish within about a point of each other), at
+    least 1.
+
+    Parameters
+    ----------
+    remaining : int
+        Points not yet submitted.
+    workers : int
+        Workers of the cluster, >= 1.
+    seconds_per_point : float or None
+        Mean wall time of a point of the latest chunk [s].
+    """
+    if seconds_per_point is None or not seconds_per_point > 0.0:
+        return 1
+    by_time = int(CHUNK_SECONDS / seconds_per_point) if math.isfinite(seconds_per_point) else 1
+    return max(1, min(by_time, remaining // (2 * max(1, workers))))
+
+
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
-                  ship_fmus: bool) -> tuple[Callable, Callable]:
-    """(iterator over results as they complete, closer) for the Dask executor."""
+                  ship_fmus: bool, series_dir: str) -> tuple[Callable, Callable, dict]:
+    """(iterator over results as they complete, closer, counts: ``{"tasks": submitted}``) for
+    the Dask executor.
+
+    The points go out in chunks (:func:`chunk_size`), :data:`IN_FLIGHT` per worker, the next
+    one submitted as soon as one comes back and before its results are handled; a chunk's
+    results come back together and are saved at once.  Workers that share this file system
+    (``ship_fmus`` false) save each point's series themselves."""
     from dask.distributed import Client, as_completed
 
     own_cluster = own_client = None
@@ -291,24 +327,44 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for sha, path in files.items():
             with open(path, "rb") as fh:
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
-    futures = {}
-    for t in tasks:
-        # one task per point: its result comes back (and is saved) while the others run;
-        # chunks of points were measured slower (benchmarks/sweep_scaling.py: 1.52x against
-        # 1.81x on 2 workers), the last chunk's results all arriving at the end
-        fut = client.submit(run_point, t, blobs, key=f"prsm-point-{t.id}-{t.index}",
+    n_workers = max(1, len(client.scheduler_info().get("workers", {})) or (workers or 1))
+    save_dir = None if ship_fmus else series_dir
+    futures: dict[Any, list[PointTask]] = {}
+    pending = as_completed()
+    state: dict[str, Any] = {"next": 0, "seconds_per_point": None, "tasks": 0}
+
+    def submit() -> None:
+        k = state["next"]
+        size = chunk_size(len(tasks) - k, n_workers, state["seconds_per_point"])
+        chunk = tasks[k:k + size]
+        state["next"] = k + len(chunk)
+        # the dashboard's progress shows these tasks (prsm-points) done of those submitted
+        fut = client.submit(run_points, chunk, blobs, save_dir,
+                            key=f"prsm-points-{chunk[0].index}-{len(chunk)}-{chunk[0].id}",
                             pure=False, retries=0)
-        futures[fut] = t
+        futures[fut] = chunk
+        pending.add(fut)
+        state["tasks"] += 1
+
+    def top_up() -> None:
+        while state["next"] < len(tasks) and len(futures) < IN_FLIGHT * n_workers:
+            submit()
 
     def results():
-        for fut in as_completed(list(futures)):
-            t = futures[fut]
+        top_up()
+        for fut in pending:
+            chunk = futures.pop(fut)
             try:
-                yield fut.result()
+                done = fut.result()
             except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
-                yield PointResult(t.index, t.id, dict(t.values), "error",
-                                  f"{type(exc).__name__}: {exc}")
+                done = [PointResult(t.index, t.id, dict(t.values), "error",
+                                    f"{type(exc).__name__}: {exc}") for t in chunk]
             fut.release()
+            timed = [res.wall_time for res in done if res.wall_time > 0.0]
+            if timed:
+                state["seconds_per_point"] = sum(timed) / len(timed)
+            top_up()                       # the workers go on while these are handled
+            yield from done
 
     def close(quiet: bool = False):
         if quiet:
@@ -325,7 +381,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         if own_cluster is not None:
             own_cluster.close()
 
-    return results, close
+    return results, close, state
 
 
 #: file in a study's output folder naming the study it belongs to
@@ -452,13 +508,13 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
                        metric_names, fmus) for p, pid in pending]
 
     bar = Progress(len(tasks), len(kept), progress)
+    counts = {"tasks": 0}
     done: list[PointResult] = []
     timing_rows: list[list[str]] = []
 
     def handle(res: PointResult) -> None:
-        if res.status == "ok" and res.series is not None:
-            with atomic_path(os.path.join(series_dir, f"{res.id}.npz")) as tmp:
-                np.savez_compressed(tmp, **res.series)
+        if res.status == "ok" and res.series is not None:      # not saved where it ran
+            save_series(series_dir, res.id, res.series)
         row = row_of(res, header)
         rows_by_id[res.id] = row
         append_row(table_path, header, row)
@@ -475,11 +531,12 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             with deferred_interrupt() as interrupted:
                 for t in tasks:
                     interrupted()
-                    handle(run_point(t))
+                    handle(run_point(t, None, series_dir))
         else:
             ship = (scheduler is not None and client is None) if ship_fmus is None \
                 else bool(ship_fmus)
-            results, close = _dask_results(tasks, client, scheduler, workers, ship)
+            results, close, counts = _dask_results(tasks, client, scheduler, workers, ship,
+                                                   series_dir)
             try:
                 for res in results():
                     handle(res)
@@ -499,7 +556,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     for r in rows:
         r.update(point_of[r["id"]].values)     # swept values with their types (str, int)
     result = SweepResult(study, out_dir, table_path, header, rows, done, len(kept),
-                         backend=backend)
+                         backend=backend, dask_tasks=counts["tasks"])
     result.trends = evaluate(study, rows)
     if figures:
         result.figures = draw_figures(study, result)
