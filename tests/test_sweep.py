@@ -309,6 +309,29 @@ def test_short_points_go_in_chunks_and_give_the_loops_table(tmp_path, client):
             np.testing.assert_array_equal(a[k], b[k])
 
 
+def test_the_dashboard_serves_the_studys_progress(tmp_path, client):
+    """The local cluster's dashboard server has the page /prsm-progress; after a study of three
+    points of which one fails it says so, and the progress stream named the page."""
+    import io
+    import urllib.request
+
+    from prsm_fmu.sweep.dashboard import page_url
+
+    study = load_study(_write_study(tmp_path / "s.toml", "mu_screw_roller = [0.1, 1.5, 0.2]",
+                                    backend="model"))
+    stream = io.StringIO()
+    res = run_study(study, str(tmp_path / "out"), client=client, progress=stream,
+                    figures=False)
+    assert [r["status"] for r in res.rows] == ["ok", "error", "ok"]
+    url = page_url(client.dashboard_link)
+    assert url.startswith("http://127.0.0.1:") and url.endswith("/prsm-progress")
+    assert f"progress page: {url}" in stream.getvalue()
+    with urllib.request.urlopen(url, timeout=10) as reply:
+        page = reply.read().decode("utf-8")
+    assert "3 of 3 points done, 1 failed" in page
+    assert "<progress value='3' max='3'>" in page
+
+
 def _listening_addresses() -> list[tuple[int, str, int]]:
     """(pid, ip, port) of every listening TCP socket of this process and its children."""
     import psutil

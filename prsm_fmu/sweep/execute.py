@@ -171,7 +171,13 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
 
 
 class Progress:
-    """A text progress bar on ``stream`` (redrawn in place on a terminal, else every 10 %)."""
+    """The study's progress: a text bar on ``stream`` (redrawn in place on a terminal, else
+    every 10 %) and, where :attr:`publish` is set, the same line and counts handed to it (the
+    Dask dashboard's progress page, :mod:`prsm_fmu.sweep.dashboard`) at most every
+    :data:`PUBLISH_SECONDS` and at the end."""
+
+    #: least time between two calls of :attr:`publish` [s]
+    PUBLISH_SECONDS = 0.5
 
     def __init__(self, total: int, skipped: int, stream: TextIO | None, width: int = 30) -> None:
         self.total, self.skipped, self.stream, self.width = total, skipped, stream, width
@@ -179,6 +185,9 @@ class Progress:
         self.t0 = time.perf_counter()
         self.tty = bool(stream is not None and getattr(stream, "isatty", lambda: False)())
         self._last_decile = -1
+        self._published = -math.inf
+        #: called with the progress state (:meth:`state`), or None
+        self.publish: Callable[[dict], None] | None = None
         self._draw(force=True)
 
     def update(self, ok: bool) -> None:
@@ -186,15 +195,11 @@ class Progress:
         self.failed += 0 if ok else 1
         self._draw()
 
-    def _draw(self, force: bool = False) -> None:
-        if self.stream is None:
-            return
+    def state(self) -> dict[str, Any]:
+        """Points ``done``, ``failed``, ``total``, ``skipped``, ``elapsed`` [s], ``left`` [s]
+        (None when unknown) and the bar's ``text``."""
         n = self.total
         frac = 1.0 if n == 0 else self.done / n
-        decile = int(frac * 10)
-        if not self.tty and not force and decile == self._last_decile and self.done < n:
-            return
-        self._last_decile = decile
         filled = round(frac * self.width)
         bar = "#" * filled + "." * (self.width - filled)
         elapsed = time.perf_counter() - self.t0
@@ -202,6 +207,23 @@ class Progress:
         text = (f"[{bar}] {self.done}/{n} points, {self.failed} failed"
                 f"{f', {self.skipped} already done' if self.skipped else ''}, "
                 f"{elapsed:.1f} s{f', ~{left:.0f} s left' if left is not None else ''}")
+        return {"done": self.done, "failed": self.failed, "total": n, "skipped": self.skipped,
+                "elapsed": elapsed, "left": left, "text": text}
+
+    def _draw(self, force: bool = False) -> None:
+        n = self.total
+        now = time.perf_counter()
+        if self.publish is not None and (force or self.done >= n
+                                         or now - self._published >= self.PUBLISH_SECONDS):
+            self._published = now
+            self.publish(self.state())
+        if self.stream is None:
+            return
+        decile = int((1.0 if n == 0 else self.done / n) * 10)
+        if not self.tty and not force and decile == self._last_decile and self.done < n:
+            return
+        self._last_decile = decile
+        text = self.state()["text"]
         if self.tty:
             self.stream.write("\r" + text)
         else:
@@ -255,10 +277,18 @@ def local_cluster(workers: int | None = None):
     # starts (a few seconds) is not seen.
     on_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if on_main else None
+    import dask
+
+    from .dashboard import ROUTE_MODULE
+
+    routes = list(dask.config.get("distributed.scheduler.http.routes", []))
     try:
-        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOOPBACK,
-                            dashboard_address=f"{LOOPBACK}:0",
-                            preload=["prsm_fmu.sweep.worker_setup"])
+        # the study's progress page on the dashboard's server (prsm_fmu.sweep.dashboard)
+        with dask.config.set({"distributed.scheduler.http.routes":
+                              routes + [ROUTE_MODULE] * (ROUTE_MODULE not in routes)}):
+            return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                host=LOOPBACK, dashboard_address=f"{LOOPBACK}:0",
+                                preload=["prsm_fmu.sweep.worker_setup"])
     finally:
         if on_main:
             signal.signal(signal.SIGINT, previous)
@@ -300,7 +330,8 @@ def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) ->
 
 
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
-                  ship_fmus: bool, series_dir: str) -> tuple[Callable, Callable, dict]:
+                  ship_fmus: bool, series_dir: str,
+                  bar: Progress) -> tuple[Callable, Callable, dict]:
     """(iterator over results as they complete, closer, counts: ``{"tasks": submitted}``) for
     the Dask executor.
 
@@ -327,6 +358,13 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for sha, path in files.items():
             with open(path, "rb") as fh:
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
+    from .dashboard import page_served, publisher
+
+    bar.publish = publisher(client)               # the dashboard's progress page
+    bar.publish(bar.state())
+    page = page_served(client)
+    if bar.stream is not None and page:
+        bar.stream.write(f"{chr(10) if bar.tty else ''}progress page: {page}\n")
     n_workers = max(1, len(client.scheduler_info().get("workers", {})) or (workers or 1))
     save_dir = None if ship_fmus else series_dir
     futures: dict[Any, list[PointTask]] = {}
@@ -536,7 +574,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             ship = (scheduler is not None and client is None) if ship_fmus is None \
                 else bool(ship_fmus)
             results, close, counts = _dask_results(tasks, client, scheduler, workers, ship,
-                                                   series_dir)
+                                                   series_dir, bar)
             try:
                 for res in results():
                     handle(res)
