@@ -22,6 +22,8 @@ starting a cluster (≈ 1 s) is paid once per study, not per point.  Each config
 * speed-up = t(dask 1) / t(dask 2)             (goal ≥ 1.85, floor ≥ 1.7 on 2 cores);
 * overhead per point = (t(dask 1) − t(loop)) / points, and as a fraction of the loop's time
   per point                                     (goal ≤ 2 %);
+* the same overhead in CPU time (this process with its scheduler thread, and the worker
+  processes): what Dask costs whatever else runs on the machine;
 * the Dask tasks the points went in (chunks, prsm_fmu.sweep.execute.chunk_size).
 
 The one-engine goal (printed first; alone with ``--goal-only``): a point of the same study on
@@ -138,19 +140,28 @@ def scaling(study, n: int, fmu_dir: str, tmp: str, repeat: int, label: str) -> N
     from prsm_fmu.sweep.execute import local_cluster
 
     tasks: dict[str, int] = {}
+    cpu: dict[str, float] = {}
+
+    def workers_cpu(client) -> float:
+        return sum(client.run(time.process_time).values()) if client is not None else 0.0
 
     def timed(name: str, **kw) -> float:
         best = float("inf")
         for r in range(repeat):
             out = os.path.join(tmp, f"{label}_{name.replace(' ', '_')}_{r}")
+            client = kw.get("client")
+            c0 = time.process_time() + workers_cpu(client)
             t0 = time.perf_counter()
             res = run_study(study, out, fmu_dir=fmu_dir, progress=None, figures=False,
                             resume=False, **kw)
             dt = time.perf_counter() - t0
+            dc = time.process_time() + workers_cpu(client) - c0
             assert all(row["status"] == "ok" for row in res.rows), res.failed
             tasks[name] = res.dask_tasks
             best = min(best, dt)
-            print(f"  {name:7s} run {r + 1}: {dt:7.3f} s  ({dt / n * 1e3:7.2f} ms per point)")
+            cpu[name] = min(cpu.get(name, float("inf")), dc)
+            print(f"  {name:7s} run {r + 1}: {dt:7.3f} s  ({dt / n * 1e3:7.2f} ms per point; "
+                  f"CPU {dc / n * 1e3:7.2f} ms per point, this process and the workers)")
         return best
 
     print(f"{label}: {n} points")
@@ -178,6 +189,11 @@ def scaling(study, n: int, fmu_dir: str, tmp: str, repeat: int, label: str) -> N
           f"{_verdict(speedup, 1.85, 1.7)})")
     print(f"  Dask overhead per point over the plain loop: {overhead * 1e3:+.2f} ms = "
           f"{share:+.1f} % of a point   (goal <= 2 %: {'met' if share <= 2.0 else 'NOT met'})")
+    cpu_share = (cpu["dask 1"] - cpu["loop"]) / cpu["loop"] * 100
+    print(f"  in CPU time (this process, its scheduler thread and the worker, least of "
+          f"{repeat}; the other jobs on the machine do not count): Dask 1 worker "
+          f"{(cpu['dask 1'] - cpu['loop']) / n * 1e3:+.2f} ms = {cpu_share:+.1f} % of a point's "
+          f"CPU in the loop")
     print()
 
 

@@ -39,8 +39,10 @@ class Schedule:
 
 
 def input_schedule(n_steps: int, output_interval: float, load: Callable[[float], float],
-                   torque: Callable[[float], float] | None = None, profile=None) -> Schedule:
-    """The advances of ``n_steps`` output intervals of ``output_interval`` [s] from t = 0.
+                   torque: Callable[[float], float] | None = None, profile=None,
+                   first: int = 0) -> Schedule:
+    """The advances of ``n_steps`` output intervals of ``output_interval`` [s], the intervals
+    ``first`` … ``first + n_steps − 1`` of a run from t = 0.
 
     Interval i runs from t_i = i·h to t_(i+1) = (i + 1)·h; the load [N] is sampled at t_i.
     Torque drive (``torque`` given): one advance of h with (torque(t_i), load(t_i)).  Speed
@@ -52,6 +54,8 @@ def input_schedule(n_steps: int, output_interval: float, load: Callable[[float],
     ----------
     n_steps : int
         Output intervals, >= 1.
+    first : int
+        Index of the first of them (a long run is listed in blocks).
     output_interval : float
         h [s].
     load : callable
@@ -73,7 +77,7 @@ def input_schedule(n_steps: int, output_interval: float, load: Callable[[float],
     u: list[tuple[float, float]] = []
     record: list[bool] = []
     h = output_interval
-    for i in range(n_steps):
+    for i in range(first, first + n_steps):
         t = i * h
         if profile is None:
             start.append(t)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time as _time
-from typing import Callable, Union
+from typing import Callable, Iterable, Union
 
 import numpy as np
 
@@ -32,6 +32,11 @@ Signal = Union[float, Callable[[float], float]]
 #: scene's bound of 500; it is a choice (``stepper = "exponential"``), not the default.
 DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
                    "kinematic": "closed_form", "auto": "default"}
+
+#: output intervals listed and handed to the engine at a time: a long run's list of advances
+#: stays small (~10 MB) beside its outputs, and one call per 65536 intervals costs nothing
+SCHEDULE_BLOCK = 65536
+
 
 def _signal(value: Signal, name: str) -> Callable[[float], float]:
     if callable(value):
@@ -165,12 +170,17 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     y = model.outputs(0.0, x, u0)
     out[0] = [y[k] for k in names]
     cpu0 = _time.process_time()
-    plan = input_schedule(n_steps, output_interval, load_signal,
-                          torque=None if drive == "speed" else torque_signal,
-                          profile=profile if drive == "speed" else None)
-    rhs_calls = _run_in_engine(st, model, x, plan, out) if is_engine(st) else None
+
+    def plans():
+        """The run's advances (prsm_fmu.schedule) in blocks of SCHEDULE_BLOCK intervals."""
+        for first in range(0, n_steps, SCHEDULE_BLOCK):
+            yield input_schedule(min(SCHEDULE_BLOCK, n_steps - first), output_interval,
+                                 load_signal, torque=None if drive == "speed" else torque_signal,
+                                 profile=profile if drive == "speed" else None, first=first)
+
+    rhs_calls = _run_in_engine(st, model, x, plans(), out) if is_engine(st) else None
     if rhs_calls is None:
-        rhs_calls = _run_in_python(st, model, x, plan, out, output_interval)
+        rhs_calls = _run_in_python(st, model, x, plans(), out, output_interval)
     cpu = _time.process_time() - cpu0
     res = {"time": np.arange(n_steps + 1) * output_interval}
     res.update({k: out[:, j] for j, k in enumerate(names)})
@@ -184,45 +194,55 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     return res
 
 
-def _run_in_python(st, model, x: list[float], plan: Schedule, out: np.ndarray,
+def _run_in_python(st, model, x: list[float], plans: Iterable[Schedule], out: np.ndarray,
                    output_interval: float) -> int:
-    """Step through ``plan`` advance by advance from ``x``, the outputs after each output
-    interval into ``out[1:]``; the rhs calls of the run."""
+    """Step through the blocks ``plans`` advance by advance from ``x``, the outputs after each
+    output interval into ``out[1:]``; the rhs calls of the run."""
     names = model.output_names
     rhs_calls = 0
     row = 0
-    for start, length, u, record in zip(plan.start, plan.length, plan.u, plan.record):
-        x, stats = _advance(st, model, start, x, u, length)
-        rhs_calls += stats.rhs_calls
-        if record:
-            # outputs at the end of the interval with the inputs that were held over it
-            row += 1
-            y = model.outputs(row * output_interval, x, u)
-            out[row] = [y[k] for k in names]
+    for plan in plans:
+        for start, length, u, record in zip(plan.start, plan.length, plan.u, plan.record):
+            x, stats = _advance(st, model, start, x, u, length)
+            rhs_calls += stats.rhs_calls
+            if record:
+                # outputs at the end of the interval with the inputs that were held over it
+                row += 1
+                y = model.outputs(row * output_interval, x, u)
+                out[row] = [y[k] for k in names]
     return rhs_calls
 
 
-def _run_in_engine(st, model, x: list[float], plan: Schedule, out: np.ndarray) -> int | None:
-    """Step through ``plan`` in one call into the engine (NativeStepper.advance_schedule), the
-    outputs computed in C (equal to the model's bit for bit); the rhs calls of the run.  None
-    (the stepper's memory reset, ``out[1:]`` to be filled again) where the engine cannot run
-    the whole plan: a library without the call or without one of the model's outputs, or an
-    advance that fails or ends in a non-finite state (the Python loop then runs the plan and
-    raises with the cause it names)."""
+def _run_in_engine(st, model, x: list[float], plans: Iterable[Schedule],
+                   out: np.ndarray) -> int | None:
+    """Step through the blocks ``plans`` in one call into the engine each
+    (NativeStepper.advance_schedule), the outputs computed in C (equal to the model's bit for
+    bit); the rhs calls of the run.  None (the stepper's memory reset, ``out[1:]`` to be
+    filled again) where the engine cannot run the whole run: a library without the call or
+    without one of the model's outputs, or an advance that fails or ends in a non-finite
+    state (the Python loop then runs the run from its start and raises with the cause it
+    names)."""
     names = model.output_names
     position = {name: i for i, name in enumerate(getattr(st, "output_names", ()))}
     if not hasattr(st, "advance_schedule") or any(n not in position for n in names):
         return None
-    try:
-        y, _, stats, done, _ = st.advance_schedule(x, plan.start, plan.length, plan.u,
-                                                   plan.record)
-    except ValueError:           # a library without the call
-        return None
-    if done < len(plan.start):
-        st.reset()               # as new: the Python loop starts over
-        return None
-    out[1:] = y[:, [position[n] for n in names]]
-    return stats.rhs_calls
+    columns = [position[n] for n in names]
+    rhs_calls = 0
+    row = 1
+    for plan in plans:
+        try:
+            y, x, stats, done, _ = st.advance_schedule(x, plan.start, plan.length, plan.u,
+                                                       plan.record)
+        except ValueError:           # a library without the call
+            st.reset()
+            return None
+        if done < len(plan.start):
+            st.reset()               # as new: the Python loop starts over
+            return None
+        out[row:row + len(y)] = y[:, columns]
+        row += len(y)
+        rhs_calls += stats.rhs_calls
+    return rhs_calls
 
 
 def _advance(st, model, t: float, x: list[float], u: tuple, h: float) -> tuple:

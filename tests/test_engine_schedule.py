@@ -196,3 +196,27 @@ def test_a_constant_speed_splits_an_interval_as_the_general_profile(capsys):
         assert [struct.pack("<d", v) for v in got[0]] == [struct.pack("<d", v) for v in ref[0]]
     with capsys.disabled():
         print(f"\n{cases} seeded (speed, interval) cases: one piece, equal bit for bit")
+
+
+@pytest.mark.parametrize("drive", ["speed", "torque"])
+def test_a_run_listed_in_blocks_equals_the_run_listed_at_once(monkeypatch, drive):
+    """A long run's advances go to the engine in blocks (simulate.SCHEDULE_BLOCK intervals):
+    with blocks of 7 intervals (a ramp's corner inside one, so a block holds a split interval)
+    the engine's and the per-step path's results equal the run in one block bit for bit."""
+    params = FMUS["PRSM2"][0]()
+    kw = dict(fidelity="dynamic", drive=drive, load_force=lambda t: 5000.0 - 1e6 * t,
+              t_end=100 * 1e-5, output_interval=1e-5)
+    if drive == "speed":
+        kw["screw_speed"] = RampSpeed(0.0, 100.0, 33.3e-5)      # corner inside interval 33
+    else:
+        kw["screw_torque"] = lambda t: 3.0 + 2e3 * t
+    whole = simulate(params, **kw)
+    monkeypatch.setattr(simulate_module, "SCHEDULE_BLOCK", 7)
+    blocks = simulate(params, **kw)
+    blocks_per_step = _per_step(monkeypatch, params, kw)
+    assert blocks["engine"] == whole["engine"] == "native"
+    for key, value in whole.items():
+        if isinstance(value, np.ndarray):
+            assert _bits(blocks[key]) == _bits(value), key
+            assert _bits(blocks_per_step[key]) == _bits(value), key
+    assert blocks["rhs_calls"] == whole["rhs_calls"] == blocks_per_step["rhs_calls"]

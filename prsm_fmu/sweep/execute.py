@@ -341,6 +341,8 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
     (``ship_fmus`` false) save each point's series themselves."""
     from dask.distributed import Client, as_completed
 
+    from .dashboard import page_served, publisher
+
     own_cluster = own_client = None
     if client is None:
         if scheduler:
@@ -358,8 +360,6 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for sha, path in files.items():
             with open(path, "rb") as fh:
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
-    from .dashboard import page_served, publisher
-
     bar.publish = publisher(client)               # the dashboard's progress page
     bar.publish(bar.state())
     page = page_served(client)
