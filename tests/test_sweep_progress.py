@@ -33,12 +33,13 @@ def test_progress_bar_shows_done_failed_and_time_left():
     assert "left" not in out.getvalue().splitlines()[-1]
 
 
-def test_chunks_hold_a_quarter_second_of_work_and_shrink_to_single_points_at_the_end():
-    # the start-up study on the model backend, ~6 ms a point, 1000 left on 2 workers:
-    # 0.25 s / 6 ms = 41.7 -> 41 points (guided bound 1000 // (2 x 2) = 250 is larger)
-    assert chunk_size(1000, 2, 0.006) == 41
-    # on the FMU backend, ~0.3 s a point: a chunk of one (0.25 / 0.3 < 1)
-    assert chunk_size(1000, 2, 0.3) == 1
+def test_chunks_hold_half_a_cpu_second_and_shrink_to_single_points_at_the_end():
+    # the start-up study on the model backend, ~6 ms of CPU a point, 1000 left on 2 workers:
+    # 0.5 s / 6 ms = 83.3 -> 83 points (guided bound 1000 // (2 x 2) = 250 is larger)
+    assert chunk_size(1000, 2, 0.006) == 83
+    # on the FMU backend, ~0.12 s of CPU a point: 0.5 / 0.12 = 4.2 -> 4; 0.6 s: one
+    assert chunk_size(1000, 2, 0.12) == 4
+    assert chunk_size(1000, 2, 0.6) == 1
     # towards the end the guided bound: 20 left on 2 workers -> 20 // 4 = 5; 7 left -> 1
     assert chunk_size(20, 2, 0.006) == 5
     assert chunk_size(7, 2, 0.006) == 1

@@ -33,9 +33,9 @@ A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points o
 other in this process (the reference the Dask overhead is measured against).
 
 The points go to the workers in chunks (:func:`chunk_size`), each submitted once
-(``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of work each at the latest
-chunk's time per point (so the scheduler's cost per task stays near 1 % of the work; a point
-of more than that is a chunk of its own), shrinking to single points towards the end (so the
+(``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of CPU each at the latest
+chunk's CPU time per point (so Dask's cost per task, a few ms of CPU, stays near 1 % of the
+work; a point of more than that is a chunk of its own), shrinking to single points towards the end (so the
 workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as soon as one
 comes back.  A chunk's results are appended to the table as soon as it is done, so an
 interrupted study keeps every finished chunk; where the workers share this file system they
@@ -249,6 +249,19 @@ def _label(values: dict[str, Any]) -> str:
     return ", ".join(short_label(k, v) for k, v in values.items())
 
 
+#: Dask settings of the local cluster that keep its periodic work off the points' CPU (a
+#: cluster's own cost grows with its wall time, not with its points): no statistical profiler
+#: (it samples the running task's stack every 10 ms), no work stealing (the chunks are handed
+#: out as workers free up, IN_FLIGHT each), the event loops' health check every second
+#: instead of every 20 ms, the workers' memory check every second instead of every 100 ms
+QUIET_CLUSTER = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.scheduler.work-stealing": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
 def local_cluster(workers: int | None = None):
     """A Dask ``LocalCluster`` for a study on this machine, reachable from this machine only.
 
@@ -282,10 +295,12 @@ def local_cluster(workers: int | None = None):
     from .dashboard import ROUTE_MODULE
 
     routes = list(dask.config.get("distributed.scheduler.http.routes", []))
+    settings = dict(QUIET_CLUSTER)
+    # the study's progress page on the dashboard's server (prsm_fmu.sweep.dashboard)
+    settings["distributed.scheduler.http.routes"] = \
+        routes + [ROUTE_MODULE] * (ROUTE_MODULE not in routes)
     try:
-        # the study's progress page on the dashboard's server (prsm_fmu.sweep.dashboard)
-        with dask.config.set({"distributed.scheduler.http.routes":
-                              routes + [ROUTE_MODULE] * (ROUTE_MODULE not in routes)}):
+        with dask.config.set(settings):
             return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                 host=LOOPBACK, dashboard_address=f"{LOOPBACK}:0",
                                 preload=["prsm_fmu.sweep.worker_setup"])
@@ -299,16 +314,18 @@ def _quiet_logs() -> None:
     logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
-#: wall time [s] a Dask task (a chunk of points) aims at: the cost of a task to the scheduler
-#: and of its round trip (a few ms on a local cluster) stays near 1 % of it
-CHUNK_SECONDS = 0.25
+#: CPU time [s] a Dask task (a chunk of points) aims at: Dask's cost per task (scheduler,
+#: worker, this process: ~5 ms of CPU on a local cluster, benchmarks/sweep_scaling.py) stays
+#: near 1 % of it.  CPU, not wall time: on a loaded machine a point's wall time grows with the
+#: other jobs while Dask's cost per task does not shrink
+CHUNK_SECONDS = 0.5
 #: chunks in flight per worker: while one runs the next waits on the worker, so that no worker
 #: idles during a round trip to this process
 IN_FLIGHT = 2
 
 
 def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) -> int:
-    """Points of the next Dask task: about :data:`CHUNK_SECONDS` of work at
+    """Points of the next Dask task: about :data:`CHUNK_SECONDS` of CPU at
     ``seconds_per_point`` (the latest chunk's mean: a worker's first point, which loads the FMU
     or the engine, counts once only; None before the first: one point), at most ``remaining // (2 workers)`` (guided: the chunks shrink to single points
     towards the end, so that the workers finish within about a point of each other), at
@@ -321,7 +338,7 @@ def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) ->
     workers : int
         Workers of the cluster, >= 1.
     seconds_per_point : float or None
-        Mean wall time of a point of the latest chunk [s].
+        Mean CPU time of a point of the latest chunk [s] (PointResult.cpu_time).
     """
     if seconds_per_point is None or not seconds_per_point > 0.0:
         return 1
@@ -398,7 +415,8 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
                 done = [PointResult(t.index, t.id, dict(t.values), "error",
                                     f"{type(exc).__name__}: {exc}") for t in chunk]
             fut.release()
-            timed = [res.wall_time for res in done if res.wall_time > 0.0]
+            # the points that ran (a refused point ends in microseconds and says nothing)
+            timed = [res.cpu_time for res in done if res.cpu_time > 0.0 and res.status == "ok"]
             if timed:
                 state["seconds_per_point"] = sum(timed) / len(timed)
             top_up()                       # the workers go on while these are handled
