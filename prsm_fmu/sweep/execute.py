@@ -35,16 +35,17 @@ other in this process (the reference the Dask overhead is measured against).
 The points go to the workers in chunks (:func:`chunk_size`), each submitted once
 (``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of CPU each at the latest
 chunk's CPU time per point (so Dask's cost per task, a few ms of CPU, stays near 1 % of the
-work; a point of more than that is a chunk of its own), shrinking to single points towards the end (so the
-workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as soon as one
-comes back.  A chunk's results are appended to the table as soon as it is done, so an
-interrupted study keeps every finished chunk; where the workers share this file system they
-save each point's series themselves (:mod:`~prsm_fmu.sweep.series_files`).  The progress bar
-shows the points done, failed and the time left; the Dask dashboard's progress shows the
-chunks (``prsm-points``) done of those submitted.  A rerun with the same output directory
-skips the points whose id (a hash of the
-point's preset, parameters, scenario and backend) is already in the table with status ``ok``
-and whose series file exists; failed points are run again.  A point whose worker dies is
+work; a point of more than that is a chunk of its own), shrinking to single points towards
+the end (so the workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as
+soon as one comes back.  A chunk's results are appended to the table as soon as it is done,
+so an interrupted study keeps every finished chunk; where the workers share this file system
+they save each point's series themselves (:mod:`~prsm_fmu.sweep.series_files`).  The local
+cluster runs quiet (:data:`QUIET_CLUSTER`).  The progress bar shows the points done, failed
+and the time left, and so does the page ``/prsm-progress`` of the dashboard's server
+(:mod:`~prsm_fmu.sweep.dashboard`); Dask's own dashboard (with bokeh) shows the chunks
+(``prsm-points``) done of those submitted.  A rerun with the same output directory skips the
+points whose id (a hash of the point's preset, parameters, scenario and backend) is already in
+the table with status ``ok`` and whose series file exists; failed points are run again.  A point whose worker dies is
 recorded as failed with the scheduler's message.
 """
 
@@ -327,9 +328,9 @@ IN_FLIGHT = 2
 def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) -> int:
     """Points of the next Dask task: about :data:`CHUNK_SECONDS` of CPU at
     ``seconds_per_point`` (the latest chunk's mean: a worker's first point, which loads the FMU
-    or the engine, counts once only; None before the first: one point), at most ``remaining // (2 workers)`` (guided: the chunks shrink to single points
-    towards the end, so that the workers finish within about a point of each other), at
-    least 1.
+    or the engine, counts once only; None before the first: one point), at most
+    ``remaining // (2 workers)`` (guided: the chunks shrink to single points towards the end,
+    so that the workers finish within about a point of each other), at least 1.
 
     Parameters
     ----------
