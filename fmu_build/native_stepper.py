@@ -160,6 +160,10 @@ def load_library(path: str) -> ctypes.CDLL:
         dll.prsm_api_output_name.restype = ctypes.c_char_p
         dll.prsm_api_output_name.argtypes = [ctypes.c_int]
         dll.prsm_api_outputs.argtypes = [vp, ctypes.c_double, dbl, dbl, dbl]
+    if hasattr(dll, "prsm_api_advance_schedule"):     # (likewise)
+        dll.prsm_api_advance_schedule.restype = ctypes.c_int
+        dll.prsm_api_advance_schedule.argtypes = [vp, dbl, ctypes.c_int, dbl, dbl, dbl, i32, dbl,
+                                                  dbl, i32, ctypes.c_char_p, ctypes.c_int]
     _loaded[path] = dll
     return dll
 
@@ -349,11 +353,10 @@ class NativeStepper(Stepper):
         self._memory_size = (lib.prsm_api_handle_memory_size(self._handle)
                              if hasattr(lib, "prsm_api_handle_memory_size")
                              else lib.prsm_api_memory_size())
-        #: the names of the outputs :meth:`outputs` computes, in the C's order: () where the
-        #: library has no prsm_api_outputs, and for the speed drive (the C's outputs read u[0]
-        #: as the motor torque: the torque drive's, the FMU's)
-        self.output_names: tuple[str, ...] = (library_output_names(lib)
-                                              if model.drive != "speed" else ())
+        #: the names of the outputs :meth:`outputs` computes, in the C's order, for either
+        #: drive (u[0] is the motor torque or the prescribed acceleration, as the model's);
+        #: () where the library has no prsm_api_outputs
+        self.output_names: tuple[str, ...] = library_output_names(lib)
 
     def outputs(self, t: float, x: list[float], u: tuple) -> dict[str, float]:
         """The C model's outputs at ``x`` with inputs ``u`` (those of :attr:`output_names`,
@@ -367,7 +370,7 @@ class NativeStepper(Stepper):
         names = self.output_names
         if not names:
             raise ValueError("the engine computes no outputs here (a library without "
-                             "prsm_api_outputs, or the speed drive)")
+                             "prsm_api_outputs)")
         out = (ctypes.c_double * len(names))()
         self._x[:] = x
         self._u[0], self._u[1] = u[0], u[1]
@@ -402,6 +405,71 @@ class NativeStepper(Stepper):
         stats.rhs_calls, stats.substeps, stats.rejected = self._stats
         flat = out[:]
         return [flat[i * n:(i + 1) * n] for i in range(n_steps)], stats
+
+    def advance_schedule(self, x: list[float], start, length, u, record):
+        """A whole run of known inputs in one call into C (``prsm_api_advance_schedule``): the
+        i-th advance from ``start[i]`` [s] over ``length[i]`` [s] with the inputs ``u[i]`` held,
+        each from the state the one before ended in, the first from ``x``; after each advance
+        with ``record[i]`` true, the outputs of :attr:`output_names` at its end state and inputs.
+        Equal to :meth:`advance` and :meth:`outputs` called advance by advance.
+
+        Parameters
+        ----------
+        x : list of float
+            Start state.
+        start, length : array_like of float, shape (n,)
+            Start time [s] and length [s] of each advance.
+        u : array_like of float, shape (n, 2)
+            Inputs held over each advance (the model's, e.g. [N.m, N] or [rad/s², N]).
+        record : array_like of bool, shape (n,)
+            Whether the outputs after that advance are wanted.
+
+        Returns
+        -------
+        tuple
+            ``(y, x_end, stats, done, reason)``: ``y`` the recorded outputs (a row per recorded
+            advance, a column per name of :attr:`output_names`; the rows after a failure are
+            unset), ``x_end`` the last state reached, ``stats`` the work (:class:`StepStats`),
+            ``done`` the advances completed (n unless one failed or ended in a non-finite
+            state) and ``reason`` why not ('' when all were done).
+
+        Raises
+        ------
+        ValueError
+            When the library has no ``prsm_api_advance_schedule`` or ``prsm_api_outputs``, or
+            for arrays of unequal lengths or a length that is not a finite number > 0 [s].
+        """
+        import numpy as np
+
+        lib = self._lib
+        if not self.output_names or not hasattr(lib, "prsm_api_advance_schedule"):
+            raise ValueError("the engine library has no prsm_api_advance_schedule")
+        start = np.ascontiguousarray(start, dtype=np.float64)
+        length = np.ascontiguousarray(length, dtype=np.float64)
+        u = np.ascontiguousarray(u, dtype=np.float64)
+        flags = np.ascontiguousarray(record, dtype=np.intc)
+        n = len(start)
+        if len(length) != n or u.shape != (n, 2) or len(flags) != n or len(x) != self.n_states:
+            raise ValueError(f"start, length, u and record must have {n} rows (u 2 columns) and "
+                             f"x {self.n_states} values: got {len(length)}, {u.shape}, "
+                             f"{len(flags)}, {len(x)}")
+        bad = length[~((length > 0.0) & (length < math.inf))]
+        if len(bad):
+            raise ValueError(f"length = {float(bad[0])!r} is out of range: must be a finite "
+                             "number > 0 [s]")
+        y = np.empty((int(flags.astype(bool).sum()), len(self.output_names)))
+        x_end = (ctypes.c_double * self.n_states)()
+        self._x[:] = x
+        dbl = ctypes.POINTER(ctypes.c_double)
+        done = lib.prsm_api_advance_schedule(
+            self._handle, self._x, n, start.ctypes.data_as(dbl), length.ctypes.data_as(dbl),
+            u.ctypes.data_as(dbl), flags.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+            y.ctypes.data_as(dbl), x_end, self._stats, self._msg, _MSG)
+        if self._auto:
+            self.sync_mode()
+        stats = StepStats()
+        stats.rhs_calls, stats.substeps, stats.rejected = self._stats
+        return y, x_end[:], stats, done, "" if done == n else self._msg.value.decode()
 
     def rhs(self, x: list[float], u: tuple) -> list[float]:
         """The C model's right-hand side at ``x`` with inputs ``u`` (the model's ``rhs``)."""

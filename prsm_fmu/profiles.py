@@ -63,6 +63,11 @@ class ConstantSpeed(SpeedProfile):
     def speed(self, t: float) -> float:
         return self.value
 
+    def pieces(self, t0: float, t1: float) -> list[tuple[float, float, float]]:
+        """One piece of acceleration 0.0: the base class's (ω₀ − ω₀)/(t1 − t0) (+0.0 for a finite
+        ω₀ and t1 > t0), without its calls (simulate lists one per output interval)."""
+        return [(t0, t1 - t0, 0.0)]
+
 
 class TableSpeed(SpeedProfile):
     """Piecewise-linear ω(t) through (times [s], speeds [rad/s]); constant before the first

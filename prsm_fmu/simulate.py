@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time as _time
-from typing import Callable, Union
+from typing import Callable, Iterable, Union
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from .models import make_model
 from .models.base import is_finite_state
 from .params import MechanismParams
 from .profiles import SpeedLike, as_speed_profile
+from .schedule import Schedule, input_schedule
 from .steppers import StepFailure, StepStats, make_stepper
 from .steppers.options import TUNED_OPTIONS, tuned_stepper_options
 
@@ -31,6 +32,11 @@ Signal = Union[float, Callable[[float], float]]
 #: scene's bound of 500; it is a choice (``stepper = "exponential"``), not the default.
 DEFAULT_STEPPER = {"dynamic": "rosenbrock", "quasi-static": "closed_form",
                    "kinematic": "closed_form", "auto": "default"}
+
+#: output intervals listed and handed to the engine at a time: a long run's list of advances
+#: stays small (~10 MB) beside its outputs, and one call per 65536 intervals costs nothing
+SCHEDULE_BLOCK = 65536
+
 
 def _signal(value: Signal, name: str) -> Callable[[float], float]:
     if callable(value):
@@ -163,28 +169,18 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
     out = np.empty((n_steps + 1, len(names)))
     y = model.outputs(0.0, x, u0)
     out[0] = [y[k] for k in names]
-    rhs_calls = 0
     cpu0 = _time.process_time()
-    for i in range(n_steps):
-        t = i * output_interval
-        t1 = (i + 1) * output_interval
-        if drive == "speed":
-            # the interval split where the prescribed acceleration jumps (profiles.py)
-            load = load_signal(t)
-            pieces = profile.pieces(t, t1)
-            if len(pieces) == 1:      # the whole interval: step exactly h, as the torque drive
-                pieces = [(t, output_interval, pieces[0][2])]
-            for start, length, alpha in pieces:
-                u = (alpha, load)
-                x, stats = _advance(st, model, start, x, u, length)
-                rhs_calls += stats.rhs_calls
-        else:
-            u = (torque_signal(t), load_signal(t))
-            x, stats = _advance(st, model, t, x, u, output_interval)
-            rhs_calls += stats.rhs_calls
-        # outputs at the end of the interval with the inputs that were held over it
-        y = model.outputs(t1, x, u)
-        out[i + 1] = [y[k] for k in names]
+
+    def plans():
+        """The run's advances (prsm_fmu.schedule) in blocks of SCHEDULE_BLOCK intervals."""
+        for first in range(0, n_steps, SCHEDULE_BLOCK):
+            yield input_schedule(min(SCHEDULE_BLOCK, n_steps - first), output_interval,
+                                 load_signal, torque=None if drive == "speed" else torque_signal,
+                                 profile=profile if drive == "speed" else None, first=first)
+
+    rhs_calls = _run_in_engine(st, model, x, plans(), out) if is_engine(st) else None
+    if rhs_calls is None:
+        rhs_calls = _run_in_python(st, model, x, plans(), out, output_interval)
     cpu = _time.process_time() - cpu0
     res = {"time": np.arange(n_steps + 1) * output_interval}
     res.update({k: out[:, j] for j, k in enumerate(names)})
@@ -196,6 +192,57 @@ def simulate(params: MechanismParams, fidelity: str = "dynamic", drive: str = "t
         res["fidelity"] = fidelity
         res["auto_choice"] = model.auto_choice
     return res
+
+
+def _run_in_python(st, model, x: list[float], plans: Iterable[Schedule], out: np.ndarray,
+                   output_interval: float) -> int:
+    """Step through the blocks ``plans`` advance by advance from ``x``, the outputs after each
+    output interval into ``out[1:]``; the rhs calls of the run."""
+    names = model.output_names
+    rhs_calls = 0
+    row = 0
+    for plan in plans:
+        for start, length, u, record in zip(plan.start, plan.length, plan.u, plan.record):
+            x, stats = _advance(st, model, start, x, u, length)
+            rhs_calls += stats.rhs_calls
+            if record:
+                # outputs at the end of the interval with the inputs that were held over it
+                row += 1
+                y = model.outputs(row * output_interval, x, u)
+                out[row] = [y[k] for k in names]
+    return rhs_calls
+
+
+def _run_in_engine(st, model, x: list[float], plans: Iterable[Schedule],
+                   out: np.ndarray) -> int | None:
+    """Step through the blocks ``plans`` in one call into the engine each
+    (NativeStepper.advance_schedule), the outputs computed in C (equal to the model's bit for
+    bit); the rhs calls of the run.  None (the stepper's memory reset, ``out[1:]`` to be
+    filled again) where the engine cannot run the whole run: a library without the call or
+    without one of the model's outputs, or an advance that fails or ends in a non-finite
+    state (the Python loop then runs the run from its start and raises with the cause it
+    names)."""
+    names = model.output_names
+    position = {name: i for i, name in enumerate(getattr(st, "output_names", ()))}
+    if not hasattr(st, "advance_schedule") or any(n not in position for n in names):
+        return None
+    columns = [position[n] for n in names]
+    rhs_calls = 0
+    row = 1
+    for plan in plans:
+        try:
+            y, x, stats, done, _ = st.advance_schedule(x, plan.start, plan.length, plan.u,
+                                                       plan.record)
+        except ValueError:           # a library without the call
+            st.reset()
+            return None
+        if done < len(plan.start):
+            st.reset()               # as new: the Python loop starts over
+            return None
+        out[row:row + len(y)] = y[:, columns]
+        row += len(y)
+        rhs_calls += stats.rhs_calls
+    return rhs_calls
 
 
 def _advance(st, model, t: float, x: list[float], u: tuple, h: float) -> tuple:

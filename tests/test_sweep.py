@@ -284,6 +284,54 @@ def test_a_failing_point_is_recorded_and_the_others_complete(tmp_path, client, f
     assert loop.skipped == 2 and len(loop.results) == 1
 
 
+def test_short_points_go_in_chunks_and_give_the_loops_table(tmp_path, client):
+    """64 points of 100 steps on the model backend (a few ms each): the Dask run sends them in
+    chunks of several points (fewer tasks than points), the workers save the series, and the
+    table and series equal the plain loop's (each point once)."""
+    mu_sr = [round(0.05 + 0.05 * i, 4) for i in range(8)]        # 0.05 ... 0.40
+    mu_ss = [round(0.1 + 0.02 * j, 4) for j in range(8)]         # 0.10 ... 0.24
+    study = load_study(_write_study(tmp_path / "s.toml", f"mu_screw_roller = {mu_sr}\n"
+                                    f"mu_spline = {mu_ss}", backend="model"))
+    loop = run_study(study, str(tmp_path / "loop"), executor="loop", progress=None,
+                     figures=False)
+    dask = run_study(study, str(tmp_path / "dask"), client=client, progress=None, figures=False)
+    assert len(dask.rows) == 64 and not dask.failed
+    print(f"64 points in {dask.dask_tasks} Dask tasks")
+    assert 1 <= dask.dask_tasks < 64
+    assert loop.dask_tasks == 0
+    assert sorted(p.index for p in dask.results) == list(range(64))      # each point once
+    assert same_table(Path(loop.table_path).read_text(encoding="utf-8"),
+                      Path(dask.table_path).read_text(encoding="utf-8"))
+    for r in loop.rows:
+        a, b = load_series(loop.out_dir, r["id"]), load_series(dask.out_dir, r["id"])
+        assert a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_the_dashboard_serves_the_studys_progress(tmp_path, client):
+    """The local cluster's dashboard server has the page /prsm-progress; after a study of three
+    points of which one fails it says so, and the progress stream named the page."""
+    import io
+    import urllib.request
+
+    from prsm_fmu.sweep.dashboard import page_url
+
+    study = load_study(_write_study(tmp_path / "s.toml", "mu_screw_roller = [0.1, 1.5, 0.2]",
+                                    backend="model"))
+    stream = io.StringIO()
+    res = run_study(study, str(tmp_path / "out"), client=client, progress=stream,
+                    figures=False)
+    assert [r["status"] for r in res.rows] == ["ok", "error", "ok"]
+    url = page_url(client.dashboard_link)
+    assert url.startswith("http://127.0.0.1:") and url.endswith("/prsm-progress")
+    assert f"progress page: {url}" in stream.getvalue()
+    with urllib.request.urlopen(url, timeout=10) as reply:
+        page = reply.read().decode("utf-8")
+    assert "3 of 3 points done, 1 failed" in page
+    assert "<progress value='3' max='3'>" in page
+
+
 def _listening_addresses() -> list[tuple[int, str, int]]:
     """(pid, ip, port) of every listening TCP socket of this process and its children."""
     import psutil

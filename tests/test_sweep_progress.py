@@ -1,4 +1,5 @@
-"""The sweep's progress bar (prsm_fmu.sweep.execute): points done, failed, time left.
+"""The sweep's chunks of points and its progress bar (prsm_fmu.sweep.execute): points done,
+failed, time left.
 
 The Dask runs themselves (1 and 2 workers giving byte-identical tables) are in
 tests/test_sweep.py.
@@ -7,8 +8,9 @@ tests/test_sweep.py.
 from __future__ import annotations
 
 import io
+import math
 
-from prsm_fmu.sweep.execute import Progress, eta
+from prsm_fmu.sweep.execute import Progress, chunk_size, eta
 
 
 def test_time_left_at_the_rate_so_far():
@@ -29,3 +31,30 @@ def test_progress_bar_shows_done_failed_and_time_left():
     bar.update(True)
     assert "4/4 points, 1 failed" in out.getvalue().splitlines()[-1]
     assert "left" not in out.getvalue().splitlines()[-1]
+
+
+def test_chunks_hold_half_a_cpu_second_and_shrink_to_single_points_at_the_end():
+    # the start-up study on the model backend, ~6 ms of CPU a point, 1000 left on 2 workers:
+    # 0.5 s / 6 ms = 83.3 -> 83 points (guided bound 1000 // (2 x 2) = 250 is larger)
+    assert chunk_size(1000, 2, 0.006) == 83
+    # on the FMU backend, ~0.12 s of CPU a point: 0.5 / 0.12 = 4.2 -> 4; 0.6 s: one
+    assert chunk_size(1000, 2, 0.12) == 4
+    assert chunk_size(1000, 2, 0.6) == 1
+    # towards the end the guided bound: 20 left on 2 workers -> 20 // 4 = 5; 7 left -> 1
+    assert chunk_size(20, 2, 0.006) == 5
+    assert chunk_size(7, 2, 0.006) == 1
+    # before the first result, or with a time that says nothing: one point
+    for seconds in (None, 0.0, -1.0, math.nan):
+        assert chunk_size(1000, 2, seconds) == 1
+    assert chunk_size(1000, 2, math.inf) == 1
+
+
+def test_chunks_are_never_empty_nor_beyond_the_guided_bound():
+    cases = 0
+    for workers in range(1, 5):
+        for remaining in range(1, 301):
+            for seconds in (1e-5, 1e-3, 6e-3, 0.05, 0.3, 3.0):
+                size = chunk_size(remaining, workers, seconds)
+                assert 1 <= size <= max(1, remaining // (2 * workers)), (remaining, workers)
+                cases += 1
+    print(f"{cases} (points left, workers, seconds per point) cases")

@@ -445,3 +445,52 @@ void prsm_api_step_outputs(double *io) {
     prsm_handle *h = (prsm_handle *)(void *)((char *)io - offsetof(prsm_handle, io));
     prsm_api_outputs(h, io[PRSM_IO_T], io + PRSM_IO_X, io + PRSM_IO_U, io + PRSM_IO_OUT);
 }
+
+/* ---- input schedules: a whole run in one call ------------------------------------------------ */
+#include <math.h>
+
+/* n_pieces advances (prsm_advance), the i-th from t[i] over h[i] [s] with the inputs
+ * (u[2 i], u[2 i + 1]) held, each from the state the one before ended in (the first from x): a run
+ * whose inputs are known beforehand (prsm_fmu.simulate's schedule: one piece per output interval,
+ * or several where a prescribed acceleration jumps inside one).  After each piece whose record[i]
+ * is non-zero, the outputs at the state it ended in with its inputs (prsm_api_outputs, in the order
+ * of prsm_api_output_name) fill the next row of y_out (prsm_api_n_outputs() doubles a row).
+ * x_out receives the last state reached; stats the work of the pieces done, summed (rhs calls,
+ * accepted substeps, rejected substeps).  Returns the number of pieces done: n_pieces, or fewer
+ * when a piece fails (its reason in msg) or ends in a non-finite state (said in msg); x_out then
+ * holds the state the failing piece started from and the stepper's memory is where it stopped. */
+int prsm_api_advance_schedule(void *handle, const double *x, int n_pieces, const double *t,
+                              const double *h, const double *u, const int *record, double *y_out,
+                              double *x_out, int *stats, char *msg, int len) {
+    prsm_handle *hd = (prsm_handle *)handle;
+    int nx = model_of(hd)->nx, row = 0;
+    double xi[PRSM_NX_MAX] = {0.0}, xo[PRSM_NX_MAX] = {0.0};
+    memcpy(xi, x, sizeof(double) * (size_t)nx);
+    stats[0] = stats[1] = stats[2] = 0;
+    int i;
+    for (i = 0; i < n_pieces; i++) {
+        prsm_stats st;
+        const double *ui = u + 2 * (size_t)i;
+        int rc = hd->au ? prsm_auto_advance(&hd->au->a, &hd->au->memory, t[i], xi, ui, h[i], xo,
+                                            &st, msg, len)
+                        : prsm_advance(&hd->model, &hd->memory, t[i], xi, ui, h[i], xo, &st, msg,
+                                       len);
+        stats[0] += st.rhs_calls;
+        stats[1] += st.substeps;
+        stats[2] += st.rejected;
+        if (rc) break;
+        int finite = 1;
+        for (int j = 0; j < nx; j++) finite = finite && isfinite(xo[j]);
+        if (!finite) {
+            refuse(msg, len, "the stepper returned a non-finite state");
+            break;
+        }
+        memcpy(xi, xo, sizeof xi);
+        if (record[i]) {
+            prsm_api_outputs(handle, t[i] + h[i], xi, ui, y_out + (size_t)row * PRSM_API_N_OUTPUTS);
+            row++;
+        }
+    }
+    memcpy(x_out, xi, sizeof(double) * (size_t)nx);
+    return i;
+}

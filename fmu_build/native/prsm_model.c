@@ -733,7 +733,6 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
     int consistent;
     double alpha = balance_at(m, x, u, loss, &motor, wps, &cache, &rec, &consistent);
     /* Mechanism._assemble(detail=True) */
-    double motor_sol = rec.m0 + rec.m1 * alpha;
     double p_fric = 0.0, p_coulomb = 0.0, p_joints = 0.0, p_viscous = 0.0, p_differential = 0.0;
     for (int k = 0; k < m->n; k++) {
         const rec_stage *r = &rec.s[k];
@@ -760,7 +759,6 @@ void prsm_outputs_at(prsm_model *m, const double x[PRSM_NX_MAX], const double u[
         y->carrier_speed[k] = wps[k];
         y->carrier_speed_ratio[k] = omega != 0.0 ? wps[k] / omega : 0.0;
     }
-    (void)motor_sol;
     double v_rod = m->c_out * omega;
     double p_in = motor * omega, p_out = load * v_rod;
     y->alpha = alpha;

@@ -32,12 +32,20 @@ machine's file system (they need ``prsm_fmu``, numpy, scipy, fmpy and pythonfmu 
 A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points one after the
 other in this process (the reference the Dask overhead is measured against).
 
-A point is submitted once (``retries=0``, ``pure=False``); its result comes back as soon as it
-is done and is appended to the table at once, so an interrupted study keeps every finished
-point.  The progress bar shows the points done, failed and the time left; the Dask dashboard's
-progress shows the tasks (``prsm-point``) done of total.  A rerun with the same output directory skips the points whose id (a hash of the
-point's preset, parameters, scenario and backend) is already in the table with status ``ok``
-and whose series file exists; failed points are run again.  A point whose worker dies is
+The points go to the workers in chunks (:func:`chunk_size`), each submitted once
+(``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of CPU each at the latest
+chunk's CPU time per point (so Dask's cost per task, a few ms of CPU, stays near 1 % of the
+work; a point of more than that is a chunk of its own), shrinking to single points towards
+the end (so the workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as
+soon as one comes back.  A chunk's results are appended to the table as soon as it is done,
+so an interrupted study keeps every finished chunk; where the workers share this file system
+they save each point's series themselves (:mod:`~prsm_fmu.sweep.series_files`).  The local
+cluster runs quiet (:data:`QUIET_CLUSTER`).  The progress bar shows the points done, failed
+and the time left, and so does the page ``/prsm-progress`` of the dashboard's server
+(:mod:`~prsm_fmu.sweep.dashboard`); Dask's own dashboard (with bokeh) shows the chunks
+(``prsm-points``) done of those submitted.  A rerun with the same output directory skips the
+points whose id (a hash of the point's preset, parameters, scenario and backend) is already in
+the table with status ``ok`` and whose series file exists; failed points are run again.  A point whose worker dies is
 recorded as failed with the scheduler's message.
 """
 
@@ -61,7 +69,8 @@ from ..atomic import atomic_path
 from ..command import child_failure, deferred_interrupt
 from ..extras import require
 from .metrics import standard_metrics
-from .points import FmuFile, PointResult, PointTask, run_point
+from .points import FmuFile, PointResult, PointTask, run_point, run_points
+from .series_files import load_series, save_series
 from .study import Study
 from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
                     write_table)
@@ -69,7 +78,7 @@ from .trends import TrendResult, evaluate
 
 __all__ = ["run_study", "claim_out_dir", "STUDY_MARKER", "SweepResult", "ensure_fmus",
            "metric_columns", "load_series", "EXECUTORS", "Progress", "local_cluster", "LOOPBACK",
-           "eta"]
+           "eta", "chunk_size", "CHUNK_SECONDS", "IN_FLIGHT"]
 
 EXECUTORS = ("dask", "loop")
 
@@ -95,6 +104,7 @@ class SweepResult:
     figures: list[str] = field(default_factory=list)
     wall_time: float = 0.0
     backend: str = ""
+    dask_tasks: int = 0                            # Dask tasks (chunks of points) submitted
 
     @property
     def failed(self) -> list[dict[str, Any]]:
@@ -161,17 +171,14 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
     return paths
 
 
-def load_series(out_dir: str, point_id: str) -> dict[str, np.ndarray] | None:
-    """The saved series of a point, or None."""
-    path = os.path.join(out_dir, "series", f"{point_id}.npz")
-    if not os.path.exists(path):
-        return None
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
-
-
 class Progress:
-    """A text progress bar on ``stream`` (redrawn in place on a terminal, else every 10 %)."""
+    """The study's progress: a text bar on ``stream`` (redrawn in place on a terminal, else
+    every 10 %) and, where :attr:`publish` is set, the same line and counts handed to it (the
+    Dask dashboard's progress page, :mod:`prsm_fmu.sweep.dashboard`) at most every
+    :data:`PUBLISH_SECONDS` and at the end."""
+
+    #: least time between two calls of :attr:`publish` [s]
+    PUBLISH_SECONDS = 0.5
 
     def __init__(self, total: int, skipped: int, stream: TextIO | None, width: int = 30) -> None:
         self.total, self.skipped, self.stream, self.width = total, skipped, stream, width
@@ -179,6 +186,9 @@ class Progress:
         self.t0 = time.perf_counter()
         self.tty = bool(stream is not None and getattr(stream, "isatty", lambda: False)())
         self._last_decile = -1
+        self._published = -math.inf
+        #: called with the progress state (:meth:`state`), or None
+        self.publish: Callable[[dict], None] | None = None
         self._draw(force=True)
 
     def update(self, ok: bool) -> None:
@@ -186,15 +196,11 @@ class Progress:
         self.failed += 0 if ok else 1
         self._draw()
 
-    def _draw(self, force: bool = False) -> None:
-        if self.stream is None:
-            return
+    def state(self) -> dict[str, Any]:
+        """Points ``done``, ``failed``, ``total``, ``skipped``, ``elapsed`` [s], ``left`` [s]
+        (None when unknown) and the bar's ``text``."""
         n = self.total
         frac = 1.0 if n == 0 else self.done / n
-        decile = int(frac * 10)
-        if not self.tty and not force and decile == self._last_decile and self.done < n:
-            return
-        self._last_decile = decile
         filled = round(frac * self.width)
         bar = "#" * filled + "." * (self.width - filled)
         elapsed = time.perf_counter() - self.t0
@@ -202,6 +208,23 @@ class Progress:
         text = (f"[{bar}] {self.done}/{n} points, {self.failed} failed"
                 f"{f', {self.skipped} already done' if self.skipped else ''}, "
                 f"{elapsed:.1f} s{f', ~{left:.0f} s left' if left is not None else ''}")
+        return {"done": self.done, "failed": self.failed, "total": n, "skipped": self.skipped,
+                "elapsed": elapsed, "left": left, "text": text}
+
+    def _draw(self, force: bool = False) -> None:
+        n = self.total
+        now = time.perf_counter()
+        if self.publish is not None and (force or self.done >= n
+                                         or now - self._published >= self.PUBLISH_SECONDS):
+            self._published = now
+            self.publish(self.state())
+        if self.stream is None:
+            return
+        decile = int((1.0 if n == 0 else self.done / n) * 10)
+        if not self.tty and not force and decile == self._last_decile and self.done < n:
+            return
+        self._last_decile = decile
+        text = self.state()["text"]
         if self.tty:
             self.stream.write("\r" + text)
         else:
@@ -225,6 +248,19 @@ def _label(values: dict[str, Any]) -> str:
     from .plots import short_label
 
     return ", ".join(short_label(k, v) for k, v in values.items())
+
+
+#: Dask settings of the local cluster that keep its periodic work off the points' CPU (a
+#: cluster's own cost grows with its wall time, not with its points): no statistical profiler
+#: (it samples the running task's stack every 10 ms), no work stealing (the chunks are handed
+#: out as workers free up, IN_FLIGHT each), the event loops' health check every second
+#: instead of every 20 ms, the workers' memory check every second instead of every 100 ms
+QUIET_CLUSTER = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.scheduler.work-stealing": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
 
 
 def local_cluster(workers: int | None = None):
@@ -255,10 +291,20 @@ def local_cluster(workers: int | None = None):
     # starts (a few seconds) is not seen.
     on_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if on_main else None
+    import dask
+
+    from .dashboard import ROUTE_MODULE
+
+    routes = list(dask.config.get("distributed.scheduler.http.routes", []))
+    settings = dict(QUIET_CLUSTER)
+    # the study's progress page on the dashboard's server (prsm_fmu.sweep.dashboard)
+    settings["distributed.scheduler.http.routes"] = \
+        routes + [ROUTE_MODULE] * (ROUTE_MODULE not in routes)
     try:
-        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOOPBACK,
-                            dashboard_address=f"{LOOPBACK}:0",
-                            preload=["prsm_fmu.sweep.worker_setup"])
+        with dask.config.set(settings):
+            return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                host=LOOPBACK, dashboard_address=f"{LOOPBACK}:0",
+                                preload=["prsm_fmu.sweep.worker_setup"])
     finally:
         if on_main:
             signal.signal(signal.SIGINT, previous)
@@ -269,10 +315,51 @@ def _quiet_logs() -> None:
     logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
+#: CPU time [s] a Dask task (a chunk of points) aims at: Dask's cost per task (scheduler,
+#: worker, this process: ~5 ms of CPU on a local cluster, benchmarks/sweep_scaling.py) stays
+#: near 1 % of it.  CPU, not wall time: on a loaded machine a point's wall time grows with the
+#: other jobs while Dask's cost per task does not shrink
+CHUNK_SECONDS = 0.5
+#: chunks in flight per worker: while one runs the next waits on the worker, so that no worker
+#: idles during a round trip to this process
+IN_FLIGHT = 2
+
+
+def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) -> int:
+    """Points of the next Dask task: about :data:`CHUNK_SECONDS` of CPU at
+    ``seconds_per_point`` (the latest chunk's mean: a worker's first point, which loads the FMU
+    or the engine, counts once only; None before the first: one point), at most
+    ``remaining // (2 workers)`` (guided: the chunks shrink to single points towards the end,
+    so that the workers finish within about a point of each other), at least 1.
+
+    Parameters
+    ----------
+    remaining : int
+        Points not yet submitted.
+    workers : int
+        Workers of the cluster, >= 1.
+    seconds_per_point : float or None
+        Mean CPU time of a point of the latest chunk [s] (PointResult.cpu_time).
+    """
+    if seconds_per_point is None or not seconds_per_point > 0.0:
+        return 1
+    by_time = int(CHUNK_SECONDS / seconds_per_point) if math.isfinite(seconds_per_point) else 1
+    return max(1, min(by_time, remaining // (2 * max(1, workers))))
+
+
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
-                  ship_fmus: bool) -> tuple[Callable, Callable]:
-    """(iterator over results as they complete, closer) for the Dask executor."""
+                  ship_fmus: bool, series_dir: str,
+                  bar: Progress) -> tuple[Callable, Callable, dict]:
+    """(iterator over results as they complete, closer, counts: ``{"tasks": submitted}``) for
+    the Dask executor.
+
+    The points go out in chunks (:func:`chunk_size`), :data:`IN_FLIGHT` per worker, the next
+    one submitted as soon as one comes back and before its results are handled; a chunk's
+    results come back together and are saved at once.  Workers that share this file system
+    (``ship_fmus`` false) save each point's series themselves."""
     from dask.distributed import Client, as_completed
+
+    from .dashboard import page_served, publisher
 
     own_cluster = own_client = None
     if client is None:
@@ -291,24 +378,50 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for sha, path in files.items():
             with open(path, "rb") as fh:
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
-    futures = {}
-    for t in tasks:
-        # one task per point: its result comes back (and is saved) while the others run;
-        # chunks of points were measured slower (benchmarks/sweep_scaling.py: 1.52x against
-        # 1.81x on 2 workers), the last chunk's results all arriving at the end
-        fut = client.submit(run_point, t, blobs, key=f"prsm-point-{t.id}-{t.index}",
+    bar.publish = publisher(client)               # the dashboard's progress page
+    bar.publish(bar.state())
+    page = page_served(client)
+    if bar.stream is not None and page:
+        bar.stream.write(f"{chr(10) if bar.tty else ''}progress page: {page}\n")
+    n_workers = max(1, len(client.scheduler_info().get("workers", {})) or (workers or 1))
+    save_dir = None if ship_fmus else series_dir
+    futures: dict[Any, list[PointTask]] = {}
+    pending = as_completed()
+    state: dict[str, Any] = {"next": 0, "seconds_per_point": None, "tasks": 0}
+
+    def submit() -> None:
+        k = state["next"]
+        size = chunk_size(len(tasks) - k, n_workers, state["seconds_per_point"])
+        chunk = tasks[k:k + size]
+        state["next"] = k + len(chunk)
+        # the dashboard's progress shows these tasks (prsm-points) done of those submitted
+        fut = client.submit(run_points, chunk, blobs, save_dir,
+                            key=f"prsm-points-{chunk[0].index}-{len(chunk)}-{chunk[0].id}",
                             pure=False, retries=0)
-        futures[fut] = t
+        futures[fut] = chunk
+        pending.add(fut)
+        state["tasks"] += 1
+
+    def top_up() -> None:
+        while state["next"] < len(tasks) and len(futures) < IN_FLIGHT * n_workers:
+            submit()
 
     def results():
-        for fut in as_completed(list(futures)):
-            t = futures[fut]
+        top_up()
+        for fut in pending:
+            chunk = futures.pop(fut)
             try:
-                yield fut.result()
+                done = fut.result()
             except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
-                yield PointResult(t.index, t.id, dict(t.values), "error",
-                                  f"{type(exc).__name__}: {exc}")
+                done = [PointResult(t.index, t.id, dict(t.values), "error",
+                                    f"{type(exc).__name__}: {exc}") for t in chunk]
             fut.release()
+            # the points that ran (a refused point ends in microseconds and says nothing)
+            timed = [res.cpu_time for res in done if res.cpu_time > 0.0 and res.status == "ok"]
+            if timed:
+                state["seconds_per_point"] = sum(timed) / len(timed)
+            top_up()                       # the workers go on while these are handled
+            yield from done
 
     def close(quiet: bool = False):
         if quiet:
@@ -325,7 +438,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         if own_cluster is not None:
             own_cluster.close()
 
-    return results, close
+    return results, close, state
 
 
 #: file in a study's output folder naming the study it belongs to
@@ -452,13 +565,13 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
                        metric_names, fmus) for p, pid in pending]
 
     bar = Progress(len(tasks), len(kept), progress)
+    counts = {"tasks": 0}
     done: list[PointResult] = []
     timing_rows: list[list[str]] = []
 
     def handle(res: PointResult) -> None:
-        if res.status == "ok" and res.series is not None:
-            with atomic_path(os.path.join(series_dir, f"{res.id}.npz")) as tmp:
-                np.savez_compressed(tmp, **res.series)
+        if res.status == "ok" and res.series is not None:      # not saved where it ran
+            save_series(series_dir, res.id, res.series)
         row = row_of(res, header)
         rows_by_id[res.id] = row
         append_row(table_path, header, row)
@@ -475,11 +588,12 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             with deferred_interrupt() as interrupted:
                 for t in tasks:
                     interrupted()
-                    handle(run_point(t))
+                    handle(run_point(t, None, series_dir))
         else:
             ship = (scheduler is not None and client is None) if ship_fmus is None \
                 else bool(ship_fmus)
-            results, close = _dask_results(tasks, client, scheduler, workers, ship)
+            results, close, counts = _dask_results(tasks, client, scheduler, workers, ship,
+                                                   series_dir, bar)
             try:
                 for res in results():
                     handle(res)
@@ -499,7 +613,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     for r in rows:
         r.update(point_of[r["id"]].values)     # swept values with their types (str, int)
     result = SweepResult(study, out_dir, table_path, header, rows, done, len(kept),
-                         backend=backend)
+                         backend=backend, dask_tasks=counts["tasks"])
     result.trends = evaluate(study, rows)
     if figures:
         result.figures = draw_figures(study, result)

@@ -23,15 +23,17 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from ..profiles import ConstantSpeed, RampSpeed, SpeedProfile
 from .metrics import compute_metrics, derive_series
+from .series_files import save_series
 from .study import apply_overrides, resolve_preset
 
-__all__ = ["PointTask", "PointResult", "FmuFile", "run_point", "worker_info", "speed_profile"]
+__all__ = ["PointTask", "PointResult", "FmuFile", "run_point", "run_points", "worker_info",
+           "speed_profile"]
 
 #: largest number of output intervals of one point
 MAX_STEPS = 10_000_000
@@ -199,10 +201,14 @@ def simulate_point(params, scenario: Mapping[str, Any], backend: str,
     return _runner(ref, tolerance).run(params, fidelity, profile.speed, acc0, load, t_end, h)
 
 
-def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None) -> PointResult:
+def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None,
+              series_dir: str | None = None) -> PointResult:
     """Run one point; never raises for the point's own problems (module docstring).
 
-    ``blobs`` maps an FMU's SHA-256 to its bytes, for workers that do not see its path.
+    ``blobs`` maps an FMU's SHA-256 to its bytes, for workers that do not see its path.  With
+    ``series_dir`` (a folder this process can write: the study's own, on a shared file system)
+    the point's series is saved there (:func:`~prsm_fmu.sweep.series_files.save_series`) and
+    the result carries none; else the result carries it.
     """
     wall0, cpu0 = time.perf_counter(), time.process_time()
     if blobs:
@@ -216,7 +222,10 @@ def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None) -> Poin
         res = simulate_point(params, inputs["scenario"], inputs["backend"], task.fmus)
         series = derive_series(res, params.n_stages)
         result.metrics = compute_metrics(series, task.metrics, int(res["rhs_calls"]))
-        result.series = series
+        if series_dir is None:
+            result.series = series
+        else:
+            save_series(series_dir, task.id, series)
     except Exception as exc:  # noqa: BLE001 - recorded in the table, the study goes on
         result.status = "error"
         result.error = f"{type(exc).__name__}: {exc}"
@@ -228,3 +237,11 @@ def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None) -> Poin
     result.fmu_instances = sum(r.instances_made for r in stats)
     result.fmu_points = sum(r.points_run for r in stats)
     return result
+
+
+def run_points(tasks: Sequence[PointTask], blobs: Mapping[str, bytes] | None = None,
+               series_dir: str | None = None) -> list[PointResult]:
+    """Run a chunk of points one after the other (one Dask task for several points: the
+    scheduler's and the round trip's cost per task is shared by them); each as
+    :func:`run_point`."""
+    return [run_point(t, blobs, series_dir) for t in tasks]
