@@ -43,6 +43,7 @@ PACKAGE_DIR = Path(prsm_fmu.__file__).parent
 #: layer of each top-level module or subpackage of prsm_fmu ("" is the package's __init__)
 LAYERS = {
     "params": 0, "param_ranges": 0, "geometry": 0, "friction": 0, "units": 0, "profiles": 0,
+    "schedule": 0,
     "mechanics": 1, "kinematics": 1,
     "models": 2, "steppers": 2, "presets": 2,
     "simulate": 3, "steady_state": 3, "": 3, "engine": 3,
