@@ -57,6 +57,25 @@ def _set(inst, vr, values: dict) -> None:
             inst.setReal([vr[name]], [v])
 
 
+def _logged_instance(fmu, name: str, messages: list) -> FMU2Model:
+    """A model-exchange instance of ``fmu`` named ``name`` whose log messages go to
+    ``messages`` (instantiated, not yet set up)."""
+    md, unzip = fmu
+
+    def logger(env, inst, status, category, message):
+        messages.append(message.decode())
+
+    m = FMU2Model(guid=md.guid, unzipDirectory=unzip,
+                  modelIdentifier=md.modelExchange.modelIdentifier, instanceName=name)
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(logger)
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    m._prsm_logger = cb          # (the callbacks must outlive the instance)
+    m.instantiate(loggingOn=True, callbacks=cb)
+    return m
+
+
 def co_simulation(fmu, start: dict, torque, load, h: float) -> np.ndarray:
     """Rows (t, outputs...) at t = 0, h, 2h, ... with input i held over step i."""
     md, unzip = fmu
@@ -241,17 +260,8 @@ def test_no_rigid_contact_solution_is_an_error_naming_the_cause(fmu):
     start = {"fidelity": 2, "initial_screw_speed": -1.0, "screw_torque": 20.0, "load_force": 500.0}
     messages = []
 
-    def logger(env, name, status, category, message):
-        messages.append(message.decode())
-
     for inertias, indicator in ((light, -1.0), ({}, 1.0)):
-        m = FMU2Model(guid=md.guid, unzipDirectory=unzip,
-                      modelIdentifier=md.modelExchange.modelIdentifier, instanceName="painleve")
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(logger)
-        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        m.instantiate(loggingOn=True, callbacks=cb)
+        m = _logged_instance(fmu, "painleve", messages)
         try:
             m.setupExperiment(startTime=0.0)
             m.enterInitializationMode()
@@ -284,16 +294,7 @@ def test_auto_is_refused_for_model_exchange_naming_the_fidelity(fmu):
     vr = {v.name: v.valueReference for v in md.modelVariables}
     messages = []
 
-    def logger(env, name, status, category, message):
-        messages.append(message.decode())
-
-    m = FMU2Model(guid=md.guid, unzipDirectory=unzip,
-                  modelIdentifier=md.modelExchange.modelIdentifier, instanceName="auto")
-    cb = fmi2CallbackFunctions()
-    cb.logger = fmi2CallbackLoggerTYPE(logger)
-    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    m.instantiate(loggingOn=True, callbacks=cb)
+    m = _logged_instance(fmu, "auto", messages)
     try:
         m.setupExperiment(startTime=0.0)
         m.enterInitializationMode()
