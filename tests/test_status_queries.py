@@ -204,3 +204,54 @@ def test_other_status_queries_are_answered_alike(native):
         free(hosts)
     print(f"  {got}")
     assert got["pythonfmu"] == got["native"] == (DISCARD, 7, DISCARD, 7)
+
+
+def _restore(h: Host, state, how: str) -> int:
+    """Restore ``state`` as made (``"handle"``) or through its bytes (``"bytes"``); the status."""
+    from fmpy.fmi1 import FMICallException
+    try:
+        if how == "handle":
+            h.fmu.setFMUstate(state)
+        else:
+            copy = h.fmu.deSerializeFMUstate(h.fmu.serializeFMUstate(state))
+            try:
+                h.fmu.setFMUstate(copy)
+            finally:
+                h.fmu.freeFMUstate(copy)
+    except FMICallException as exc:
+        return exc.status
+    return OK
+
+
+@pytest.mark.parametrize("how", ["handle", "bytes"])
+def test_a_state_restored_after_terminate_brings_its_phase_back(native, how):
+    """A state taken while stepping and restored after fmi2Terminate answers fmi2Terminated
+    false and steps again; one taken after fmi2Terminate answers true (the native FMU and the
+    Python slave both restore the phase with the state: the error table's "true after
+    fmi2Terminate" holds for the phase the FMU is in).  Before, the pythonfmu FMU's binary kept
+    answering true after such a restore while the native FMU answered false.  ``bytes``: the
+    state serialized and read back (the binary reads the phase from the bytes)."""
+    hosts = both()
+    got: dict[str, list] = {}
+    try:
+        for kind, h in hosts.items():
+            assert h.step(0.0, H_STEP) == OK
+            stepping = h.fmu.getFMUstate()
+            h.fmu.terminate()
+            answers = [_terminated(h)]                          # terminated: true
+            terminated = h.fmu.getFMUstate()
+            answers += [_restore(h, stepping, how), _terminated(h)]  # stepping again: false
+            answers.append(h.step(H_STEP, H_STEP))              # ... and it steps
+            h.fmu.terminate()
+            answers.append(_terminated(h))                      # terminated again: true
+            answers += [_restore(h, stepping, how), _terminated(h),
+                        _restore(h, terminated, how), _terminated(h)]   # the terminated state
+            h.fmu.freeFMUstate(stepping)
+            h.fmu.freeFMUstate(terminated)
+            got[kind] = answers
+    finally:
+        free(hosts)
+    want = [STOPS, OK, GOES_ON, OK, STOPS, OK, GOES_ON, OK, STOPS]
+    for kind, answers in got.items():
+        print(f"  restored by {how}, {kind}: {answers}")
+    assert got["pythonfmu"] == want and got["native"] == want
