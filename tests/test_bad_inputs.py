@@ -26,6 +26,7 @@ import random
 import shutil
 import subprocess
 import sys
+import time
 import zipfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -297,3 +298,110 @@ def test_native_outputs_finite_at_every_real_parameters_extremes(native):
           f"{stepped} steps taken, {len(bad)} with a non-finite output")
     assert not bad, bad
     assert stepped > 100
+
+
+# ---- inputs at their bounds on random mechanisms within the parameters' ranges --------------
+#: the inputs' bounds as docs/fmu.md states them (Variables: bounds of the inputs): |T| <= 1e6
+#: N.m, |F| <= 1e8 N, and a nonzero input at least 1e-150 in magnitude
+T_MAX, F_MAX, U_MIN = 1e6, 1e8, 1e-150
+#: the Li et al. (2021) two-stage mechanism's lengths [m] and its largest (the second nut's
+#: radius, 27.5 mm): a scale s keeps every length within (0, 1] m while s <= 1/0.0275 = 36.4
+LI_LARGEST_LENGTH = 0.0275
+RANDOM_MECHANISMS = 80          # per FMU; the same seeded draws for both
+
+
+def _random_mechanism(rnd: random.Random) -> dict:
+    """Parameters within docs/fmu.md's ranges: every length of Li et al.'s two stages times one
+    scale 10^U(-300, log10(36.4)) (the geometry's relations r_N = r_S + 2 r_R = n_S r_R hold at
+    any scale), each mass in (0, 1e4] kg and inertia in (0, 1e3] kg.m2 drawn log-uniformly from
+    1e-300 up, friction coefficients in [0, 1), the viscous coefficient in [0, 1e5] N.s/m, the
+    differential arm in [0, 1e-3] m, the slip scale in [1e-300, 1] m/s, a random level."""
+    from prsm_fmu import presets
+    li = presets.load("li2021_two_stage")
+    s = 10.0 ** rnd.uniform(-300.0, math.log10(1.0 / LI_LARGEST_LENGTH))
+    d: dict = {}
+    for k, st in enumerate(li.stages, 1):
+        for f in ("screw_radius", "roller_radius", "nut_radius", "screw_lead", "spline_radius"):
+            if getattr(st, f):
+                d[f"stage[{k}].{f}"] = getattr(st, f) * s
+        for f, top in (("screw_mass", 4), ("nut_mass", 4), ("roller_mass", 4),
+                       ("carrier_mass", 4), ("screw_inertia", 3), ("roller_inertia", 3),
+                       ("carrier_inertia", 3)):
+            d[f"stage[{k}].{f}"] = 10.0 ** rnd.uniform(-300.0, top)
+    d["stage[1].bearing_radius"] = li.stages[0].screw_radius * s
+    d.update({"mu_screw_roller": rnd.random(), "mu_spline": rnd.random(),
+              "mu_nut_screw": rnd.choice((0.0, rnd.random())),
+              "mu_viscous": rnd.uniform(0.0, 1e5), "mu_differential": rnd.uniform(0.0, 1e-3),
+              "slip_velocity_scale": 10.0 ** rnd.uniform(-300.0, 0.0),
+              "fidelity": rnd.choice(("kinematic", "quasi-static", "dynamic", "auto"))})
+    return d
+
+
+def _inputs_at_bounds(rnd: random.Random) -> list[tuple[float, float]]:
+    """Three input pairs, each component 0 or at one end of its bound, either sign."""
+    def one(top: float) -> float:
+        return rnd.choice((0.0, top, -top, U_MIN, -U_MIN))
+    return [(one(T_MAX), one(F_MAX)) for _ in range(3)]
+
+
+def inputs_at_bounds_counts(make, seed: int = 2611, n: int = RANDOM_MECHANISMS) -> dict:
+    """Drive ``n`` seeded random mechanisms (:func:`_random_mechanism`) with inputs at their
+    bounds, steps of 1e-6, 1e-3 and 0.1 s: counts of mechanisms refused at initialization
+    (native: fmi2ExitInitializationMode; pythonfmu: its first doStep), steps refused
+    (fmi2Discard with a message, state unchanged), steps taken, and ``bad``: accepted steps with
+    a non-finite output or a refusal without its one-line message or with the state changed."""
+    from fmpy.fmi1 import FMICallException
+    rnd = random.Random(seed)
+    counts = {"mechanisms": n, "init_refused": 0, "steps_refused": 0, "steps_taken": 0,
+              "bad": [], "slowest_step_s": 0.0}
+    for case in range(n):
+        par, inputs = _random_mechanism(rnd), _inputs_at_bounds(rnd)
+        host = make()
+        try:
+            host.set(par)
+            try:
+                host.fmu.exitInitializationMode()
+            except FMICallException:
+                counts["init_refused"] += 1
+                continue
+            vr = [host.vars["screw_torque"].valueReference, host.vars["load_force"].valueReference]
+            t = 0.0
+            for u, h in zip(inputs, (1e-6, 1e-3, 0.1)):
+                host.fmu.setReal(vr, list(u))
+                before = host.state_bytes()
+                start = time.perf_counter()
+                status = host.step(t, h)
+                counts["slowest_step_s"] = max(counts["slowest_step_s"],
+                                               time.perf_counter() - start)
+                if status == OK:
+                    t += h
+                    counts["steps_taken"] += 1
+                    if not _all_finite(host):
+                        counts["bad"].append((case, u, h, "non-finite output"))
+                elif host.state_bytes() != before or not host.messages \
+                        or "refused" not in host.messages[-1][1]:
+                    counts["bad"].append((case, u, h, "refusal changed the state or said nothing"))
+                elif "initialization failed" in host.messages[-1][1]:
+                    counts["init_refused"] += 1          # pythonfmu: a refused initialization
+                    break
+                else:
+                    counts["steps_refused"] += 1
+        finally:
+            host.fmu.freeInstance()
+    return counts
+
+
+@pytest.mark.parametrize("kind", ["pythonfmu", "native"])
+def test_inputs_at_their_bounds_on_random_mechanisms_give_finite_outputs(native, kind):
+    """docs/fmu.md's claim that the inputs' constant bounds suffice: on 80 seeded random
+    mechanisms within the parameters' ranges (lengths scaled over 300 decades, masses and
+    inertias over ~300), inputs at the bounds (±1e6 N.m, ±1e8 N, ±1e-150, 0) never give an
+    accepted step a non-finite output; a step is taken or refused whole with its message."""
+    make = {"pythonfmu": Host, "native": native_host}[kind]
+    c = inputs_at_bounds_counts(lambda: make("PRSM2", initialize=False))
+    print(f"  {kind}: {c['mechanisms']} random mechanisms (seed 2611): {c['init_refused']} refused at "
+          f"initialization, {c['steps_taken']} steps taken with finite outputs, "
+          f"{c['steps_refused']} refused with a message and the state unchanged, "
+          f"{len(c['bad'])} wrong; slowest doStep {c['slowest_step_s']:.3f} s")
+    assert not c["bad"], c["bad"]
+    assert c["steps_taken"] >= 20           # the draws reach stepping mechanisms, not only refusals

@@ -204,3 +204,147 @@ def test_other_status_queries_are_answered_alike(native):
         free(hosts)
     print(f"  {got}")
     assert got["pythonfmu"] == got["native"] == (DISCARD, 7, DISCARD, 7)
+
+
+def _restore(h: Host, state, how: str) -> int:
+    """Restore ``state`` as made (``"handle"``) or through its bytes (``"bytes"``); the status."""
+    from fmpy.fmi1 import FMICallException
+    try:
+        if how == "handle":
+            h.fmu.setFMUstate(state)
+        else:
+            copy = h.fmu.deSerializeFMUstate(h.fmu.serializeFMUstate(state))
+            try:
+                h.fmu.setFMUstate(copy)
+            finally:
+                h.fmu.freeFMUstate(copy)
+    except FMICallException as exc:
+        return exc.status
+    return OK
+
+
+@pytest.mark.parametrize("how", ["handle", "bytes"])
+def test_a_state_restored_after_terminate_brings_its_phase_back(native, how):
+    """A state taken while stepping and restored after fmi2Terminate answers fmi2Terminated
+    false and steps again; one taken after fmi2Terminate answers true (the native FMU and the
+    Python slave both restore the phase with the state: the error table's "true after
+    fmi2Terminate" holds for the phase the FMU is in).  Before, the pythonfmu FMU's binary kept
+    answering true after such a restore while the native FMU answered false.  ``bytes``: the
+    state serialized and read back (the binary reads the phase from the bytes)."""
+    hosts = both()
+    got: dict[str, list] = {}
+    try:
+        for kind, h in hosts.items():
+            assert h.step(0.0, H_STEP) == OK
+            stepping = h.fmu.getFMUstate()
+            h.fmu.terminate()
+            answers = [_terminated(h)]                          # terminated: true
+            terminated = h.fmu.getFMUstate()
+            answers += [_restore(h, stepping, how), _terminated(h)]  # stepping again: false
+            answers.append(h.step(H_STEP, H_STEP))              # ... and it steps
+            h.fmu.terminate()
+            answers.append(_terminated(h))                      # terminated again: true
+            answers += [_restore(h, stepping, how), _terminated(h),
+                        _restore(h, terminated, how), _terminated(h)]   # the terminated state
+            h.fmu.freeFMUstate(stepping)
+            h.fmu.freeFMUstate(terminated)
+            got[kind] = answers
+    finally:
+        free(hosts)
+    want = [STOPS, OK, GOES_ON, OK, STOPS, OK, GOES_ON, OK, STOPS]
+    for kind, answers in got.items():
+        print(f"  restored by {how}, {kind}: {answers}")
+    assert got["pythonfmu"] == want and got["native"] == want
+
+
+#: reads the phase of serialized states with the wrapper's own function (its source included):
+#: argv: files of states; prints each one's phase, then, for the first, the phases of all its
+#: truncations and of seeded random mutations (1-4 bytes each) as counts per answer
+_PHASE_HOST = r"""
+#include PRSM_WRAPPER
+static unsigned char buf[1 << 20];
+int main(int argc, char **argv) {
+    size_t len = 0;
+    for (int k = 1; k < argc; k++) {
+        FILE *f = fopen(argv[k], "rb");
+        size_t n = fread(buf, 1, sizeof buf, f);
+        fclose(f);
+        printf("%d ", serialized_phase(buf, n));
+        if (k == 1) len = n;
+    }
+    FILE *f = fopen(argv[1], "rb");
+    len = fread(buf, 1, sizeof buf, f);
+    fclose(f);
+    int counts[6] = {0};
+    for (size_t n = 0; n <= len; n++) {                 /* every truncation, on the heap */
+        unsigned char *d = malloc(n ? n : 1);
+        memcpy(d, buf, n);
+        counts[serialized_phase(d, n) + 1]++;
+        free(d);
+    }
+    srand(11);
+    for (int r = 0; r < 50000; r++) {
+        unsigned char *d = malloc(len);
+        memcpy(d, buf, len);
+        for (int j = 0; j <= r % 4; j++) d[rand() % len] = (unsigned char)rand();
+        counts[serialized_phase(d, len) + 1]++;
+        free(d);
+    }
+    printf("| %zu truncations + 50000 mutations:", len + 1);
+    for (int k = 0; k < 5; k++) printf(" %d", counts[k]);
+    printf("\n");
+    return 0;
+}
+"""
+
+
+def test_the_wrapper_reads_the_phase_of_serialized_states_and_survives_bad_bytes(native,
+                                                                                 tmp_path):
+    """The wrapper's reader of a serialized state's phase (serialized_phase), compiled under
+    AddressSanitizer and UndefinedBehaviorSanitizer: the states of the pythonfmu FMU taken
+    while stepping and after fmi2Terminate read as the wrapper's phases 2 and 3 (its enum:
+    instantiated 0, initialization 1, stepping 2, terminated 3); every truncation of the first
+    and 50000 seeded random mutations (seed 11) give an answer in -1..3 without a sanitizer
+    report."""
+    import shutil
+    import subprocess
+    import sys
+    if sys.platform != "linux" or shutil.which("gcc") is None:
+        pytest.skip("needs gcc on Linux")
+    from test_bad_inputs import _sanitizers_work
+    why = _sanitizers_work(tmp_path)
+    if why:
+        pytest.skip(why)
+    h = Host("PRSM2")
+    try:
+        assert h.step(0.0, H_STEP) == OK
+        (tmp_path / "stepping.bin").write_bytes(h.state_bytes())
+        h.fmu.terminate()
+        (tmp_path / "terminated.bin").write_bytes(h.state_bytes())
+    finally:
+        h.fmu.freeInstance()
+    with zipfile.ZipFile(native["PRSM2"]) as z:            # fmi2Functions.h and its includes
+        for name in z.namelist():
+            if name.startswith("sources/") and name.endswith(".h"):
+                (tmp_path / Path(name).name).write_bytes(z.read(name))
+    wrapper = Path(__file__).resolve().parents[1] / "fmu_build" / "native" / \
+        "prsm_status_wrapper.c"
+    (tmp_path / "host.c").write_text(_PHASE_HOST)
+    p = subprocess.run(["gcc", "-std=c99", "-g", "-O1", "-fsanitize=address,undefined",
+                        "-fno-sanitize-recover=undefined", f"-I{tmp_path}",
+                        f'-DPRSM_WRAPPER="{wrapper}"', "-DPRSM_VR_TORQUE=0", "-DPRSM_VR_LOAD=1",
+                        '-DPRSM_INNER_STEM="none"', str(tmp_path / "host.c"), "-o",
+                        str(tmp_path / "host"), "-ldl"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    run = subprocess.run([str(tmp_path / "host"), str(tmp_path / "stepping.bin"),
+                          str(tmp_path / "terminated.bin")], capture_output=True, text=True,
+                         timeout=300)
+    print(f"  serialized phases (stepping, terminated): {run.stdout.strip()}")
+    assert "ERROR: AddressSanitizer" not in run.stderr and "runtime error" not in run.stderr, \
+        run.stderr[-3000:]
+    assert run.returncode == 0
+    phases, counts = run.stdout.split("|")
+    assert phases.split() == ["2", "3"]
+    # answers -1 (unreadable), 0, 1, 2, 3: every case gives one of them
+    n = [int(x) for x in counts.split(":")[1].split()]
+    assert sum(n) == int(counts.split()[0]) + 50000

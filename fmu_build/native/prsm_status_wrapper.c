@@ -15,6 +15,10 @@
  *                  = false otherwise: a refused step left the state unchanged, and a retry
  *                          with other inputs, another step or a restored state may succeed.
  * A successful doStep, a restored state (fmi2SetFMUstate) and fmi2Reset forget the refusals.
+ * A restored state brings its phase back, as the native FMU's and the Python slave's do: a state
+ * taken while stepping and restored after fmi2Terminate answers false and may step again.  The
+ * phase of a state is recorded when fmi2GetFMUstate makes it, or read from the bytes
+ * fmi2DeSerializeFMUstate takes (serialized_phase); where neither says, the phase stays.
  * fmi2GetStatus answers fmi2Discard (doStep never runs asynchronously), as the native FMU.
  *
  * Build-time definitions: PRSM_VR_TORQUE, PRSM_VR_LOAD (value references of the inputs),
@@ -80,7 +84,156 @@ typedef struct {
     double refused_call[4];       /* the last refused doStep: t, h, u */
     int has_refused, stuck;
     char name[256];
+    struct state_phase *states;   /* the phase of each state handle made by this instance */
 } wrapper;
+
+typedef struct state_phase {
+    fmi2FMUstate state;
+    int phase;
+    struct state_phase *next;
+} state_phase;
+
+/* the recorded phase of ``state``'s entry (NULL: none) */
+static state_phase *phase_entry(const wrapper *w, fmi2FMUstate state) {
+    for (state_phase *e = w->states; e; e = e->next)
+        if (e->state == state) return e;
+    return NULL;
+}
+
+/* record that ``state`` holds ``phase`` (-1: unknown, the entry is dropped) */
+static void record_phase(wrapper *w, fmi2FMUstate state, int phase) {
+    state_phase *e = phase_entry(w, state);
+    if (!e && phase >= 0) {
+        e = (state_phase *)w->cb.allocateMemory(1, sizeof *e);
+        if (!e) return;
+        e->state = state;
+        e->next = w->states;
+        w->states = e;
+    }
+    if (e) e->phase = phase;
+}
+
+static void forget_phase(wrapper *w, fmi2FMUstate state) {
+    for (state_phase **p = &w->states; *p; p = &(*p)->next)
+        if ((*p)->state == state) {
+            state_phase *e = *p;
+            *p = e->next;
+            w->cb.freeMemory(e);
+            return;
+        }
+}
+
+static unsigned long long little_endian(const unsigned char *b, int n) {
+    unsigned long long v = 0;
+    for (int k = n - 1; k >= 0; k--) v = v << 8 | b[k];
+    return v;
+}
+
+/* The phase (PH_*) of a serialized state of the Python slave, or -1 where the bytes do not say.
+ * prsm_fmu.fmu_state.to_bytes writes "PRSMFMU2" and a pickle (protocol 4) of the state tuple,
+ * whose 6th item (fmu_state.FIELDS) is the phase's name; this walks the pickle's opcodes to the
+ * end of that tuple, keeping its items (a string's bytes, else NULL) and the strings memoized
+ * (for a phase written as a reference to an earlier equal string).  "failed" (initialization refused) reads as the initialization phase, where this
+ * wrapper stays when fmi2ExitInitializationMode fails. */
+static int serialized_phase(const unsigned char *b, size_t n) {
+    enum { MEMO_MAX = 512 };
+    static const char *const names[] = {"instantiated", "initialization", "stepping",
+                                        "terminated", "failed"};
+    static const int phases[] = {PH_INSTANTIATED, PH_INITIALIZATION, PH_STEPPING, PH_TERMINATED,
+                                 PH_INITIALIZATION};
+    const unsigned char *memo[MEMO_MAX], *top[MEMO_MAX];  /* top: the outer tuple's items */
+    size_t memo_len[MEMO_MAX], top_len[MEMO_MAX];
+    int n_memo = 0, depth = 0, items = 0;
+    const unsigned char *s = NULL;           /* the last object pushed, if a string */
+    size_t s_len = 0, i = 8;
+#define NEED(k) do { if ((k) > n - i) return -1; } while (0)
+    if (n < 8 || memcmp(b, "PRSMFMU2", 8)) return -1;
+    while (i < n) {
+        unsigned char op = b[i++];
+        int push = 1;
+        size_t len;
+        switch (op) {
+        case 0x80: NEED(1); i += 1; push = 0; break;                 /* PROTO */
+        case 0x95: NEED(8); i += 8; push = 0; break;                 /* FRAME */
+        case '(': depth++; push = 0; break;                          /* MARK */
+        case 't':                                                    /* TUPLE */
+            if (depth == 1) {          /* the outer tuple is complete: its 6th item */
+                if (items < 6 || !top[5]) return -1;
+                for (int k = 0; k < 5; k++)
+                    if (strlen(names[k]) == top_len[5] && !memcmp(names[k], top[5], top_len[5]))
+                        return phases[k];
+                return -1;
+            }
+            if (--depth < 0) return -1;
+            s = NULL;
+            break;
+        case 0x85: case 0x86: case 0x87:                             /* TUPLE1..3 */
+            if (depth == 1 && (items -= op - 0x84) < 0) return -1;
+            s = NULL;
+            break;
+        case 0x94:                                                   /* MEMOIZE */
+            if (n_memo == MEMO_MAX) return -1;
+            memo[n_memo] = s;
+            memo_len[n_memo++] = s_len;
+            push = 0;
+            break;
+        case 'h': case 'j': {                                        /* BINGET, LONG_BINGET */
+            int k = op == 'h' ? 1 : 4;
+            NEED((size_t)k);
+            unsigned long long idx = little_endian(b + i, k);
+            i += (size_t)k;
+            if (idx >= (unsigned long long)n_memo) return -1;
+            s = memo[idx];
+            s_len = memo_len[idx];
+            break;
+        }
+        case 0x8c: case 'X': case 0x8d: {                            /* strings */
+            int k = op == 0x8c ? 1 : op == 'X' ? 4 : 8;
+            NEED((size_t)k);
+            len = (size_t)little_endian(b + i, k);
+            i += (size_t)k;
+            NEED(len);
+            s = b + i;
+            s_len = len;
+            i += len;
+            break;
+        }
+        case 0x8a: case 0x8b: case 'C': case 'B': case 0x8e: {   /* LONG1/4, bytes */
+            int k = op == 0x8a || op == 'C' ? 1 : op == 0x8e ? 8 : 4;
+            NEED((size_t)k);
+            len = (size_t)little_endian(b + i, k);
+            i += (size_t)k;
+            NEED(len);
+            i += len;
+            s = NULL;
+            break;
+        }
+        case 'K': NEED(1); i += 1; s = NULL; break;                  /* BININT1 */
+        case 'M': NEED(2); i += 2; s = NULL; break;                  /* BININT2 */
+        case 'J': NEED(4); i += 4; s = NULL; break;                  /* BININT */
+        case 'G': NEED(8); i += 8; s = NULL; break;                  /* BINFLOAT */
+        case 0x88: case 0x89: case 'N': case ')': case ']': case '}':
+            s = NULL;                                    /* True False None () [] {} */
+            break;
+        case 'a': case 's':                              /* APPEND, SETITEM: into the list/dict */
+            if (depth == 1 && (items -= op == 'a' ? 1 : 2) < 1) return -1;
+            push = 0;
+            break;
+        case 'e': case 'u':                              /* APPENDS, SETITEMS: up to the mark */
+            if (--depth < 1) return -1;
+            push = 0;
+            break;
+        default: return -1;                                          /* STOP or not ours */
+        }
+        if (push && depth == 1) {
+            if (items == MEMO_MAX) return -1;
+            top[items] = s;
+            top_len[items++] = s_len;
+        }
+    }
+#undef NEED
+    return -1;
+}
 
 /* the directory of this library, with its separator, into dir; 0 on success */
 static int own_directory(char *dir, size_t len) {
@@ -183,6 +336,7 @@ void fmi2FreeInstance(fmi2Component c) {
     wrapper *w = (wrapper *)c;
     if (!w) return;
     inner.fmi2FreeInstance(w->inner);
+    while (w->states) forget_phase(w, w->states->state);
     w->cb.freeMemory(w);
 }
 
@@ -257,19 +411,28 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
     W(c);
-    return inner.fmi2GetFMUstate(w->inner, state);
+    fmi2Status s = inner.fmi2GetFMUstate(w->inner, state);
+    if (s == fmi2OK && state && *state) record_phase(w, *state, w->phase);
+    return s;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     W(c);
     fmi2Status s = inner.fmi2SetFMUstate(w->inner, state);
-    w->has_refused = w->stuck = 0;     /* another state: a refused call may succeed from it */
+    if (s == fmi2OK) {                 /* refused: nothing changed (the native FMU's rule) */
+        const state_phase *e = phase_entry(w, state);
+        if (e) w->phase = e->phase;    /* the state's phase, as the slave restores it */
+        w->has_refused = w->stuck = 0; /* another state: a refused call may succeed from it */
+    }
     return s;
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
     W(c);
-    return inner.fmi2FreeFMUstate(w->inner, state);
+    fmi2FMUstate was = state ? *state : NULL;
+    fmi2Status s = inner.fmi2FreeFMUstate(w->inner, state);
+    if (was && s == fmi2OK) forget_phase(w, was);
+    return s;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
@@ -286,7 +449,10 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                    fmi2FMUstate *state) {
     W(c);
-    return inner.fmi2DeSerializeFMUstate(w->inner, bytes, size, state);
+    fmi2Status s = inner.fmi2DeSerializeFMUstate(w->inner, bytes, size, state);
+    if (s == fmi2OK && bytes && state && *state)
+        record_phase(w, *state, serialized_phase((const unsigned char *)bytes, size));
+    return s;
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference unknown[],
