@@ -260,7 +260,7 @@ def _run_and_write(args, ap, scene, fmu_path, retry, workers,
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     drawing, drawn = None, []
-    if not args.no_plots and workers is not None and workers.pool is not None:
+    if not args.no_plots and workers is not None and workers.active:
         # the figures are drawn in the workers while this process writes the CSV
         import threading
 

@@ -122,6 +122,36 @@ def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path, prsm
     assert list(out.iterdir()) == []
 
 
+def test_ctrl_c_to_the_process_group_ends_a_run_and_its_drawing_processes(tmp_path):
+    """A terminal's Ctrl-C reaches the whole process group, the forked figure process too
+    (started before the run, importing matplotlib meanwhile): still one line on stderr, exit
+    130, no output, and no process of the group left."""
+    out = tmp_path / "out"
+    out.mkdir()
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "system_models", "run", "--scene",
+                             "sine_tracking", "--prsm", "python", "--out", str(out)],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        first = proc.stdout.readline()
+        assert first.startswith("scene sine_tracking"), first
+        time.sleep(0.5)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    errors = [ln for ln in err.strip().splitlines() if not ln.startswith("[")]   # not the bar
+    assert "Traceback" not in err and len(errors) == 1, err
+    assert errors[0].startswith("prsm-ema: interrupted")
+    assert list(out.iterdir()) == []
+    time.sleep(0.2)
+    with pytest.raises(ProcessLookupError):           # the group is empty: every process ended
+        os.killpg(proc.pid, 0)
+
+
 def test_run_command_maps_ctrl_c_and_missing_extras(capsys):
     from prsm_fmu.command import run_command
 
