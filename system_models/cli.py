@@ -153,35 +153,36 @@ def _cmd_run(args, ap) -> int:
         check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
         return _refuse(str(exc))
-    if args.prsm == "python":
-        build_errors: tuple[type[Exception], ...] = (FMUError,)
-    else:
-        # the fmu extra, before anything runs: fmpy steps the FMU, pythonfmu builds it (and
-        # the native FMU's builder imports it)
-        require("fmpy", "pythonfmu", purpose=f"running the PRSM as an FMU (--prsm {args.prsm})")
-        from fmu_build.errors import BuildError
-
-        build_errors = (FMUError, BuildError)
-    if args.step is not None:
-        try:
-            whole_steps(scene.t0, scene.t_end, args.step)
-        except ValueError as exc:
-            ap.error(f"argument --step: {exc}; must divide the scene's run into whole steps")
-    retry = None
-    if args.retry is not None:
-        retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
-    fmu_path = None
-    if args.prsm != "python":
-        default = f"dist/{mech}{'-native' if args.prsm == 'native' else ''}.fmu"
-        try:
-            fmu_path = ensure_fmu(args.fmu or default, rebuild_stale=args.fmu is None)
-        except FMUError as exc:
-            print(f"prsm-ema: {exc}", file=sys.stderr)
-            return 1
-    print(f"scene {scene.name}: {scene.description}")
-    # the figures' processes start now and import matplotlib while the scene runs
+    # the figures' processes start now and import matplotlib while the FMU is checked and the
+    # scene runs
     workers = None if args.no_plots or scene.topology != "direct" else FigureWorkers().start()
     try:
+        if args.prsm == "python":
+            build_errors: tuple[type[Exception], ...] = (FMUError,)
+        else:
+            # the fmu extra, before anything runs: fmpy steps the FMU, pythonfmu builds it (and
+            # the native FMU's builder imports it)
+            require("fmpy", "pythonfmu", purpose=f"running the PRSM as an FMU (--prsm {args.prsm})")
+            from fmu_build.errors import BuildError
+
+            build_errors = (FMUError, BuildError)
+        if args.step is not None:
+            try:
+                whole_steps(scene.t0, scene.t_end, args.step)
+            except ValueError as exc:
+                ap.error(f"argument --step: {exc}; must divide the scene's run into whole steps")
+        retry = None
+        if args.retry is not None:
+            retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
+        fmu_path = None
+        if args.prsm != "python":
+            default = f"dist/{mech}{'-native' if args.prsm == 'native' else ''}.fmu"
+            try:
+                fmu_path = ensure_fmu(args.fmu or default, rebuild_stale=args.fmu is None)
+            except FMUError as exc:
+                print(f"prsm-ema: {exc}", file=sys.stderr)
+                return 1
+        print(f"scene {scene.name}: {scene.description}")
         return _run_and_write(args, ap, scene, fmu_path, retry, workers, build_errors)
     finally:
         if workers is not None:
