@@ -131,6 +131,19 @@ def _plots(run, out: Path, workers=None) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
+    from .figure_process import early_drawer
+
+    # the figures' process forked first thing (before numpy is imported here): it imports
+    # matplotlib while the scene is checked, the FMU loaded and the scene run
+    drawer = None if args.no_plots else early_drawer()
+    try:
+        return _checked_run(args, ap, drawer)
+    finally:
+        if drawer is not None:
+            drawer.close()
+
+
+def _checked_run(args, ap, drawer) -> int:
     from prsm_fmu.extras import require
 
     from .fmu import FMUError, ensure_fmu
@@ -153,9 +166,13 @@ def _cmd_run(args, ap) -> int:
         check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
         return _refuse(str(exc))
-    # the figures' processes start now and import matplotlib while the FMU is checked and the
-    # scene runs
-    workers = None if args.no_plots or scene.topology != "direct" else FigureWorkers().start()
+    # the figures' processes (the drawer forked already, else started now) import matplotlib
+    # while the FMU is checked and the scene runs; geared scenes draw theirs here
+    if drawer is not None and scene.topology != "direct":
+        drawer.close()
+        drawer = None
+    workers = (None if args.no_plots or scene.topology != "direct"
+               else FigureWorkers(drawer=drawer).start())
     try:
         if args.prsm == "python":
             build_errors: tuple[type[Exception], ...] = (FMUError,)

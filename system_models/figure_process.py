@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-__all__ = ["available", "ForkedDrawer"]
+__all__ = ["available", "processes", "early_drawer", "ForkedDrawer"]
 
 
 def available() -> bool:
@@ -32,6 +32,20 @@ def available() -> bool:
     import threading
 
     return sys.platform.startswith("linux") and threading.active_count() == 1
+
+
+def processes() -> int:
+    """Processes to draw in where the drawer is forked: 2 on a machine of two cores or more, 1
+    on one, busy or not (a fork copies the command's imports: the processes' CPU is the drawing
+    the command would do itself)."""
+    return 2 if (os.cpu_count() or 1) >= 2 else 1
+
+
+def early_drawer() -> "ForkedDrawer | None":
+    """A started :class:`ForkedDrawer` of :func:`processes` processes, or None where it cannot
+    start.  This module imports no numpy: called first thing, the fork copies a small process
+    and its matplotlib import overlaps the command's own imports too."""
+    return ForkedDrawer(processes()).start() if available() else None
 
 
 def _ignore_interrupts() -> None:

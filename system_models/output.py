@@ -405,16 +405,11 @@ def spare_workers() -> int:
 
 def default_workers() -> int:
     """Drawing processes for :class:`FigureWorkers` by default: where the drawer is forked
-    (:func:`system_models.figure_process.available`), 2 on a machine of two cores or more and
-    1 on one, busy or not (forks copy the command's imports: the processes' CPU is the drawing
-    the command would do itself); elsewhere spawned ones, :func:`spare_workers`."""
-    import os
+    (:func:`system_models.figure_process.available`), :func:`~system_models.figure_process.
+    processes`; elsewhere spawned ones, :func:`spare_workers`."""
+    from .figure_process import available, processes
 
-    from .figure_process import available
-
-    if available():
-        return 2 if (os.cpu_count() or 1) >= 2 else 1
-    return spare_workers()
+    return processes() if available() else spare_workers()
 
 
 class FigureWorkers:
@@ -426,12 +421,14 @@ class FigureWorkers:
     forks once more to draw (``workers`` >= 2); elsewhere ``workers`` >= 2 spawned processes
     (by default only where a core is idle, :func:`spare_workers`).  With ``workers`` = 0, or if
     the processes cannot start or fail, the figures are drawn in this process (same files, same
-    content)."""
+    content).  ``drawer``: a :class:`~system_models.figure_process.ForkedDrawer` started
+    already (by the command, first thing), used instead of starting one."""
 
-    def __init__(self, workers: int | None = None) -> None:
-        self.n = workers if workers is not None else default_workers()
+    def __init__(self, workers: int | None = None, drawer=None) -> None:
+        self.n = drawer.split if drawer is not None else (
+            workers if workers is not None else default_workers())
         self.pool = None
-        self.drawer = None
+        self.drawer = drawer
 
     @property
     def active(self) -> bool:
@@ -441,7 +438,9 @@ class FigureWorkers:
     def start(self) -> "FigureWorkers":
         from .figure_process import ForkedDrawer, available
 
-        if self.n >= 1 and available():
+        if self.drawer is not None:
+            pass
+        elif self.n >= 1 and available():
             self.drawer = ForkedDrawer(self.n).start()
         elif self.n >= 2:
             from prsm_fmu.workers import started_pool
