@@ -178,6 +178,24 @@ def test_time_panels_legend_tells_the_stage_line_styles(saved, tmp_path):
     assert {"µ 0.05", "µ 0.1"} <= set(entries)
 
 
+def _drawn_here_and_there(tmp_path, workers):
+    """(files write_plots draws in this process, files ``workers`` draw) of one result."""
+    res = _step_result()
+    kw = dict(voltage_limit=300.0, n_rollers=[10, 10], description="a step")
+    (tmp_path / "here").mkdir()
+    (tmp_path / "there").mkdir()
+    here = write_plots(res, tmp_path / "here", "s", lambda t: 0.01, "position", 40.0, **kw)
+    there = workers.write_plots(res, tmp_path / "there", "s", lambda t: 0.01, "position", 40.0,
+                                **kw)
+    return here, there
+
+
+def _same_bytes(here, there):
+    assert [p.name for p in there] == [p.name for p in here]
+    for a, b in zip(here, there):
+        assert a.read_bytes() == b.read_bytes(), a.name
+
+
 @pytest.mark.parametrize("how", ["forked", "spawned"])
 def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path, monkeypatch, how):
     """prsm-ema run draws its figures in other processes (forked where fork is safe, else
@@ -190,22 +208,14 @@ def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path, monk
         pytest.skip("no safe fork on this platform")
     if how == "spawned":
         monkeypatch.setattr(figure_process, "available", lambda: False)
-    res = _step_result()
-    kw = dict(voltage_limit=300.0, n_rollers=[10, 10], description="a step")
-    (tmp_path / "here").mkdir()
-    (tmp_path / "there").mkdir()
-    here = write_plots(res, tmp_path / "here", "s", lambda t: 0.01, "position", 40.0, **kw)
     workers = FigureWorkers(2).start()
     try:
         # really drawn in the other processes
         assert (workers.drawer if how == "forked" else workers.pool) is not None
-        there = workers.write_plots(res, tmp_path / "there", "s", lambda t: 0.01, "position",
-                                    40.0, **kw)
+        here, there = _drawn_here_and_there(tmp_path, workers)
     finally:
         workers.close()
-    assert [p.name for p in there] == [p.name for p in here]
-    for a, b in zip(here, there):
-        assert a.read_bytes() == b.read_bytes(), a.name
+    _same_bytes(here, there)
 
 
 def test_a_drawer_that_dies_leaves_the_figures_to_this_process(tmp_path):
@@ -219,22 +229,14 @@ def test_a_drawer_that_dies_leaves_the_figures_to_this_process(tmp_path):
 
     if not figure_process.available():
         pytest.skip("no safe fork on this platform")
-    res = _step_result()
-    kw = dict(voltage_limit=300.0, n_rollers=[10, 10])
-    (tmp_path / "here").mkdir()
-    (tmp_path / "there").mkdir()
-    here = write_plots(res, tmp_path / "here", "s", lambda t: 0.01, "position", 40.0, **kw)
     workers = FigureWorkers(2).start()
     try:
         os.kill(workers.drawer.process.pid, signal.SIGKILL)
         workers.drawer.process.join()
-        there = workers.write_plots(res, tmp_path / "there", "s", lambda t: 0.01, "position",
-                                    40.0, **kw)
+        here, there = _drawn_here_and_there(tmp_path, workers)
     finally:
         workers.close()
-    assert [p.name for p in there] == [p.name for p in here]
-    for a, b in zip(here, there):
-        assert a.read_bytes() == b.read_bytes(), a.name
+    _same_bytes(here, there)
 
 
 def test_an_unused_drawer_ends_when_closed():
