@@ -1,10 +1,9 @@
 """A forked drawing process: matplotlib imported while the run goes, the figures drawn beside
 the CSV.
 
-Started (:meth:`ForkedDrawer.start`) before the co-simulation, the process is a ``fork`` of the
-command: it copies the interpreter with numpy already imported (a few ms, against ~0.8 s CPU for
-a spawned interpreter), imports matplotlib while the parent runs the scene and then waits for
-the run's result.  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
+Started (:func:`early_drawer`) first thing in ``prsm-ema run``, the process is a ``fork`` of
+the command: it copies the interpreter (a few ms, against ~0.8 s CPU for a spawned one), imports
+matplotlib while the parent checks and runs the scene and then waits for the run's result.  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
 (the second process inherits matplotlib, imported once) and the two draw half the figures each,
 while the parent writes the CSV.  The CPU is the work the command would do in its own process
 plus the forks, so the drawer is used on a busy machine too.
