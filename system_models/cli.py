@@ -131,6 +131,19 @@ def _plots(run, out: Path, workers=None) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
+    from .figure_process import early_drawer
+
+    # the figures' process forked first thing (before numpy is imported here): it imports
+    # matplotlib while the scene is checked, the FMU loaded and the scene run
+    drawer = None if args.no_plots else early_drawer()
+    try:
+        return _checked_run(args, ap, drawer)
+    finally:
+        if drawer is not None:
+            drawer.close()
+
+
+def _checked_run(args, ap, drawer) -> int:
     from prsm_fmu.extras import require
 
     from .fmu import FMUError, ensure_fmu
@@ -153,35 +166,40 @@ def _cmd_run(args, ap) -> int:
         check_output_dir(args.out)          # last: it creates the directory the run writes to
     except ValueError as exc:
         return _refuse(str(exc))
-    if args.prsm == "python":
-        build_errors: tuple[type[Exception], ...] = (FMUError,)
-    else:
-        # the fmu extra, before anything runs: fmpy steps the FMU, pythonfmu builds it (and
-        # the native FMU's builder imports it)
-        require("fmpy", "pythonfmu", purpose=f"running the PRSM as an FMU (--prsm {args.prsm})")
-        from fmu_build.errors import BuildError
-
-        build_errors = (FMUError, BuildError)
-    if args.step is not None:
-        try:
-            whole_steps(scene.t0, scene.t_end, args.step)
-        except ValueError as exc:
-            ap.error(f"argument --step: {exc}; must divide the scene's run into whole steps")
-    retry = None
-    if args.retry is not None:
-        retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
-    fmu_path = None
-    if args.prsm != "python":
-        default = f"dist/{mech}{'-native' if args.prsm == 'native' else ''}.fmu"
-        try:
-            fmu_path = ensure_fmu(args.fmu or default, rebuild_stale=args.fmu is None)
-        except FMUError as exc:
-            print(f"prsm-ema: {exc}", file=sys.stderr)
-            return 1
-    print(f"scene {scene.name}: {scene.description}")
-    # the figures' processes start now and import matplotlib while the scene runs
-    workers = None if args.no_plots or scene.topology != "direct" else FigureWorkers().start()
+    # the figures' processes (the drawer forked already, else started now) import matplotlib
+    # while the FMU is checked and the scene runs; geared scenes draw theirs here
+    if drawer is not None and scene.topology != "direct":
+        drawer.close()
+        drawer = None
+    workers = (None if args.no_plots or scene.topology != "direct"
+               else FigureWorkers(drawer=drawer).start())
     try:
+        if args.prsm == "python":
+            build_errors: tuple[type[Exception], ...] = (FMUError,)
+        else:
+            # the fmu extra, before anything runs: fmpy steps the FMU, pythonfmu builds it (and
+            # the native FMU's builder imports it)
+            require("fmpy", "pythonfmu", purpose=f"running the PRSM as an FMU (--prsm {args.prsm})")
+            from fmu_build.errors import BuildError
+
+            build_errors = (FMUError, BuildError)
+        if args.step is not None:
+            try:
+                whole_steps(scene.t0, scene.t_end, args.step)
+            except ValueError as exc:
+                ap.error(f"argument --step: {exc}; must divide the scene's run into whole steps")
+        retry = None
+        if args.retry is not None:
+            retry = RetryPolicy(max_halvings=args.retry, tolerance=scene.retry.get("tolerance"))
+        fmu_path = None
+        if args.prsm != "python":
+            default = f"dist/{mech}{'-native' if args.prsm == 'native' else ''}.fmu"
+            try:
+                fmu_path = ensure_fmu(args.fmu or default, rebuild_stale=args.fmu is None)
+            except FMUError as exc:
+                print(f"prsm-ema: {exc}", file=sys.stderr)
+                return 1
+        print(f"scene {scene.name}: {scene.description}")
         return _run_and_write(args, ap, scene, fmu_path, retry, workers, build_errors)
     finally:
         if workers is not None:
@@ -260,7 +278,7 @@ def _run_and_write(args, ap, scene, fmu_path, retry, workers,
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     drawing, drawn = None, []
-    if not args.no_plots and workers is not None and workers.pool is not None:
+    if not args.no_plots and workers is not None and workers.active:
         # the figures are drawn in the workers while this process writes the CSV
         import threading
 

@@ -89,11 +89,14 @@ def test_the_plain_python_model_runs_without_the_fmu_extra(tmp_path):
     assert (out / "load_step.csv").is_file() and (out / "load_step_summary.json").is_file()
 
 
-@pytest.mark.parametrize("prsm", ["python", "fmu"])
-def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path, prsm):
+@pytest.mark.parametrize("prsm, group", [("python", False), ("fmu", False), ("python", True)])
+def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path, prsm, group):
     """SIGINT once the scene runs (its first line printed): one line on stderr, exit 130,
     no CSV/PNG/JSON and no temporary file left in the output folder.  With the pythonfmu FMU
-    the interrupt must not land inside the FMU's Python (a fatal FMU error, exit 1)."""
+    the interrupt must not land inside the FMU's Python (a fatal FMU error, exit 1).  ``group``:
+    sent as a terminal's Ctrl-C is, to the whole process group, the forked figure process too
+    (started before the run, importing matplotlib meanwhile): the same one line, and no process
+    of the group left."""
     out = tmp_path / "out"
     out.mkdir()
     env = dict(os.environ, PYTHONUNBUFFERED="1")
@@ -105,12 +108,15 @@ def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path, prsm
     proc = subprocess.Popen([sys.executable, "-m", "system_models", "run", "--scene",
                              "sine_tracking", "--prsm", prsm, *fmu, "--out", str(out)],
                             cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=group)
     try:
         first = proc.stdout.readline()          # "scene sine_tracking: ..." before the run
         assert first.startswith("scene sine_tracking"), first
         time.sleep(0.5)
-        proc.send_signal(signal.SIGINT)
+        if group:
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
@@ -120,6 +126,10 @@ def test_ctrl_c_ends_a_run_with_one_line_status_130_and_no_output(tmp_path, prsm
     assert "Traceback" not in err and len(errors) == 1, err
     assert errors[0].startswith("prsm-ema: interrupted")
     assert list(out.iterdir()) == []
+    if group:
+        time.sleep(0.2)
+        with pytest.raises(ProcessLookupError):       # the group is empty: every process ended
+            os.killpg(proc.pid, 0)
 
 
 def test_run_command_maps_ctrl_c_and_missing_extras(capsys):

@@ -38,6 +38,13 @@ def test_prsm_ema_argument_errors_import_no_numerics():
     assert not loaded & {"numpy", "scipy", "matplotlib"}, loaded
 
 
+def test_the_figure_process_module_imports_no_numerics():
+    # prsm-ema run forks its figure process first thing, from this module: a small process to
+    # copy, whose matplotlib import overlaps the command's own imports
+    loaded = _modules_after("import system_models.figure_process\n")
+    assert not loaded & {"numpy", "scipy", "matplotlib", "fmpy"}, loaded
+
+
 _NO_SCIPY = ["prsm_fmu", "prsm_fmu.geometry", "prsm_fmu.models", "prsm_fmu.steady_state",
              "prsm_fmu.design_checks", "prsm_fmu.report", "system_models.ema",
              "system_models.coupling_analysis", "system_models.run", "prsm_fmu.cli"]

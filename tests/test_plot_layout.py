@@ -178,26 +178,79 @@ def test_time_panels_legend_tells_the_stage_line_styles(saved, tmp_path):
     assert {"µ 0.05", "µ 0.1"} <= set(entries)
 
 
-def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path):
-    """prsm-ema run draws its figures in two spawned processes: the same files, byte for byte
-    (Agg renders deterministically), as drawn in this process."""
-    from system_models.output import FigureWorkers
-
+def _drawn_here_and_there(tmp_path, workers):
+    """(files write_plots draws in this process, files ``workers`` draw) of one result."""
     res = _step_result()
     kw = dict(voltage_limit=300.0, n_rollers=[10, 10], description="a step")
     (tmp_path / "here").mkdir()
     (tmp_path / "there").mkdir()
     here = write_plots(res, tmp_path / "here", "s", lambda t: 0.01, "position", 40.0, **kw)
-    workers = FigureWorkers(2).start()
-    try:
-        there = workers.write_plots(res, tmp_path / "there", "s", lambda t: 0.01, "position",
-                                    40.0, **kw)
-        assert workers.pool is not None              # really drawn in the workers
-    finally:
-        workers.close()
+    there = workers.write_plots(res, tmp_path / "there", "s", lambda t: 0.01, "position", 40.0,
+                                **kw)
+    return here, there
+
+
+def _same_bytes(here, there):
     assert [p.name for p in there] == [p.name for p in here]
     for a, b in zip(here, there):
         assert a.read_bytes() == b.read_bytes(), a.name
+
+
+@pytest.mark.parametrize("how", ["forked", "spawned"])
+def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path, monkeypatch, how):
+    """prsm-ema run draws its figures in other processes (forked where fork is safe, else
+    spawned): the same files, byte for byte (Agg renders deterministically), as drawn in this
+    process."""
+    from system_models import figure_process
+    from system_models.output import FigureWorkers
+
+    if how == "forked" and not figure_process.available():
+        pytest.skip("no safe fork on this platform")
+    if how == "spawned":
+        monkeypatch.setattr(figure_process, "available", lambda: False)
+    workers = FigureWorkers(2).start()
+    try:
+        # really drawn in the other processes
+        assert (workers.drawer if how == "forked" else workers.pool) is not None
+        here, there = _drawn_here_and_there(tmp_path, workers)
+    finally:
+        workers.close()
+    _same_bytes(here, there)
+
+
+def test_a_drawer_that_dies_leaves_the_figures_to_this_process(tmp_path):
+    """The forked drawer killed before it is given the run: write_plots still writes every
+    figure (drawn here), byte for byte as write_plots does."""
+    import os
+    import signal
+
+    from system_models import figure_process
+    from system_models.output import FigureWorkers
+
+    if not figure_process.available():
+        pytest.skip("no safe fork on this platform")
+    workers = FigureWorkers(2).start()
+    try:
+        os.kill(workers.drawer.process.pid, signal.SIGKILL)
+        workers.drawer.process.join()
+        here, there = _drawn_here_and_there(tmp_path, workers)
+    finally:
+        workers.close()
+    _same_bytes(here, there)
+
+
+def test_an_unused_drawer_ends_when_closed():
+    """A run that draws nothing (it failed): close() ends the forked drawer at once, even
+    while it is still importing matplotlib, and leaves no process behind."""
+    from system_models import figure_process
+
+    if not figure_process.available():
+        pytest.skip("no safe fork on this platform")
+    drawer = figure_process.ForkedDrawer(2).start()
+    process = drawer.process
+    assert process.is_alive()
+    drawer.close()
+    assert not process.is_alive() and process.exitcode is not None
 
 
 def test_geared_figures_show_the_error_against_the_reference_carried_to_the_rod(saved,
@@ -229,12 +282,15 @@ def test_geared_figures_show_the_error_against_the_reference_carried_to_the_rod(
 
 
 def test_figure_processes_only_where_a_core_is_idle(monkeypatch):
-    """Two drawing processes on an idle 2-core machine; none under a load of 8 (the figures
-    are then drawn in the command's process) nor on one core."""
+    """Where processes are spawned (no safe fork): two drawing processes on an idle 2-core
+    machine; none under a load of 8 (the figures are then drawn in the command's process) nor
+    on one core."""
     import os
 
+    from system_models import figure_process
     from system_models.output import FigureWorkers
 
+    monkeypatch.setattr(figure_process, "available", lambda: False)
     for cores, load, expected in ((2, 0.2, 2), (2, 0.6, 0), (2, 8.0, 0), (1, 0.0, 0),
                                   (8, 3.0, 2)):
         monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
@@ -243,5 +299,20 @@ def test_figure_processes_only_where_a_core_is_idle(monkeypatch):
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
     monkeypatch.setattr(os, "getloadavg", lambda: (8.0, 8.0, 8.0))
     workers = FigureWorkers().start()
-    assert workers.pool is None                     # nothing started
+    assert workers.pool is None and not workers.active          # nothing started
     workers.close()
+
+
+def test_forked_drawing_processes_busy_machine_or_not(monkeypatch):
+    """Where the drawer is forked its processes copy the command's imports (no interpreter
+    start to pay back): two on two cores or more, under a load of 8 too; one on one core."""
+    import os
+
+    from system_models import figure_process
+    from system_models.output import FigureWorkers
+
+    monkeypatch.setattr(figure_process, "available", lambda: True)
+    for cores, load, expected in ((2, 0.2, 2), (2, 8.0, 2), (1, 0.0, 1), (8, 3.0, 2)):
+        monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
+        monkeypatch.setattr(os, "getloadavg", lambda lo=load: (lo, lo, lo))
+        assert FigureWorkers().n == expected, (cores, load)

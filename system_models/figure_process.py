@@ -1,0 +1,188 @@
+"""A forked drawing process: matplotlib imported while the run goes, the figures drawn beside
+the CSV.
+
+Started (:func:`early_drawer`) first thing in ``prsm-ema run``, the process is a ``fork`` of
+the command: it copies the interpreter (a few ms, against ~0.8 s CPU for a spawned one), imports
+matplotlib while the parent checks and runs the scene and then waits for the run's result.  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
+(the second process inherits matplotlib, imported once) and the two draw half the figures each,
+while the parent writes the CSV.  The CPU is the work the command would do in its own process
+plus the forks, so the drawer is used on a busy machine too.
+
+Only where ``fork`` is safe to use (Linux); elsewhere :func:`available` is False and the caller
+draws another way.  The processes ignore Ctrl-C (the parent ends them) and write every file
+whole (:func:`prsm_fmu.figures.save`), so an interrupted run leaves no half-written PNG.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["available", "processes", "early_drawer", "ForkedDrawer"]
+
+
+def available() -> bool:
+    """True where the drawer can start: on Linux (macOS and Windows have no safe ``fork``) and
+    from a process running no other Python thread (a lock another thread holds would stay held
+    in the copy; numpy's BLAS threads are stopped and restarted around a fork by the BLAS's own
+    ``pthread_atfork`` handlers)."""
+    import threading
+
+    return sys.platform.startswith("linux") and threading.active_count() == 1
+
+
+def processes() -> int:
+    """Processes to draw in where the drawer is forked: 2 on a machine of two cores or more, 1
+    on one, busy or not (a fork copies the command's imports: the processes' CPU is the drawing
+    the command would do itself)."""
+    return 2 if (os.cpu_count() or 1) >= 2 else 1
+
+
+def early_drawer() -> "ForkedDrawer | None":
+    """A started :class:`ForkedDrawer` of :func:`processes` processes, or None where it cannot
+    start.  This module imports no numpy: called first thing, the fork copies a small process
+    and its matplotlib import overlaps the command's own imports too."""
+    return ForkedDrawer(processes()).start() if available() else None
+
+
+def _ignore_interrupts() -> None:
+    """Ctrl-C (the terminal's SIGINT reaches the whole process group) ignored here: the parent
+    ends the run and this process.  SIGINT arrives blocked (:meth:`ForkedDrawer.start`), so
+    none lands before it is ignored."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def _draw(names: list[str], job: tuple) -> list[Path]:
+    from .output import _save_figures
+
+    res, out_dir, scene, reference, mode, current_limit, kw = job
+    return _save_figures(res, out_dir, scene, reference, mode, current_limit, kw, only=names)
+
+
+def _half(conn, names: list[str], job: tuple) -> None:
+    """The second process: its figures' paths, or the error, on ``conn``."""
+    _ignore_interrupts()
+    try:
+        conn.send(("ok", _draw(names, job)))
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which draws instead
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+    conn.close()
+
+
+def _main(conn, split: int) -> None:
+    """The drawing process: import matplotlib, wait for a job, draw it (in ``split`` processes),
+    answer ``("ok", paths)`` or ``("error", text)``; end on EOF (no figures wanted)."""
+    _ignore_interrupts()
+    from .output import _warm
+
+    _warm()
+    try:
+        job = conn.recv()
+    except EOFError:
+        return
+    try:
+        import multiprocessing
+
+        from .output import DRAW_ORDER
+
+        parts = [list(DRAW_ORDER[i::split]) for i in range(split)]
+        ctx = multiprocessing.get_context("fork")
+        others = []
+        for names in parts[1:]:
+            here, there = ctx.Pipe(duplex=False)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            pid = os.fork()             # (a daemonic multiprocessing process has no children)
+            if pid == 0:
+                try:
+                    here.close()
+                    _half(there, names, job)
+                finally:
+                    os._exit(0)
+            there.close()
+            others.append((pid, here))
+        done = _draw(parts[0], job)
+        for pid, here in others:
+            status, value = here.recv()
+            os.waitpid(pid, 0)
+            if status != "ok":
+                raise RuntimeError(value)
+            done += value
+        conn.send(("ok", done))
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which draws instead
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+
+
+class ForkedDrawer:
+    """The forked drawing process of the module docstring.
+
+    Parameters
+    ----------
+    split : int
+        Processes that draw the figures (1: the drawer alone; 2: it and one more fork).
+    """
+
+    def __init__(self, split: int = 2) -> None:
+        self.split = max(1, int(split))
+        self.process = None
+        self.conn = None
+        self.sent = False
+
+    def start(self) -> "ForkedDrawer | None":
+        """Fork the drawer now; None if no process can start here."""
+        import multiprocessing
+        import signal
+        import warnings
+
+        if not available():
+            return None
+        try:
+            ctx = multiprocessing.get_context("fork")
+            self.conn, theirs = ctx.Pipe()
+            self.process = ctx.Process(target=_main, args=(theirs, self.split), daemon=True)
+            # SIGINT blocked across the fork: the child ignores it before it unblocks it, and
+            # one sent meanwhile reaches this process when unblocked here
+            blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            try:
+                with warnings.catch_warnings():
+                    # Python >= 3.12 warns of any other thread: here only the BLAS's (above)
+                    warnings.filterwarnings("ignore", "This process .* is multi-threaded",
+                                            DeprecationWarning)
+                    self.process.start()
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+            theirs.close()
+        except (OSError, ValueError, RuntimeError):
+            self.process = self.conn = None
+            return None
+        return self
+
+    def draw(self, res, out_dir: str | Path, scene: str, reference, mode: str,
+             current_limit: float | None, kw: dict[str, Any]) -> list[Path] | None:
+        """The figures' paths (their order: whichever process drew them), or None if the
+        drawer failed (the caller then draws them itself)."""
+        if self.conn is None or self.sent:
+            return None
+        try:
+            self.sent = True
+            self.conn.send((res, out_dir, scene, reference, mode, current_limit, kw))
+            status, value = self.conn.recv()
+        except (OSError, EOFError):
+            return None
+        return value if status == "ok" else None
+
+    def close(self) -> None:
+        """End the drawer: at once if it was given nothing (it may still be importing)."""
+        if self.process is None:
+            return
+        if self.conn is not None:
+            self.conn.close()
+        if not self.sent and self.process.is_alive():
+            self.process.terminate()
+        self.process.join()
+        self.process = self.conn = None
