@@ -265,6 +265,17 @@ def _engine_class() -> type:
             self._call.restype = ctypes.c_int
             self._double = ctypes.c_double
             self._msg_len = len(self._msg)
+            # the memory of an FMU state (fmi2GetFMUstate, once per communication step of a
+            # master that saves and restores) into a buffer made once, through the same
+            # function without declared argument types
+            self._memory = ctypes.create_string_buffer(self._memory_size)
+            self._get_mem = type(lib.prsm_api_get_memory)(("prsm_api_get_memory", lib))
+            self._get_mem.restype = None
+
+        def get_memory(self) -> tuple:
+            """``(bytes,)``: the C stepper's memory, as :meth:`NativeStepper.get_memory`."""
+            self._get_mem(self._handle, self._memory)
+            return (self._memory.raw,)
 
         def advance(self, t: float, x: list[float], u: tuple, h: float):
             if not (0.0 < h < math.inf):
