@@ -30,6 +30,7 @@ the reference in every door of a process that is given no ``engine`` argument, F
 from __future__ import annotations
 
 import math
+from operator import itemgetter
 from typing import Any
 
 __all__ = ["ENGINES", "DEFAULT_ENGINE", "ENGINE_ENV", "ENGINE_METHOD", "check_engine",
@@ -362,7 +363,10 @@ def _engine_class() -> type:
             index = [position[name] for name in names]
             if index == list(range(len(position))):
                 return lambda values: values
-            return lambda values: [values[i] for i in index]
+            if len(index) == 1:
+                return lambda values: [values[index[0]]]
+            pick = itemgetter(*index)        # (a tuple of two or more)
+            return lambda values: list(pick(values))
 
         def output_reader(self, names: tuple[str, ...]):
             """A function ``(t, x, u) -> list`` of the values of the outputs ``names`` at

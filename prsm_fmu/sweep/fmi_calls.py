@@ -8,7 +8,9 @@ the state, per trial set the torque, step and read the speed, restore the state,
 outputs and the step's right-hand-side count, free the state), so :class:`StepCalls` makes
 them with the library's own functions (looked up by name in the library fmpy loaded), without
 declared argument types (ctypes then converts nothing: the arrays, made once, pass as their
-pointers; the doubles and the instance's address are wrapped here), into arrays made once.
+pointers; the doubles and the instance's address are wrapped here), into arrays made once, and
+without releasing the GIL (a pythonfmu FMU would take it back at once to run its slave; a
+native FMU's calls are short).
 The calls and their order are the runner's; only the way into the library changes.  A status
 above fmi2Warning raises fmpy's own :class:`fmpy.fmi1.FMICallException` naming the function,
 as fmpy's call would.
@@ -43,8 +45,11 @@ class StepCalls:
                  output_vrs: Sequence[int]) -> None:
         from fmpy.fmi1 import FMICallException
 
-        self._exception = FMICallException
-        lib = fmu.dll
+        #: the exception a failed call raises (fmpy's)
+        self.failure = FMICallException
+        # the library fmpy loaded, its functions called without releasing the GIL: a pythonfmu
+        # FMU takes it back at once to run its slave (a wait for it saved on every call)
+        lib = ctypes.PyDLL(fmu.dll._name, handle=fmu.dll._handle)
 
         def raw(name: str):
             f = type(lib[name])((name, lib))
@@ -58,22 +63,22 @@ class StepCalls:
         self._c = ctypes.c_void_p(fmu.component)
         self._double = ctypes.c_double
         uint = ctypes.c_uint
-        self._torque_vr, self._speed_vr, self._rhs_vr = uint(torque_vr), uint(speed_vr), \
-            uint(rhs_vr)
+        # one-element arrays: they pass as their pointers
+        self._torque_vr, self._speed_vr, self._rhs_vr = ((uint * 1)(vr) for vr in
+                                                         (torque_vr, speed_vr, rhs_vr))
         self._n_out = len(output_vrs)
         self._out_vrs = (uint * self._n_out)(*output_vrs)
-        self._out = (ctypes.c_double * self._n_out)()
         self._one = (ctypes.c_double * 1)()
         self._torque = (ctypes.c_double * 1)()
         self._int = (ctypes.c_int * 1)()
 
     def _failed(self, name: str, status: int):
-        return self._exception(function=name, status=status)
+        return self.failure(function=name, status=status)
 
     def set_torque(self, torque: float) -> None:
         """fmi2SetReal of ``screw_torque`` [N.m]."""
         self._torque[0] = torque
-        status = self._set_real(self._c, ctypes.byref(self._torque_vr), 1, self._torque)
+        status = self._set_real(self._c, self._torque_vr, 1, self._torque)
         if status > _WARNING:
             raise self._failed("fmi2SetReal", status)
 
@@ -86,21 +91,22 @@ class StepCalls:
 
     def speed(self) -> float:
         """fmi2GetReal of ``screw_speed`` [rad/s]."""
-        status = self._get_real(self._c, ctypes.byref(self._speed_vr), 1, self._one)
+        status = self._get_real(self._c, self._speed_vr, 1, self._one)
         if status > _WARNING:
             raise self._failed("fmi2GetReal", status)
         return self._one[0]
 
-    def outputs(self) -> list[float]:
-        """fmi2GetReal of the outputs read at every communication point, in their order."""
-        status = self._get_real(self._c, self._out_vrs, self._n_out, self._out)
+    def outputs_into(self, address: int) -> None:
+        """fmi2GetReal of the outputs read at every communication point, in their order, into
+        the doubles at ``address`` (a row of a C-contiguous float64 array, kept alive by the
+        caller)."""
+        status = self._get_real(self._c, self._out_vrs, self._n_out, ctypes.c_void_p(address))
         if status > _WARNING:
             raise self._failed("fmi2GetReal", status)
-        return self._out[:]
 
     def rhs_calls(self) -> int:
         """fmi2GetInteger of ``step_rhs_calls``."""
-        status = self._get_integer(self._c, ctypes.byref(self._rhs_vr), 1, self._int)
+        status = self._get_integer(self._c, self._rhs_vr, 1, self._int)
         if status > _WARNING:
             raise self._failed("fmi2GetInteger", status)
         return self._int[0]

@@ -242,27 +242,26 @@ class FmuRunner:
         ref[0] = w0
         trials = 0
         rhs_calls = 0
-        prev_torques = [torque]
+        last, before = torque, None     # the tracked torques of the last two steps [N·m]
         gain = None           # d(speed at t + h)/d(torque) [rad/s per N·m], learnt on the way
         calls = self._calls
+        track = self._track
+        # each communication point's outputs straight into its row of ``out``
+        row0, row_bytes = out.ctypes.data, out.strides[0]
         for i in range(n_steps):
             t = i * h
             target = float(speed((i + 1) * h))
             ref[i + 1] = target
             # guess: linear extrapolation of the tracked torque
-            guess = prev_torques[-1] if len(prev_torques) < 2 else \
-                2.0 * prev_torques[-1] - prev_torques[-2]
+            guess = last if before is None else 2.0 * last - before
             state = calls.get_state()
             try:
-                torque, gain, n_trials = self._track(calls, state, t, h, target, guess, gain,
-                                                     t_scale)
+                torque, gain, n_trials = track(calls, state, t, h, target, guess, gain, t_scale)
             finally:
                 calls.free_state(state)
             trials += n_trials
-            prev_torques.append(torque)
-            if len(prev_torques) > 2:
-                del prev_torques[0]
-            out[i + 1] = calls.outputs()
+            last, before = torque, last
+            calls.outputs_into(row0 + (i + 1) * row_bytes)
             rhs_calls += calls.rhs_calls()
         fmu.terminate()
         res = {"time": np.arange(n_steps + 1) * h}
@@ -275,14 +274,12 @@ class FmuRunner:
     def _trial(self, calls: StepCalls, state, restore: bool, t: float, h: float,
                torque: float) -> float:
         """Step from the saved state with ``torque`` held; the screw speed at t + h."""
-        from fmpy.fmi1 import FMICallException
-
         if restore:
             calls.set_state(state)
         calls.set_torque(torque)
         try:
             calls.do_step(t, h)
-        except FMICallException as exc:
+        except calls.failure as exc:
             raise FmuPointError(f"the FMU refused the step at t = {t:.9g} s with screw_torque "
                                 f"= {torque!r} N.m (status {exc.status})") from exc
         return calls.speed()
