@@ -13,27 +13,15 @@ wherever the short one does not hold (a state made before any step).
 from __future__ import annotations
 
 import random
-import struct
-
-import pytest
 
 from prsm_fmu import fmu_state
-from prsm_fmu.engine import ENGINE_ENV
 from prsm_fmu.slave import READ_PLANS, PRSMSlave
+from test_slave_step import _bits, engine  # noqa: F401 - fixture
 
 SEED = 20261126
 H = 1e-6
 #: the Fidelity enumeration's value of the dynamic level (docs/fmu.md, "Variables")
 DYNAMIC = 2
-
-
-def _bits(value):
-    """Floats as their bit patterns (so that -0.0 != 0.0 and NaN == NaN), recursively."""
-    if isinstance(value, float):
-        return struct.pack("<d", value)
-    if isinstance(value, (list, tuple)):
-        return tuple(_bits(v) for v in value)
-    return value
 
 
 def _slave(name: str) -> tuple[PRSMSlave, dict[str, int]]:
@@ -49,11 +37,6 @@ def _slave(name: str) -> tuple[PRSMSlave, dict[str, int]]:
     by_name = {v.name: vr for vr, v in s.vars.items()}
     s.set_real([by_name["screw_torque"], by_name["load_force"]], [20.0, 5000.0])
     return s, by_name
-
-
-@pytest.fixture()
-def engine(monkeypatch):
-    monkeypatch.setenv(ENGINE_ENV, "native")
 
 
 class _Spy:
