@@ -30,6 +30,7 @@ the reference in every door of a process that is given no ``engine`` argument, F
 from __future__ import annotations
 
 import math
+from operator import itemgetter
 from typing import Any
 
 __all__ = ["ENGINES", "DEFAULT_ENGINE", "ENGINE_ENV", "ENGINE_METHOD", "check_engine",
@@ -265,6 +266,17 @@ def _engine_class() -> type:
             self._call.restype = ctypes.c_int
             self._double = ctypes.c_double
             self._msg_len = len(self._msg)
+            # the memory of an FMU state (fmi2GetFMUstate, once per communication step of a
+            # master that saves and restores) into a buffer made once, through the same
+            # function without declared argument types
+            self._memory = ctypes.create_string_buffer(self._memory_size)
+            self._get_mem = type(lib.prsm_api_get_memory)(("prsm_api_get_memory", lib))
+            self._get_mem.restype = None
+
+        def get_memory(self) -> tuple:
+            """``(bytes,)``: the C stepper's memory, as :meth:`NativeStepper.get_memory`."""
+            self._get_mem(self._handle, self._memory)
+            return (self._memory.raw,)
 
         def advance(self, t: float, x: list[float], u: tuple, h: float):
             if not (0.0 < h < math.inf):
@@ -351,7 +363,10 @@ def _engine_class() -> type:
             index = [position[name] for name in names]
             if index == list(range(len(position))):
                 return lambda values: values
-            return lambda values: [values[i] for i in index]
+            if len(index) == 1:
+                return lambda values: [values[index[0]]]
+            pick = itemgetter(*index)        # (a tuple of two or more)
+            return lambda values: list(pick(values))
 
         def output_reader(self, names: tuple[str, ...]):
             """A function ``(t, x, u) -> list`` of the values of the outputs ``names`` at

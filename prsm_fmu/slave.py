@@ -518,8 +518,9 @@ class PRSMSlave(Fmi2Slave):
         self._rget: dict[int, Callable[[], float]] = {}
         #: value reference of a Real output -> its position in the outputs (fmi2GetReal's path)
         self._out_index: dict[int, int] = {}
-        #: what fmi2GetReal read last and where its values are (_read_plan)
-        self._last_read: tuple = (None, None, None, None)
+        #: the lists of value references fmi2GetReal read (at most READ_PLANS) and where
+        #: their values are (_read_plan)
+        self._read_plans: dict[tuple, tuple] = {}
         #: value references of the step counters -> their place in _counters(); what
         #: fmi2GetInteger read last and their places (None: not a step counter)
         self._counter_index: dict[int, int] = {}
@@ -552,7 +553,8 @@ class PRSMSlave(Fmi2Slave):
         self._y: list[float] | None = None
         self._preview: tuple = (None, None)
         self._refused: list[str] = []           # refused calls not yet reported by a doStep
-        #: the last FMU states this instance made (the objects themselves, immutable tuples)
+        #: the last FMU states this instance made (the objects themselves, immutable tuples),
+        #: each with whether its state vector is known within the state's bounds
         self._own_states: deque = deque(maxlen=OWN_STATES)
         self._register(defaults)
         fmu_exit.guard_library(self.resources, type(self).__name__)
@@ -669,11 +671,17 @@ class PRSMSlave(Fmi2Slave):
     # value written is ignored, and the next doStep is refused (fmi2Discard) naming it.
     @_guarded("fmi2GetReal", lambda self, vrs: [math.nan] * len(vrs))
     def get_real(self, vrs):
-        last = self._last_read
         states = self._state_outputs
-        # a host's step loop reads the same outputs every step: where they are, worked out once
-        if vrs != last[0] or states is not last[3]:
-            last = self._last_read = self._read_plan(list(vrs), states)
+        # a host's step loop reads the same few lists of outputs every step (a master that
+        # tracks the speed: the speed after each trial, every output after the step): where
+        # they are, worked out once per list
+        plans = self._read_plans
+        key = tuple(vrs)
+        last = plans.get(key)
+        if last is None or states is not last[3]:
+            if len(plans) >= READ_PLANS:
+                plans.clear()
+            last = plans[key] = self._read_plan(list(vrs), states)
         _, positions, from_state, _ = last
         if positions is None:
             g = self._rget
@@ -707,18 +715,23 @@ class PRSMSlave(Fmi2Slave):
         return vrs, positions, from_state, states
 
     def set_real(self, vrs, values):
-        """fmi2SetReal: a host's step loop sets both inputs, in their order, every step: those
-        are written here; any other call goes through :meth:`_set_real`."""
-        if vrs == self._input_vrs and self._phase != "terminated":
+        """fmi2SetReal: a host's step loop sets both inputs, in their order, or one of them
+        (a master that tracks the speed: the torque of each trial), every step: those are
+        written here; any other call goes through :meth:`_set_real`."""
+        if self._phase != "terminated":
+            inputs = self._input_vrs
             try:
-                torque, load = float(values[0]), float(values[1])
+                if vrs == inputs:
+                    torque, load = float(values[0]), float(values[1])
+                    u = self._u
+                    u[0] = torque
+                    u[1] = load
+                    return
+                if len(vrs) == 1 and vrs[0] in inputs:
+                    self._u[inputs.index(vrs[0])] = float(values[0])
+                    return
             except Exception:  # noqa: BLE001 - _set_real says what is wrong
                 pass
-            else:
-                u = self._u
-                u[0] = torque
-                u[1] = load
-                return
         self._set_real(vrs, values)
 
     @_guarded("fmi2SetReal")
@@ -1099,27 +1112,62 @@ class PRSMSlave(Fmi2Slave):
     @_guarded("fmi2GetFMUstate")
     def _get_fmu_state(self) -> tuple:
         memory = None if self._stepper is None else self._stepper.get_memory()
-        x = None if self._x is None else tuple(self._x)
+        x = self._x
+        # a state vector the engine's one-call step just ended in: within the state's bounds
+        # (prsm_api_step checks them, as _checked_step does: tests/test_slave_step.py)
+        checked = x is not None and self._engine_step is not None and x is self._engine_step[2]
+        x = None if x is None else tuple(x[:])    # (a ctypes array's slice: 4x faster)
         # while stepping the parameters are fixed: the key made at initialization holds
         config = self._config if self._config and self._phase == "stepping" else \
             self._config_key()
         state = (fmu_state.TAG, type(self).__name__, self.n_stages, config,
                  (self._u[0], self._u[1]), self._phase, self._t, x, self._u_held, memory,
                  self._counters(), self._init_error)
-        self._own_states.append(state)
+        self._own_states.append((state, checked))
         return state
 
     @_guarded("fmi2SetFMUstate")
     def _set_fmu_state(self, state: tuple) -> None:
         # a state this instance made (the same immutable object: a master that saves and
         # restores around trial steps) was valid when made: its check is skipped
-        own = any(state is s for s in self._own_states)
-        why = None if own else fmu_state.check(state, type(self).__name__, self.n_stages,
-                                                tuple(self._par_types))
+        checked = None
+        for own, x_checked in self._own_states:
+            if own is state:
+                checked = x_checked
+                break
+        if checked and self._restore_own(state):
+            return
+        why = None if checked is not None else fmu_state.check(
+            state, type(self).__name__, self.n_stages, tuple(self._par_types))
         if why is None:
             why = self._restore(dict(zip(fmu_state.FIELDS, state)))
         if why is not None:
             self._refused_call(f"fmi2SetFMUstate: the state is refused, nothing restored: {why}")
+
+    def _restore_own(self, state: tuple) -> bool:
+        """Restore a state this instance made while stepping, from a state vector within its
+        bounds, with the model and stepper it still runs (a master's save → trial step →
+        restore): what :meth:`_restore` would do there, without its checks and rebuilding
+        (the parameters are the ones held, the memory is the stepper's own).  False (nothing
+        changed) where that is not the case: then :meth:`_restore` runs."""
+        (_tag, _model, _n, config, inputs, phase, time, x, held, memory, counters,
+         init_error) = state
+        stepper = self._stepper
+        if (stepper is None or phase != "stepping" or config is not self._config
+                or self._phase not in fmu_state.RUNNING):
+            return False
+        stepper.set_memory(memory)
+        u = self._u
+        u[0], u[1] = inputs
+        self._phase = phase
+        self._t = time
+        self._x = list(x)
+        self._u_held = held
+        self._stats = counters
+        self._init_error = init_error
+        self._y = None
+        self._refused = []
+        return True
 
     def _restore(self, f: dict) -> str | None:
         """Restore a state that :func:`fmu_state.check` accepted; why not, if it cannot be."""
@@ -1184,6 +1232,9 @@ ALL_OUTPUTS = object()
 
 #: how many of its latest FMU states an instance recognises as its own (restored unchecked)
 OWN_STATES = 8
+
+#: how many lists of value references fmi2GetReal keeps the plan of (then it forgets them all)
+READ_PLANS = 8
 
 #: how far a doStep's currentCommunicationPoint may lie from the FMU's time, relative to
 #: max(1 s, |time|): hosts that count time in integers (libcosim: ns) or as differences of

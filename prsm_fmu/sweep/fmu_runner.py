@@ -38,6 +38,7 @@ import numpy as np
 from ..fmi_enum import enumeration_value
 from ..fmu_log import FmuLog
 from ..params import MECHANISM_FIELD_NAMES, MechanismParams, StageParams
+from .fmi_calls import StepCalls
 
 #: mechanism-level parameters of the FMU (fields of MechanismParams that are FMU parameters)
 MECHANISM_PARAMETERS = MECHANISM_FIELD_NAMES
@@ -92,6 +93,7 @@ class FmuRunner:
         self._i_speed = self.output_names.index("screw_speed")
         self.n_stages = sum(1 for n in self.output_names if n.endswith(".contact_force"))
         self.fmu = None
+        self._calls: StepCalls | None = None      # the step loop's calls into the instance
         self.log = FmuLog()           # the FMU's messages of the current point
         self.points_run = 0
         self.instances_made = 0
@@ -105,6 +107,8 @@ class FmuRunner:
                                  modelIdentifier=self.md.coSimulation.modelIdentifier,
                                  instanceName="prsm_sweep")
             self.fmu.instantiate(callbacks=self.log.callbacks, loggingOn=True)
+            self._calls = StepCalls(self.fmu, self.vr["screw_torque"], self.vr["screw_speed"],
+                                    self.vr["step_rhs_calls"], self._out_vrs)
             self.instances_made += 1
             self._fresh = True
         elif not self._fresh:
@@ -120,6 +124,7 @@ class FmuRunner:
             except Exception:  # noqa: BLE001 - a failed instance may refuse; it is dropped anyway
                 pass
         self.fmu = None
+        self._calls = None
 
     def close(self) -> None:
         """Free the instance and forget the FMU."""
@@ -237,27 +242,27 @@ class FmuRunner:
         ref[0] = w0
         trials = 0
         rhs_calls = 0
-        prev_torques = [torque]
+        last, before = torque, None     # the tracked torques of the last two steps [N·m]
         gain = None           # d(speed at t + h)/d(torque) [rad/s per N·m], learnt on the way
+        calls = self._calls
+        track = self._track
+        # each communication point's outputs straight into its row of ``out``
+        row0, row_bytes = out.ctypes.data, out.strides[0]
         for i in range(n_steps):
             t = i * h
             target = float(speed((i + 1) * h))
             ref[i + 1] = target
             # guess: linear extrapolation of the tracked torque
-            guess = prev_torques[-1] if len(prev_torques) < 2 else \
-                2.0 * prev_torques[-1] - prev_torques[-2]
-            state = fmu.getFMUstate()
+            guess = last if before is None else 2.0 * last - before
+            state = calls.get_state()
             try:
-                torque, gain, n_trials = self._track(fmu, state, t, h, target, guess, gain,
-                                                     t_scale)
+                torque, gain, n_trials = track(calls, state, t, h, target, guess, gain, t_scale)
             finally:
-                fmu.freeFMUstate(state)
+                calls.free_state(state)
             trials += n_trials
-            prev_torques.append(torque)
-            if len(prev_torques) > 2:
-                del prev_torques[0]
-            out[i + 1] = fmu.getReal(self._out_vrs)
-            rhs_calls += fmu.getInteger([vr_rhs])[0]
+            last, before = torque, last
+            calls.outputs_into(row0 + (i + 1) * row_bytes)
+            rhs_calls += calls.rhs_calls()
         fmu.terminate()
         res = {"time": np.arange(n_steps + 1) * h}
         res.update({name: out[:, j] for j, name in enumerate(self.output_names)})
@@ -266,27 +271,26 @@ class FmuRunner:
         res["rhs_calls"] = rhs_calls
         return res
 
-    def _trial(self, fmu, state, restore: bool, t: float, h: float, torque: float) -> float:
+    def _trial(self, calls: StepCalls, state, restore: bool, t: float, h: float,
+               torque: float) -> float:
         """Step from the saved state with ``torque`` held; the screw speed at t + h."""
-        from fmpy.fmi1 import FMICallException
-
         if restore:
-            fmu.setFMUstate(state)
-        fmu.setReal([self.vr["screw_torque"]], [torque])
+            calls.set_state(state)
+        calls.set_torque(torque)
         try:
-            fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-        except FMICallException as exc:
+            calls.do_step(t, h)
+        except calls.failure as exc:
             raise FmuPointError(f"the FMU refused the step at t = {t:.9g} s with screw_torque "
                                 f"= {torque!r} N.m (status {exc.status})") from exc
-        return fmu.getReal([self.vr["screw_speed"]])[0]
+        return calls.speed()
 
-    def _track(self, fmu, state, t, h, target, guess, gain, t_scale):
+    def _track(self, calls, state, t, h, target, guess, gain, t_scale):
         """Torque held over [t, t + h] that ends the step at ``target``; leaves the FMU there.
 
         Returns (torque, gain, trials).
         """
         torque = guess
-        err = self._trial(fmu, state, False, t, h, torque) - target
+        err = self._trial(calls, state, False, t, h, torque) - target
         n = 1
         lo = hi = None                      # bracket: (torque, error) with error < 0 / > 0
         best = (abs(err), torque)
@@ -311,9 +315,9 @@ class FmuRunner:
             if n >= MAX_TRIALS:
                 # keep the best trial: restore it (its error stays in the speed output)
                 torque = best[1]
-                self._trial(fmu, state, True, t, h, torque)
+                self._trial(calls, state, True, t, h, torque)
                 return torque, gain, n + 1
-            new_err = self._trial(fmu, state, True, t, h, new) - target
+            new_err = self._trial(calls, state, True, t, h, new) - target
             n += 1
             if new != torque and new_err != err:
                 slope = (new_err - err) / (new - torque)
