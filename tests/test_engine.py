@@ -392,7 +392,10 @@ def test_the_environment_selects_the_reference_for_every_door_given_no_engine(mo
 def test_the_command_lines_take_engine(monkeypatch, capsys):
     from prsm_fmu.cli import main
 
-    monkeypatch.delenv("PRSM_FMU_ENGINE", raising=False)
+    # setenv first, so that monkeypatch records the variable's absence and restores it: the
+    # command sets it for the rest of the process, which would leak into the worker's next tests
+    monkeypatch.setenv("PRSM_FMU_ENGINE", "native")
+    monkeypatch.delenv("PRSM_FMU_ENGINE")
     assert main(["--engine", "cuda", "presets"]) == 2
     assert "argument --engine: invalid choice: 'cuda'" in capsys.readouterr().err
     assert main(["--engine", "python", "presets"]) == 0
