@@ -90,7 +90,7 @@ def _exact(v0: float, accel_down: float, t: float) -> list[float]:
     return [v, (_antiderivative(v0) - _antiderivative(v)) / accel_down]
 
 
-@pytest.mark.parametrize("name", ["rosenbrock", "explicit_adaptive", "exponential"])
+@pytest.mark.parametrize("name", ["rosenbrock", "explicit_adaptive", "exponential", "radau"])
 def test_steppers_land_on_the_kinks_and_are_exact_between_them(name):
     # 5 v_ε braked at 1 m/s² over 1 ms: through v_ε, 0, −v_ε to −5 v_ε in one advance
     x0, u, h = [5 * VE, 0.0], (1.0,), 1e-3
@@ -105,7 +105,7 @@ def test_steppers_land_on_the_kinks_and_are_exact_between_them(name):
     assert abs(y_blind[1] - exact[1]) > 1e-11
 
 
-@pytest.mark.parametrize("name", ["rosenbrock", "explicit_adaptive", "exponential"])
+@pytest.mark.parametrize("name", ["rosenbrock", "explicit_adaptive", "exponential", "radau"])
 def test_chattering_through_zero_speed_keeps_its_step_size(name):
     # the input alternates ±1 m/s² every 0.1 ms: v swings between +v_ε/2 and −v_ε/2 and crosses
     # the kink 0 in the middle of every advance (400 advances); each advance must cost no more
@@ -113,16 +113,26 @@ def test_chattering_through_zero_speed_keeps_its_step_size(name):
     model = _BrakedLanding()
     st = make_stepper(name, model, rtol=1e-6, atol=1e-9)
     x, y_exact, h = [0.5 * VE, 0.0], 0.0, 1e-4
-    calls = []
+    calls, cuts = [], []
     for i in range(400):
         a = 1.0 if i % 2 == 0 else -1.0
         v0 = x[0]
         x, s = st.advance(i * h, x, (a,), h)
         y_exact += (_antiderivative(v0) - _antiderivative(v0 - a * h)) / a
         calls.append(s.rhs_calls)
+        cuts.append(s.rejected)
     print(f"{name}: rhs calls per advance: first 4 {calls[:4]}, max of the last 300 "
-          f"{max(calls[100:])}")
-    assert max(calls[100:]) <= max(calls[:4])
+          f"{max(calls[100:])}; rejected steps per advance {min(cuts)} to {max(cuts)}")
+    if name == "radau":
+        # radau restarts on every advance: no step size carries over to collapse, and its rhs
+        # calls vary with its Newton iterations.  What must hold is that the landing does not
+        # chatter within an advance: v is linear in t and crosses only the kink 0 (|v| stays
+        # within v_ε/2), once per advance, so at most one cut per advance (none where a step
+        # happens to end within the landing band of 0; radau reports only its kink cuts as
+        # rejected steps)
+        assert max(cuts) <= 1
+    else:
+        assert max(calls[100:]) <= max(calls[:4])
     assert abs(x[0] - 0.5 * VE) < 1e-15
     # y has no feedback (y' does not depend on y), so the advances' errors add: 400 advances
     # held to the absolute tolerance 1e-9 · 1e-3 = 1e-12 each give at most 4e-10
@@ -172,4 +182,23 @@ def test_dynamic_default_stepper_meets_its_tolerance_through_the_speed_reversal(
         res = run(wp.Config("dynamic", "default", "rtol", tol), time_it=False)
         error = max(wp.output_errors(res.outputs, ref.outputs, outs).values())
         print(f"tolerance {tol:g}: error {error:.3e}, {res.rhs_calls} rhs calls")
+        assert error <= tol
+
+
+def test_radau_meets_its_tolerance_through_the_speed_reversal():
+    """The same 40 ms of the speed reversal with the reference stepper ``radau`` (scipy's Radau
+    IIA restarted on every communication step) at tolerance 1e-4 and 1e-6, against ROS34PW2
+    at rtol 1e-10 (a different method; it and Radau at 1e-10 differ by 2.6e-11 here, far below
+    both tolerances).  Deterministic: the scene has no random input, so one case.  Before radau
+    landed on the friction law's kinks this gave 4.06e-4 at tolerance 1e-4 (4.06 times it)."""
+    from benchmark_modules import load_benchmark
+
+    wp = load_benchmark("work_precision")
+    run = wp.make_loop_runner("speed_reversal", 0.04)
+    outs = wp.loop_outputs("speed_reversal")
+    ref = run(wp.Config("dynamic", "rosenbrock", "rtol", 1e-10), time_it=False)
+    for tol in (1e-4, 1e-6):
+        res = run(wp.Config("dynamic", "radau", "rtol", tol), time_it=False)
+        error = max(wp.output_errors(res.outputs, ref.outputs, outs).values())
+        print(f"radau at tolerance {tol:g}: error {error:.3e}, {res.rhs_calls} rhs calls")
         assert error <= tol
