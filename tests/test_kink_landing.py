@@ -12,7 +12,7 @@ import pytest
 from prsm_fmu import presets
 from prsm_fmu.friction import regularised_sign
 from prsm_fmu.models import make_model
-from prsm_fmu.steppers import make_stepper
+from prsm_fmu.steppers import StepFailure, make_stepper
 from prsm_fmu.steppers.control import kink_fraction
 
 #: the friction band's speed v_ε of the toy problems [m/s]
@@ -137,6 +137,19 @@ def test_chattering_through_zero_speed_keeps_its_step_size(name):
     # y has no feedback (y' does not depend on y), so the advances' errors add: 400 advances
     # held to the absolute tolerance 1e-9 · 1e-3 = 1e-12 each give at most 4e-10
     assert abs(x[1] - y_exact) < 4e-10
+
+
+def test_radau_refuses_an_advance_beyond_max_substeps_and_leaves_the_state():
+    # braked from 5 v_ε through v_ε, 0 and −v_ε in 1 ms: three kinks, each a cut and a restart,
+    # so more than 3 internal steps (accepted + cuts) are needed; with max_substeps = 3 the
+    # advance is refused naming the bound, and the caller's state list is unchanged
+    x0 = [5 * VE, 0.0]
+    st = make_stepper("radau", _BrakedLanding(), rtol=1e-6, atol=1e-9, max_substeps=3)
+    with pytest.raises(StepFailure, match=r"more than max_substeps = 3 internal steps"):
+        st.advance(0.0, x0, (1.0,), 1e-3)
+    assert x0 == [5 * VE, 0.0]
+    with pytest.raises(ValueError, match=r"max_substeps = 0 is out of range"):
+        make_stepper("radau", _BrakedLanding(), max_substeps=0)
 
 
 # ---- the models' sliding velocities ----------------------------------------------------------
