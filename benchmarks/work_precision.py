@@ -700,8 +700,9 @@ def summary(scene: Scene, result: dict) -> list[str]:
 
 
 #: the steppers whose knob is a tolerance that the user sets (the FMU's ``tolerance``): the
-#: adaptive ones, on the dynamic level and for ``auto``'s dynamic steps (Radau is the baseline)
-ADAPTIVE = ("rosenbrock", "exponential", "explicit_adaptive", "default", NATIVE)
+#: adaptive ones, on the dynamic level and for ``auto``'s dynamic steps, and the baseline Radau
+#: (the FMU's stepper ``radau``: it lands on the friction law's kinks as they do)
+ADAPTIVE = ("rosenbrock", "exponential", "explicit_adaptive", "default", NATIVE, "radau")
 
 
 def tolerance_summary(result: dict) -> list[str]:

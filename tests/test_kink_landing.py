@@ -152,6 +152,24 @@ def test_radau_refuses_an_advance_beyond_max_substeps_and_leaves_the_state():
         make_stepper("radau", _BrakedLanding(), max_substeps=0)
 
 
+def test_radau_at_reference_tolerance_steps_as_solve_ivp():
+    # below rtol 1e-10 (the charts' references at 1e-11 and 1e-12) radau does not land: its
+    # result through the three kinks is scipy's solve_ivp(Radau)'s from the same start with the
+    # same tolerances (atol 1e-14 × state_scale 1e-3 = 1e-17), bit for bit
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    model = _BrakedLanding()
+    x0, u, h = [5 * VE, 0.0], (1.0,), 1e-3
+    y, _ = make_stepper("radau", model, rtol=1e-12, atol=1e-14).advance(0.0, x0, u, h)
+    sol = solve_ivp(lambda t, z: model.rhs(t, z.tolist(), u), (0.0, h), np.array(x0),
+                    method="Radau", rtol=1e-12, atol=np.array([1e-17, 1e-17]))
+    assert y == sol.y[:, -1].tolist()
+    # at rtol 1e-10 it lands: no longer the same steps
+    y10, s10 = make_stepper("radau", model, rtol=1e-10, atol=1e-12).advance(0.0, x0, u, h)
+    assert s10.rejected >= 1
+
+
 # ---- the models' sliding velocities ----------------------------------------------------------
 
 def test_dynamic_level_reports_threads_spline_and_kinks_of_li_et_al():

@@ -13,6 +13,14 @@ __all__ = ["ScipyRadau"]
 #: smallest internal step [s] a landing cuts to (the adaptive steppers' default ``h_min``)
 _H_MIN = 1e-14
 
+#: the smallest rtol at which radau lands on the kinks; below it (the references at rtol 1e-11
+#: and 1e-12) it steps as ``solve_ivp(method="Radau")``: there its own steps are far shorter
+#: than the friction band, and on the speed reversal one landing at rtol 1e-12 (an approach cut
+#: at 31.2 ms) moved the stage-2 spline friction at 31.3 ms by 2.6e-10 of its maximum from
+#: ROS34PW2 at rtol 1e-12, where the unlanded run is within 1.2e-12 (docs/accuracy.md,
+#: "Landing on the friction law's kinks")
+LANDING_MIN_RTOL = 1e-10
+
 
 class _WorkLimit(Exception):
     """Raised inside scipy's Radau to end an advance that exceeds its rhs-call budget."""
@@ -30,8 +38,9 @@ class ScipyRadau(Stepper):
     steppers' :class:`~prsm_fmu.steppers.control.KinkLanding`, docs/accuracy.md, "Landing on
     the friction law's kinks"), every accepted internal step is checked by the same secant; a
     step that crosses a kink (or changes a sliding speed faster than the law resolves) is
-    retried from its start by a fresh solver whose end is the cut point, and the advance goes
-    on from there with a fresh solver at the size the cut shortened.  The states are the
+    retried from its start by a fresh solver (its own first step) whose end is the cut point,
+    and the advance goes on from there with a fresh solver at the size the cut shortened.  At
+    ``rtol`` below :data:`LANDING_MIN_RTOL` (the references) there is no landing.  The states are the
     solver's step ends (order 5), never its dense output.  Without sliding velocities the
     steps are those of ``solve_ivp(method="Radau")``.
 
@@ -71,6 +80,8 @@ class ScipyRadau(Stepper):
         self._atol_vec = [self.atol * s for s in self.state_scale]
         self._has_jac = callable(getattr(model, "jacobian", None))
         self._speeds, self._kinks, self._band = model_kinks(model)
+        if self.rtol < LANDING_MIN_RTOL:
+            self._speeds = None
         import numpy as np  # only the reference path needs numpy/scipy
         from scipy.integrate import Radau
 
@@ -151,7 +162,7 @@ class ScipyRadau(Stepper):
             h_cut = landing.cut(y, y_new, h_step, stats) if landing is not None else None
             if h_cut is not None:  # it would cross a kink: retried from t to end on it instead
                 done.append(solver)
-                solver = self._solver(fun, jac, t, y, t + h_cut, h_cut)
+                solver = self._solver(fun, jac, t, y, t + h_cut, None)
                 continue
             stats.substeps += 1
             t, y = t_new, y_new
