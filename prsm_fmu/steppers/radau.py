@@ -16,8 +16,8 @@ _H_MIN = 1e-14
 #: the smallest rtol at which radau lands on the kinks; below it (the references at rtol 1e-11
 #: and 1e-12) it steps as ``solve_ivp(method="Radau")``: there its own steps are far shorter
 #: than the friction band, and on the speed reversal one landing at rtol 1e-12 (an approach cut
-#: at 31.2 ms) moved the stage-2 spline friction at 31.3 ms by 2.6e-10 of its maximum from
-#: ROS34PW2 at rtol 1e-12, where the unlanded run is within 1.2e-12 (docs/accuracy.md,
+#: at 31.2 ms) moved the stage-2 spline friction at 31.3 ms by 2.9e-11 of its maximum from
+#: ROS34PW2 at rtol 1e-12, where the unlanded run is within 1.4e-13 (docs/accuracy.md,
 #: "Landing on the friction law's kinks")
 LANDING_MIN_RTOL = 1e-10
 
