@@ -194,42 +194,30 @@ def test_dynamic_level_reports_threads_spline_and_kinks_of_li_et_al():
         assert abs(s[2]) == pytest.approx(100.0 * lead_1 / (2.0 * math.pi), rel=1e-12)
 
 
-# ---- the dynamic level's default stepper through the speed reversal --------------------------
+# ---- the dynamic level's default stepper and radau through the speed reversal ----------------
 
-def test_dynamic_default_stepper_meets_its_tolerance_through_the_speed_reversal():
+@pytest.mark.parametrize("stepper,reference", [("default", "radau"), ("radau", "rosenbrock")])
+def test_stepper_meets_its_tolerance_through_the_speed_reversal(stepper, reference):
     """The actuator loop's speed reversal (system_models/scenes/speed_reversal.toml) cut to
-    40 ms, through zero screw speed at 31.2 ms, with the PRSM's dynamic level and its default
-    stepper (the FMU's ``fidelity = dynamic``), against Radau at rtol 1e-10 restarted each
-    communication step (an independent solver; at 1e-10 it is within 5e-12 of its 1e-12 run on
-    the whole scene, docs/figures/wp_speed_reversal.csv).  Before the steppers landed on the
-    friction law's kinks this gave 8.8e-4 at tolerance 1e-4 (at 31.2 ms) and 4.0e-6 at 1e-6."""
+    40 ms, through zero screw speed at 31.2 ms, with the PRSM's dynamic level at tolerance 1e-4
+    and 1e-6, against another method at rtol 1e-10 (deterministic: the scene has no random
+    input, so one case per tolerance).
+
+    * its default stepper (the FMU's ``fidelity = dynamic``) against Radau restarted each
+      communication step (at 1e-10 within 5e-12 of its 1e-12 run on the whole scene,
+      docs/figures/wp_speed_reversal.csv).  Before the steppers landed on the friction law's
+      kinks this gave 8.8e-4 at tolerance 1e-4 (at 31.2 ms) and 4.0e-6 at 1e-6;
+    * the reference stepper ``radau`` (scipy's Radau IIA restarted on every communication step)
+      against ROS34PW2 (it and Radau at 1e-10 differ by 2.6e-11 here, far below both
+      tolerances).  Before radau landed on the kinks this gave 4.06e-4 at tolerance 1e-4."""
     from benchmark_modules import load_benchmark
 
     wp = load_benchmark("work_precision")
     run = wp.make_loop_runner("speed_reversal", 0.04)
     outs = wp.loop_outputs("speed_reversal")
-    ref = run(wp.Config("dynamic", "radau", "rtol", 1e-10), time_it=False)
+    ref = run(wp.Config("dynamic", reference, "rtol", 1e-10), time_it=False)
     for tol in (1e-4, 1e-6):
-        res = run(wp.Config("dynamic", "default", "rtol", tol), time_it=False)
+        res = run(wp.Config("dynamic", stepper, "rtol", tol), time_it=False)
         error = max(wp.output_errors(res.outputs, ref.outputs, outs).values())
-        print(f"tolerance {tol:g}: error {error:.3e}, {res.rhs_calls} rhs calls")
-        assert error <= tol
-
-
-def test_radau_meets_its_tolerance_through_the_speed_reversal():
-    """The same 40 ms of the speed reversal with the reference stepper ``radau`` (scipy's Radau
-    IIA restarted on every communication step) at tolerance 1e-4 and 1e-6, against ROS34PW2
-    at rtol 1e-10 (a different method; it and Radau at 1e-10 differ by 2.6e-11 here, far below
-    both tolerances).  Deterministic: the scene has no random input, so one case.  Before radau
-    landed on the friction law's kinks this gave 4.06e-4 at tolerance 1e-4 (4.06 times it)."""
-    from benchmark_modules import load_benchmark
-
-    wp = load_benchmark("work_precision")
-    run = wp.make_loop_runner("speed_reversal", 0.04)
-    outs = wp.loop_outputs("speed_reversal")
-    ref = run(wp.Config("dynamic", "rosenbrock", "rtol", 1e-10), time_it=False)
-    for tol in (1e-4, 1e-6):
-        res = run(wp.Config("dynamic", "radau", "rtol", tol), time_it=False)
-        error = max(wp.output_errors(res.outputs, ref.outputs, outs).values())
-        print(f"radau at tolerance {tol:g}: error {error:.3e}, {res.rhs_calls} rhs calls")
+        print(f"{stepper} at tolerance {tol:g}: error {error:.3e}, {res.rhs_calls} rhs calls")
         assert error <= tol
