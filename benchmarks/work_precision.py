@@ -35,7 +35,9 @@ speed-up of its choice over the dynamic level's implicit stepper.
 Run: ``python benchmarks/work_precision.py`` (about 7 min, most of it the loop scenes' Radau
 references; ``--scene startup``, ``--quick`` for a small grid, ``--out DIR``).  ``--replot``
 runs nothing: it redraws each selected scene's PNG from its CSV in ``--out`` through the same
-:func:`plot` (after a change to the charts' titles, labels or styles).
+:func:`plot` (after a change to the charts' titles, labels or styles).  ``--stepper NAME``
+re-runs only that stepper's configurations and replaces its rows of each selected scene's CSV
+(:func:`rerun_stepper`: after a change to one stepper).
 docs/accuracy.md explains the charts.
 """
 
@@ -700,8 +702,9 @@ def summary(scene: Scene, result: dict) -> list[str]:
 
 
 #: the steppers whose knob is a tolerance that the user sets (the FMU's ``tolerance``): the
-#: adaptive ones, on the dynamic level and for ``auto``'s dynamic steps (Radau is the baseline)
-ADAPTIVE = ("rosenbrock", "exponential", "explicit_adaptive", "default", NATIVE)
+#: adaptive ones, on the dynamic level and for ``auto``'s dynamic steps, and the baseline Radau
+#: (the FMU's stepper ``radau``: it lands on the friction law's kinks as they do)
+ADAPTIVE = ("rosenbrock", "exponential", "explicit_adaptive", "default", NATIVE, "radau")
 
 
 def tolerance_summary(result: dict) -> list[str]:
@@ -889,6 +892,48 @@ def replot(scene: Scene, csv_path: Path, png_path: Path) -> dict:
     return result
 
 
+def rerun_stepper(scene: Scene, stepper: str, csv_path: Path, png_path: Path) -> dict:
+    """Re-run only the scene's configurations of one stepper and put them in place of that
+    stepper's rows of the scene's CSV (the other rows kept as stored), then redraw the chart.
+
+    The reference and its check are run again and must give the check difference the CSV
+    stored within 10 % (a change of the model since the CSV was written moves it by round-off;
+    a change of the references by more than their floor would move it by more), so the kept
+    rows' errors still hold to that floor; the CSV then stores the new difference.  Their CPU
+    costs are the stored run's; the re-run rows' costs are this run's (the printout says so).
+    The Pareto flags and the cheapest point are recomputed over all rows.
+
+    Returns
+    -------
+    dict
+        The merged result (as :func:`read_csv` gives it) with ``replaced``, the new points.
+    """
+    stored = read_csv(csv_path)
+    if stored["scene"] != scene.name or stored["target_error"] != scene.target_error:
+        raise ValueError(f"{csv_path} is not scene {scene.name!r} at target "
+                         f"{scene.target_error:g}: re-run the whole scene")
+    grid = tuple(c for c in scene.grid if c.stepper == stepper)
+    if not grid:
+        raise ValueError(f"stepper = {stepper!r} has no configuration in scene {scene.name!r}")
+    ref = reference(scene, REFERENCE_RTOL)
+    check = reference(scene, CHECK_RTOL)
+    ref_diff = max(output_errors(check.outputs, ref.outputs, scene.outputs).values())
+    if not abs(ref_diff - stored["reference_difference"]) <= 0.1 * stored["reference_difference"]:
+        raise ValueError(f"the reference check difference is {ref_diff:.6e}, the CSV's "
+                         f"{stored['reference_difference']:.6e}: the references changed, so the "
+                         "stored rows' errors do not hold: re-run the whole scene")
+    new = {c: measure(scene, c, ref) for c in grid}
+    points = [new.pop(p.config, p) for p in stored["points"]] + list(new.values())
+    for p in points:
+        p.pareto = False
+    mark_pareto(points)
+    result = {"points": points, "reference_difference": ref_diff, "reference": ref,
+              "replaced": [p for p in points if p.config.stepper == stepper]}
+    write_csv(scene, result, csv_path)
+    plot(scene, result, png_path)
+    return result
+
+
 STEPPER_STYLE = {"rk4": ("tab:blue", "explicit fixed (RK4 × substeps)"),
                  "explicit_adaptive": ("tab:orange", "explicit adaptive (DP5(4), rtol)"),
                  "rosenbrock": ("tab:green", "implicit (ROS34PW2, rtol)"),
@@ -969,9 +1014,16 @@ def main(argv=None) -> None:
     ap.add_argument("--replot", action="store_true",
                     help="run nothing: redraw each scene's wp_<scene>.png from its "
                          "wp_<scene>.csv in --out")
+    ap.add_argument("--stepper", metavar="NAME",
+                    help="re-run only this stepper's configurations of each selected scene and "
+                         "replace its rows of wp_<scene>.csv in --out (the other rows and their "
+                         "CPU costs kept as stored; the references must reproduce the stored "
+                         "check difference), then redraw the PNG")
     args = ap.parse_args(argv)
     if args.replot and args.quick:
         ap.error("--replot runs nothing: --quick does not apply")
+    if args.stepper and (args.replot or args.quick):
+        ap.error("--stepper re-runs one stepper's rows: --replot and --quick do not apply")
     args.out.mkdir(parents=True, exist_ok=True)
     for name in args.scene or list(SCENES):
         scene = SCENES[name]
@@ -982,6 +1034,20 @@ def main(argv=None) -> None:
             print(f"replotted {png_path} from {csv_path}: {n_ok} of {len(result['points'])} "
                   f"points ok, floor {result['reference_difference']:.2g} (from "
                   f"{result['reference_difference_source']})")
+            continue
+        if args.stepper:
+            csv_path, png_path = args.out / f"wp_{name}.csv", args.out / f"wp_{name}.png"
+            c0 = time.time()
+            result = rerun_stepper(scene, args.stepper, csv_path, png_path)
+            print(f"\n== scene {name}: re-ran the {len(result['replaced'])} {args.stepper} "
+                  f"configurations (this run's CPU costs; the other rows' are the stored run's), "
+                  f"reference check difference {result['reference_difference']:.2e} as stored")
+            for p in result["replaced"]:
+                print(f"  {p.config.label:42s} " + (f"error {p.error:9.2e}  CPU {p.cpu_per_s:9.3e} "
+                      f"s/s  rhs {p.rhs_calls:7d}" if p.status == "ok" else p.status))
+            for line in tolerance_summary(result):
+                print(line)
+            print(f"wrote {csv_path} and {png_path} [{time.time() - c0:.0f} s]")
             continue
         grid = quick_grid(scene) if args.quick else scene.grid
         c0 = time.time()

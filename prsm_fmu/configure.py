@@ -225,7 +225,7 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
         raise ValueError(f"stepper = {name!r} is not allowed with fidelity = 'dynamic': "
                          "the closed form exists only for kinematic and quasi-static")
     opts: dict[str, Any] = {}
-    if name == "radau":      # scipy's solve_ivp has no step limit: bound its rhs calls instead
+    if name == "radau":      # its steps cost up to ~30 rhs calls each: bound those too
         opts["max_rhs_calls"] = RADAU_RHS_PER_STEP * max_substeps
     if name == "rk4":
         if substeps < 1:
@@ -235,8 +235,7 @@ def configure(params: MechanismParams, solver: Mapping[str, Any], inputs: tuple[
     else:
         opts.update(tuned_stepper_options(name, tol, ATOL_FACTOR * tol) if not substeps
                     else {"rtol": tol, "atol": ATOL_FACTOR * tol})
-        if name != "radau":
-            opts["max_substeps"] = max_substeps
+        opts["max_substeps"] = max_substeps
         if substeps:
             if name == "radau":
                 raise ValueError(f"substeps = {substeps!r} is out of range for stepper = "

@@ -93,3 +93,40 @@ def test_write_csv_stores_the_floor_and_reads_back(tmp_path):
     assert back["cheapest"].config == pts[0].config
     assert math.isnan(back["points"][2].error)
     assert re.fullmatch(r"failed: .*", back["points"][2].status)
+
+
+def test_rerun_stepper_replaces_only_that_steppers_rows(tmp_path, saved):
+    """``--stepper NAME`` (``rerun_stepper``) on a scene whose runs are made up: output ``a`` is
+    [1, 2, 3] for the reference (radau at rtol 1e-12), 3 + 3e-12 at the end for the check (rtol
+    1e-11), and 3 + v at the end for radau at rtol v.  Errors are relative to max|y_ref| = 3."""
+    import numpy as np
+
+    def run(cfg, time_it=True):
+        end = {1e-12: 3.0, 1e-11: 3.0 + 3e-12}.get(cfg.value, 3.0 + cfg.value)
+        return wp.RunResult({"a": np.array([1.0, 2.0, end])}, 0.5, 10)
+
+    grid = (wp.Config("dynamic", "radau", "rtol", 1e-4), wp.Config("dynamic", "radau", "rtol", 1e-6))
+    scene = wp.Scene("toy", "toy", t_end=1.0, comm_step=0.5, run=run, grid=grid,
+                     target_error=1e-4, outputs=("a",))
+    csv_path = tmp_path / "wp_toy.csv"
+    # stored: radau at 1e-4 missing its target (error 4e-4), a rosenbrock row to keep, floor
+    # 1e-12 (the check above differs by 3e-12 / 3 = 1e-12)
+    csv_path.write_text(
+        "scene,fidelity,stepper,knob,value,status,error,cpu_s_per_sim_s,rhs_calls,rhs_per_sim_s,"
+        "pareto,cheapest_at_0.0001,reference_difference,err:a\n"
+        "toy,dynamic,radau,rtol,0.0001,ok,4.0e-04,9.0e+00,20,20,0,0,1.0e-12,4.0e-04\n"
+        "toy,dynamic,rosenbrock,rtol,0.0001,ok,5.0e-05,2.0e+00,7,7,1,1,1.0e-12,5.0e-05\n")
+    result = wp.rerun_stepper(scene, "radau", csv_path, tmp_path / "wp_toy.png")
+    back = wp.read_csv(csv_path)
+    rows = {(p.config.stepper, p.config.value): p for p in back["points"]}
+    assert len(rows) == 3 and len(result["replaced"]) == 2
+    # radau at 1e-4: |3 + 1e-4 − 3| / 3 = 3.33e-5; at 1e-6: 3.33e-7; cost 0.5 s per 1 s
+    assert math.isclose(rows[("radau", 1e-4)].error, 1e-4 / 3, rel_tol=1e-5)
+    assert math.isclose(rows[("radau", 1e-6)].error, 1e-6 / 3, rel_tol=1e-5)
+    assert rows[("radau", 1e-4)].cpu_per_s == 0.5
+    # the rosenbrock row is kept as stored; the cheapest at 1e-4 is now radau at 1e-6 or 1e-4
+    # (0.5 CPU s/s against the kept row's 2.0)
+    assert rows[("rosenbrock", 1e-4)].error == 5e-5 and rows[("rosenbrock", 1e-4)].cpu_per_s == 2.0
+    assert back["cheapest"].config.stepper == "radau"
+    with pytest.raises(ValueError, match="stepper = 'nope' has no configuration"):
+        wp.rerun_stepper(scene, "nope", csv_path, tmp_path / "wp_toy.png")

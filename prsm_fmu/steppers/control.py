@@ -19,7 +19,7 @@ from typing import Any, Sequence
 from .base import Stepper, _INF, _check_count, _check_tol, _model_mask, _model_scale
 
 __all__ = ["AdaptiveBase", "KinkLanding", "KINK_BAND", "APPROACH", "MAX_KINK_CUTS", "kink_fraction",
-           "slip_error"]
+           "model_kinks", "slip_error"]
 
 #: a memory's end time matches the next advance's start within this many ulps of max(|t|, h)
 _TIME_MATCH = 4e-16
@@ -159,6 +159,29 @@ def slip_error(ds: Sequence[tuple], s0: Sequence[tuple], rtol: float, atol: floa
     return worst
 
 
+def model_kinks(model: Any) -> tuple:
+    """What a model reports of its friction laws' kinks (docs/accuracy.md, "Landing on the
+    friction law's kinks").
+
+    Parameters
+    ----------
+    model : OdeModel
+        A model that may have ``sliding_velocities(x)`` and ``kink_speeds``.
+
+    Returns
+    -------
+    tuple
+        ``(speeds, kinks, band)``: the model's ``sliding_velocities`` (None if it reports no
+        sliding velocities or no positive kink speed: no landing), its ``kink_speeds`` [m/s]
+        and v_ε [m/s], the smallest positive kink speed (0.0 without one).
+    """
+    speeds = getattr(model, "sliding_velocities", None)
+    kinks = tuple(getattr(model, "kink_speeds", ()) or ()) if callable(speeds) else ()
+    positive = [abs(k) for ks in kinks for k in ks if k != 0.0]
+    return (speeds if kinks and positive else None, kinks,
+            min(positive) if positive else 0.0)
+
+
 class KinkLanding:
     """One advance's landing on the kinks of a model's friction laws (module docstring).
 
@@ -279,16 +302,9 @@ class AdaptiveBase(Stepper):
         self._n_err = sum(self.error_mask)
         self._h_prop: float | None = None
 
-        # the friction law's kinks (docs/accuracy.md, "Landing on the friction law's kinks"):
-        # the model's sliding speeds and their kink speeds, if it reports them
-        speeds = getattr(model, "sliding_velocities", None)
-        kinks = tuple(getattr(model, "kink_speeds", ()) or ()) if callable(speeds) else ()
-        positive = [abs(k) for ks in kinks for k in ks if k != 0.0]
         #: the model's sliding velocities (None: no kink landing), their kink speeds [m/s] and
-        #: the friction band's speed v_ε [m/s]
-        self._speeds = speeds if kinks and positive else None
-        self._kinks = kinks
-        self._band = min(positive) if positive else 0.0
+        #: the friction band's speed v_ε [m/s] (:func:`model_kinks`)
+        self._speeds, self._kinks, self._band = model_kinks(model)
 
     # --- memory ---------------------------------------------------------------------
 
