@@ -311,8 +311,11 @@ def local_cluster(workers: int | None = None):
 
 
 def _quiet_logs() -> None:
-    """Run on each worker before an interrupted study closes its cluster: no shutdown logs."""
-    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+    """Run here and on each worker before an interrupted study closes its cluster: no shutdown
+    logs (Dask's own, and tornado's: a callback that Dask's sync cancels mid-way can log a
+    traceback through ``tornado.application``)."""
+    for name in ("distributed", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 #: CPU time [s] a Dask task (a chunk of points) aims at: Dask's cost per task (scheduler,
@@ -427,7 +430,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         if quiet:
             # the points still running are cancelled: their workers and nannies would log
             # it as warnings and errors on stderr
-            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            _quiet_logs()
             if own_cluster is not None:
                 try:
                     client.run(_quiet_logs)
@@ -594,12 +597,20 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
                 else bool(ship_fmus)
             results, close, counts = _dask_results(tasks, client, scheduler, workers, ship,
                                                    series_dir, bar)
+            # a Ctrl-C inside Dask's sync() makes it cancel a callback on the client's event
+            # loop thread, which can log a traceback through tornado.application before this
+            # thread reaches close(quiet=True): that logger is quiet while the points run (a
+            # point's own failure is reported through its result)
+            loop_log = logging.getLogger("tornado.application")
+            level = loop_log.level
+            loop_log.setLevel(logging.CRITICAL)
             try:
                 for res in results():
                     handle(res)
             except BaseException:           # Ctrl-C or an error: close without the workers'
                 close(quiet=True)           # shutdown warnings (one line, prsm_fmu.command)
                 raise
+            loop_log.setLevel(level)
             close()
     bar.close()
 
