@@ -90,13 +90,11 @@ static inline int prsm_state_violation(const double *x, int n, const double *spe
     return 0;
 }
 
-/* prsm_state_violation with the speed bounds of model m (prsm_speed_bound) */
+/* prsm_state_violation with the speed bounds of model m (prsm_speed_bound, computed once by
+ * prsm_model_init: not on every step) */
 static inline int prsm_model_state_violation(const double *x, const prsm_model *m, char *msg,
                                              int len) {
-    int n = m->nx;
-    double speeds[PRSM_NX_MAX];
-    for (int i = 1; i < n - 3; i++) speeds[i - 1] = prsm_speed_bound(m, i, n);
-    return prsm_state_violation(x, n, speeds, msg, len);
+    return prsm_state_violation(x, m->nx, m->speed_bound, msg, len);
 }
 
 #endif

@@ -11,6 +11,7 @@
 #include "prsm_band.h"
 #include "prsm_geometry.h"
 #include "prsm_step.h"
+#include "prsm_bounds.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -700,6 +701,8 @@ int prsm_model_init(prsm_model *m, const prsm_config *cfg, char *msg, int len) {
     if (m->coulomb_loss) r->law_dim[r->n_laws++] = 1;
     r->band = m->v_eps;
     r->slip = r->n_laws ? slip_ctx : NULL;
+    /* the speeds' bounds (from the inertias above): checked after every step */
+    for (int i = 1; i < m->nx - 3; i++) m->speed_bound[i - 1] = prsm_speed_bound(m, i, m->nx);
     return 0;
 }
 

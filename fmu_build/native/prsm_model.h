@@ -162,6 +162,8 @@ typedef struct {
     int kinematic, dynamic, speed_drive;
     int nx, ie;                        /* states; index of input_work (after the carriers) */
     double mu, v_eps, c_out, last_mass, equivalent_inertia, loss_factor, band_speed;
+    double speed_bound[PRSM_NX_MAX]; /* |speed state i| at most [rad/s]: speed_bound[i - 1],
+                                        prsm_speed_bound (prsm_bounds.h), set by prsm_model_init */
     double mu3;                        /* differential sliding mu_3 [m] (0 at the kinematic level) */
     double viscous_loss, differential_loss;   /* the kinematic level's C_v [N.m.s/rad], C_d [m] */
     int coulomb_loss;                  /* the kinematic level's Coulomb-like loss acts */
