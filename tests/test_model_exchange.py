@@ -36,7 +36,11 @@ from test_native_fmu import built_native  # noqa: E402
 
 OUTPUTS = ["screw_speed", "rod_position", "friction_work", "stage[1].contact_force",
            "stage[2].carrier_speed", "efficiency"]
-TOL = 1e-6
+#: the largest relative difference accepted between the two interfaces' runs: both integrate the
+#: same equations, the co-simulation at tolerance = 1e-8 and CVode at rtol 1e-9 … 1e-10 per
+#: step, over up to 1 000 steps; 100 x the co-simulation's requested tolerance leaves room for
+#: that accumulation (the measured differences are ~1e-7 at most, each test's docstring)
+ME_CS_AGREEMENT = 1e-6
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -147,7 +151,7 @@ def model_exchange(fmu, start: dict, torque, load, h: float, rtol: float = 1e-9)
     return np.array([[grid[i]] + rows[i] for i in range(n + 1)]), counts
 
 
-def compare(label: str, cs: np.ndarray, me: np.ndarray, counts: dict, tol: float = TOL) -> None:
+def compare(label: str, cs: np.ndarray, me: np.ndarray, counts: dict, tol: float = ME_CS_AGREEMENT) -> None:
     print(f"\n{label}: {len(cs) - 1} communication steps; host handled {counts['events']} "
           f"events, {counts['derivative evaluations']} derivative evaluations")
     worst = []
