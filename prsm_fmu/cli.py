@@ -8,7 +8,8 @@ Subcommands::
     prsm-fmu steady  [--preset li2021_two_stage] [--speed 100] [--load 5000]
     prsm-fmu presets
     prsm-fmu sweep   STUDY.toml [--out DIR] [--workers N | --scheduler tcp://host:port |
-                     --no-dask] [--backend fmu|model] [--fmu-dir DIR] [--rerun-all]
+                     --no-dask] [--backend fmu|model] [--fmu native|python] [--fmu-dir DIR]
+                     [--rerun-all]
     prsm-fmu check   PRESET [--load N] [--length M] [--material NAME] [--safety-factor K]
                      [--stability-factor N] [--ends ENDS] [--teeth Z_R,Z_IG] [--set NAME=VALUE]
     prsm-fmu regress [--update] [--fmu PRSM2.fmu] [--baselines DIR|FMU] [--case NAME ...]
@@ -386,6 +387,7 @@ def cmd_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     try:
         res = run_study(study, os.path.join(args.out, study.name), executor="loop" if args.no_dask else "dask",
                         scheduler=args.scheduler, workers=args.workers, fmu_dir=args.fmu_dir,
+                        fmu=args.fmu,
                         resume=not args.rerun_all, figures=not args.no_figures,
                         progress=None if args.quiet else sys.stderr)
     except (ValueError, RuntimeError, OSError) as exc:
@@ -584,8 +586,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="address of an existing Dask scheduler, e.g. tcp://host:8786")
     p.add_argument("--no-dask", action="store_true",
                    help="run the points one after the other in this process")
+    p.add_argument("--fmu", choices=("native", "python"), default=None,
+                   help="the FMU of the FMU backend: the native C FMU PRSM<n>-native.fmu "
+                        "(default where Zig's C compiler, pip install ziglang, can build it) or "
+                        "the Python FMU PRSM<n>.fmu (pythonfmu); the same results")
     p.add_argument("--fmu-dir", type=existing_dir, default=None,
-                   help="directory holding PRSM<n>.fmu (default: build them into OUT/fmu)")
+                   help="directory holding the FMUs (PRSM<n>-native.fmu or PRSM<n>.fmu, by "
+                        "--fmu; default: build them into OUT/<study>/fmu)")
     p.add_argument("--rerun-all", action="store_true",
                    help="run every point again, also those already done")
     p.add_argument("--no-figures", action="store_true", help="do not draw the figures")

@@ -76,6 +76,7 @@ CASES: list[tuple[str, list[str], str]] = [
     ("prsm-fmu", ["sweep", STUDY, "--workers", "-3", "--out", OUT], "--workers"),
     ("prsm-fmu", ["sweep", STUDY, "--workers", "two", "--out", OUT], "--workers"),
     ("prsm-fmu", ["sweep", STUDY, "--backend", "gpu", "--out", OUT], "--backend"),
+    ("prsm-fmu", ["sweep", STUDY, "--fmu", "c", "--out", OUT], "--fmu"),
     ("prsm-fmu", ["sweep", STUDY, "--scheduler", "not an address", "--out", OUT], "--scheduler"),
     ("prsm-fmu", ["sweep", STUDY, "--scheduler", "tcp://host:99999", "--out", OUT],
      "--scheduler"),

@@ -44,9 +44,13 @@ STUDIES = ROOT / "studies"
 # ---------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def fmu_dir(tmp_path_factory) -> str:
+    """PRSM1 and PRSM2 of both kinds: the native FMUs the FMU backend runs on by default and
+    the Python FMUs (``fmu="python"``)."""
     d = tmp_path_factory.mktemp("fmus")
-    paths = ensure_fmus([1, 2], str(d))
-    assert set(paths) == {1, 2} and all(os.path.isfile(p) for p in paths.values())
+    for kind, name in (("python", "PRSM{}.fmu"), ("native", "PRSM{}-native.fmu")):
+        paths = ensure_fmus([1, 2], str(d), kind=kind)
+        assert paths == {n: os.path.join(str(d), name.format(n)) for n in (1, 2)}
+        assert all(os.path.isfile(p) for p in paths.values())
     return str(d)
 
 
@@ -155,6 +159,48 @@ def test_one_and_two_workers_give_identical_tables(friction):
         assert s2.keys() == s1.keys()
         for k in s2:
             np.testing.assert_array_equal(s2[k], s1[k])
+
+
+def test_the_fmu_backend_runs_on_the_native_fmu_and_the_python_fmu_gives_the_same_table(
+        friction, fmu_dir, tmp_path):
+    """By default the FMU backend runs the native FMU (Zig's compiler is in the test extra);
+    the Python FMU runs the same engine behind pythonfmu, so the same study on it gives the
+    same table, every number equal as a double, and the same series."""
+    two = friction[0]
+    assert two.fmu == "native"
+    assert "the native FMU" in (Path(two.out_dir) / "report.md").read_text(encoding="utf-8")
+    study = load_study(STUDIES / "li2021_friction.toml")
+    py = run_study(study, str(tmp_path / "py"), executor="loop", fmu_dir=fmu_dir,
+                   progress=None, figures=False, fmu="python")
+    assert py.fmu == "python" and len(py.rows) == 4
+    assert same_table(Path(two.table_path).read_text(encoding="utf-8"),
+                      Path(py.table_path).read_text(encoding="utf-8"))
+    for r in two.rows:
+        a, b = load_series(two.out_dir, r["id"]), load_series(py.out_dir, r["id"])
+        assert a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_without_zig_the_fmu_backend_says_so_and_runs_the_python_fmu(tmp_path, fmu_dir,
+                                                                      monkeypatch):
+    import io
+
+    import fmu_build.platforms
+
+    monkeypatch.setattr(fmu_build.platforms, "zig_available", lambda: False)
+    study = load_study(_write_study(tmp_path / "s.toml", "mu_spline = [0.2]"))
+    log = io.StringIO()
+    res = run_study(study, str(tmp_path / "out"), executor="loop", fmu_dir=fmu_dir,
+                    progress=log, figures=False)
+    assert res.fmu == "python" and [r["status"] for r in res.rows] == ["ok"]
+    notes = [line for line in log.getvalue().splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and "pip install ziglang" in notes[0] and "Python FMU" in notes[0]
+    with pytest.raises(ValueError, match=r"fmu = 'c' is not allowed: must be one of native, "
+                                         r"python"):
+        run_study(study, str(tmp_path / "out2"), executor="loop", fmu_dir=fmu_dir,
+                  progress=None, figures=False, fmu="c")
+    assert not (tmp_path / "out2").exists()         # refused before anything was written
 
 
 def test_each_worker_loads_the_fmu_once_and_reuses_it(friction):

@@ -9,15 +9,15 @@
     res.rows, res.trends, res.figures
 
 Command line: ``prsm-fmu sweep STUDY.toml [--out DIR] [--workers N | --scheduler ADDR]
-[--backend fmu|model] [--no-dask] [--fmu-dir DIR] [--rerun-all]``.  docs/sweeps.md describes
+[--backend fmu|model] [--fmu native|python] [--no-dask] [--fmu-dir DIR] [--rerun-all]``.  docs/sweeps.md describes
 the study format, the execution, the table and the shipped studies.
 
 Modules: :mod:`.study` (TOML → points), :mod:`.points` (one point on a worker),
 :mod:`.fmu_runner` (the FMU with the screw speed prescribed), :mod:`.metrics` (a run → a row),
 :mod:`.table` (CSV), :mod:`.execute` (Dask or loop, resume, report), :mod:`.trends` (the papers'
 claims checked on the table), :mod:`.plots` (figures).  Dask is imported only when a study runs
-on it (``pip install "prsm-fmu[sweep]"``); the FMU backend needs fmpy and pythonfmu
-(``[fmu]``).
+on it (``pip install "prsm-fmu[sweep]"``); the FMU backend needs fmpy and, to build the native
+FMU it runs on by default, ziglang (``[fmu]``; pythonfmu for ``--fmu python``).
 """
 
 from __future__ import annotations

@@ -12,9 +12,9 @@
     the study, the paper's claims with the table's verdicts, the failed points, the figures;
 ``OUT/timing.csv``
     where and how long each point of this run took (not part of the table);
-``OUT/fmu/PRSM<n>.fmu``
-    the FMUs the points ran on (built with ``python -m fmu_build`` in a child process unless
-    ``fmu_dir`` has them);
+``OUT/fmu/PRSM<n>-native.fmu`` (or ``PRSM<n>.fmu``)
+    the FMUs the points ran on, the native FMU by default (:data:`FMU_KINDS`; built with
+    ``python -m fmu_build`` in a child process unless ``fmu_dir`` has them);
 ``OUT/study.txt``
     the name of the study the folder belongs to: a folder that holds another study's results
     is refused (:func:`claim_out_dir`), so one study never overwrites another's table and
@@ -78,7 +78,8 @@ from .trends import TrendResult, evaluate
 
 __all__ = ["run_study", "claim_out_dir", "STUDY_MARKER", "SweepResult", "ensure_fmus",
            "metric_columns", "load_series", "EXECUTORS", "Progress", "local_cluster", "LOOPBACK",
-           "eta", "chunk_size", "CHUNK_SECONDS", "IN_FLIGHT"]
+           "eta", "chunk_size", "CHUNK_SECONDS", "IN_FLIGHT", "FMU_KINDS", "fmu_file_name",
+           "default_fmu_kind"]
 
 EXECUTORS = ("dask", "loop")
 
@@ -104,6 +105,7 @@ class SweepResult:
     figures: list[str] = field(default_factory=list)
     wall_time: float = 0.0
     backend: str = ""
+    fmu: str = ""                                  # the FMU kind of the FMU backend, or ""
     dask_tasks: int = 0                            # Dask tasks (chunks of points) submitted
 
     @property
@@ -126,18 +128,45 @@ def _sha256(path: str) -> str:
         return hashlib.sha256(fh.read()).hexdigest()
 
 
-def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
-                build: bool = True) -> dict[int, str]:
-    """Paths of ``PRSM<n>.fmu`` for every stage count, building the missing ones.
+#: the FMUs a sweep's FMU backend can run on: the native C FMU (``PRSM<n>-native.fmu``, the
+#: compiled engine behind every FMI call) or the Python FMU (``PRSM<n>.fmu``, pythonfmu, the
+#: engine behind its Python slave); the same results bit for bit where the Python FMU's engine
+#: loads (tests/test_sweep.py)
+FMU_KINDS = ("native", "python")
 
-    An FMU is taken from ``fmu_dir`` if it is there; otherwise it is built into ``dest`` with
-    ``python -m fmu_build PRSM<n> --dest DEST`` in a child process (pythonfmu imports the
-    generated slave module while building, docs/fmu.md).
+
+def fmu_file_name(n_stages: int, kind: str) -> str:
+    """``PRSM<n>-native.fmu`` or ``PRSM<n>.fmu``: the file of an FMU of ``kind``."""
+    if kind not in FMU_KINDS:
+        raise ValueError(f"fmu = {kind!r} is not allowed: must be one of {', '.join(FMU_KINDS)}")
+    return f"PRSM{n_stages}{'-native' if kind == 'native' else ''}.fmu"
+
+
+def default_fmu_kind() -> tuple[str, str | None]:
+    """(the FMU kind a sweep runs on by default, why not the native one or None): the native FMU
+    where Zig's C compiler (the ``fmu`` extra's ziglang) can build it, else the Python FMU."""
+    from fmu_build.platforms import zig_available
+
+    if zig_available():
+        return "native", None
+    return "python", ("the native FMU needs Zig's C compiler (pip install ziglang, in the "
+                      "'fmu' extra): the points run on the Python FMU")
+
+
+def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
+                build: bool = True, kind: str = "python") -> dict[int, str]:
+    """Paths of the FMUs of ``kind`` for every stage count, building the missing ones.
+
+    An FMU is taken from ``fmu_dir`` if it is there (:func:`fmu_file_name`); otherwise it is
+    built into ``dest`` with ``python -m fmu_build PRSM<n> --dest DEST`` in a child process
+    (pythonfmu imports the generated slave module while building, docs/fmu.md), with
+    ``--native --platform <this platform> --fmi-version 2`` for ``kind = "native"`` (the
+    binary of this platform only: a local study's workers share it).
 
     Raises
     ------
     ValueError
-        For a stage count without a standard FMU (1 to 3).
+        For a stage count without a standard FMU (1 to 3) or an unknown kind.
     RuntimeError
         If the build fails (one line: the child's exit status and its last line of error).
     """
@@ -147,27 +176,31 @@ def ensure_fmus(counts: Sequence[int], dest: str, fmu_dir: str | None = None,
         if n not in (1, 2, 3):
             raise ValueError(f"no standard FMU has {n} stages (PRSM1 … PRSM3): use the model "
                              "backend")
-        name = f"PRSM{n}"
-        if fmu_dir and os.path.isfile(os.path.join(fmu_dir, f"{name}.fmu")):
-            paths[n] = os.path.join(fmu_dir, f"{name}.fmu")
+        name = fmu_file_name(n, kind)
+        if fmu_dir and os.path.isfile(os.path.join(fmu_dir, name)):
+            paths[n] = os.path.join(fmu_dir, name)
         else:
             missing.append(n)
     if missing:
         if not build:
-            raise FileNotFoundError(f"missing FMUs {', '.join(f'PRSM{n}' for n in missing)}")
+            raise FileNotFoundError(f"missing FMUs {', '.join(fmu_file_name(n, kind) for n in missing)}")
         os.makedirs(dest, exist_ok=True)
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join([root] + ([env["PYTHONPATH"]]
                                                       if env.get("PYTHONPATH") else []))
         cmd = [sys.executable, "-m", "fmu_build", *(f"PRSM{n}" for n in missing), "--dest", dest]
+        if kind == "native":
+            from ..engine import platform_folder
+
+            cmd += ["--native", "--platform", platform_folder(), "--fmi-version", "2"]
         proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600,
                               check=False)
         if proc.returncode != 0:
             raise RuntimeError(child_failure(f"building the FMUs ({' '.join(cmd[1:])})",
                                              proc.returncode, proc.stderr, proc.stdout))
         for n in missing:
-            paths[n] = os.path.join(dest, f"PRSM{n}.fmu")
+            paths[n] = os.path.join(dest, fmu_file_name(n, kind))
     return paths
 
 
@@ -479,7 +512,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
               executor: str = "dask", scheduler: str | None = None, workers: int | None = None,
               client=None, fmu_dir: str | None = None, resume: bool = True,
               figures: bool = True, progress: TextIO | None = sys.stderr,
-              ship_fmus: bool | None = None) -> SweepResult:
+              ship_fmus: bool | None = None, fmu: str | None = None) -> SweepResult:
     """Run every point of ``study`` that is not done yet; write the table, figures and report.
 
     Parameters
@@ -500,7 +533,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     client : dask.distributed.Client, optional
         Use this client (and its cluster) instead of making one.
     fmu_dir : str, optional
-        Directory holding ``PRSM<n>.fmu`` to use instead of building them.
+        Directory holding the FMUs (``PRSM<n>-native.fmu`` or ``PRSM<n>.fmu``, by ``fmu``) to
+        use instead of building them.
     resume : bool
         Skip points already in the table with status ok (default); False runs all.
     figures : bool
@@ -511,6 +545,10 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
         Send the FMU files to the workers (``Client.scatter``) instead of passing their paths;
         default: only with ``scheduler`` (a remote cluster).  Set it for a ``client`` of a
         cluster whose workers do not share this file system.
+    fmu : {"native", "python"}, optional
+        The FMU the FMU backend runs on (:data:`FMU_KINDS`): default the native FMU where Zig's
+        C compiler can build it, else the Python FMU (:func:`default_fmu_kind`; the reason is
+        written to ``progress``).  Not part of a point's identity: both give the same results.
 
     Returns
     -------
@@ -527,8 +565,15 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     if executor == "dask" and client is None:
         require("dask.distributed",
                 purpose="running the points on Dask (or in a plain loop: --no-dask)")
+    fallback = None
     if backend == "fmu":
-        require("fmpy", "pythonfmu", purpose="the FMU backend of a sweep (or --backend model)")
+        if fmu is None:
+            fmu, fallback = default_fmu_kind()
+        fmu_file_name(1, fmu)                     # the kind checked before anything is done
+        require("fmpy", *(("pythonfmu",) if fmu == "python" else ()),
+                purpose="the FMU backend of a sweep (or --backend model)")
+        if progress is not None and fallback is not None:
+            progress.write(f"note: {fallback}\n")
     t0 = time.perf_counter()
     out_dir = out_dir or os.path.join("out", "sweeps", study.name)
     claim_out_dir(out_dir, study)
@@ -560,7 +605,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
 
     fmus: dict[int, FmuFile] = {}
     if backend == "fmu" and pending:
-        paths = ensure_fmus(sorted(study.stage_counts()), os.path.join(out_dir, "fmu"), fmu_dir)
+        paths = ensure_fmus(sorted(study.stage_counts()), os.path.join(out_dir, "fmu"), fmu_dir,
+                            kind=fmu)
         fmus = {n: FmuFile(_sha256(p), os.path.abspath(p)) for n, p in paths.items()}
     metric_names = tuple(c for c in header if c not in
                          ("point", "id", "status", "error") and c not in study.swept)
@@ -624,7 +670,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     for r in rows:
         r.update(point_of[r["id"]].values)     # swept values with their types (str, int)
     result = SweepResult(study, out_dir, table_path, header, rows, done, len(kept),
-                         backend=backend, dask_tasks=counts["tasks"])
+                         backend=backend, fmu=fmu if backend == "fmu" else "",
+                         dask_tasks=counts["tasks"])
     result.trends = evaluate(study, rows)
     if figures:
         result.figures = draw_figures(study, result)
@@ -687,7 +734,8 @@ def write_report(result: SweepResult) -> str:
     sc = ", ".join(f"{k} = {v}" for k, v in st.scenario.items() if v not in (None, (), []))
     parts = [f"# {st.title}\n",
              f"Study `{st.path or st.name}` (preset `{st.preset}`, backend "
-             f"`{result.backend}`); source: {st.source or '—'}.\n",
+             f"`{result.backend}`{f', the {result.fmu} FMU' if result.fmu else ''}); source: "
+             f"{st.source or '—'}.\n",
              f"Scenario: {sc}.\n"]
     if st.parameters:
         parts.append("Fixed parameters: " + ", ".join(f"{k} = {v}" for k, v in

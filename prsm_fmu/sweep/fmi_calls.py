@@ -89,6 +89,30 @@ class StepCalls:
         if status > _WARNING:
             raise self._failed("fmi2DoStep", status)
 
+    def trial(self, state: ctypes.c_void_p | None, torque: float, t: float, h: float) -> float:
+        """One trial of the runner: restore ``state`` (unless None), set the torque, step from
+        ``t`` over ``h`` [s] and read the screw speed [rad/s]: :meth:`set_state`,
+        :meth:`set_torque`, :meth:`do_step` and :meth:`speed` in one method (the same calls,
+        each checked and named as there)."""
+        c, warning = self._c, _WARNING
+        if state is not None:
+            status = self._set_state(c, state)
+            if status > warning:
+                raise self._failed("fmi2SetFMUstate", status)
+        self._torque[0] = torque
+        status = self._set_real(c, self._torque_vr, 1, self._torque)
+        if status > warning:
+            raise self._failed("fmi2SetReal", status)
+        double = self._double
+        status = self._do_step(c, double(t), double(h), 0)
+        if status > warning:
+            raise self._failed("fmi2DoStep", status)
+        one = self._one
+        status = self._get_real(c, self._speed_vr, 1, one)
+        if status > warning:
+            raise self._failed("fmi2GetReal", status)
+        return one[0]
+
     def speed(self) -> float:
         """fmi2GetReal of ``screw_speed`` [rad/s]."""
         status = self._get_real(self._c, self._speed_vr, 1, self._one)

@@ -271,18 +271,17 @@ class FmuRunner:
         res["rhs_calls"] = rhs_calls
         return res
 
-    def _trial(self, calls: StepCalls, state, restore: bool, t: float, h: float,
+    @staticmethod
+    def _trial(calls: StepCalls, state, restore: bool, t: float, h: float,
                torque: float) -> float:
         """Step from the saved state with ``torque`` held; the screw speed at t + h."""
-        if restore:
-            calls.set_state(state)
-        calls.set_torque(torque)
         try:
-            calls.do_step(t, h)
+            return calls.trial(state if restore else None, torque, t, h)
         except calls.failure as exc:
+            if exc.function != "fmi2DoStep":
+                raise
             raise FmuPointError(f"the FMU refused the step at t = {t:.9g} s with screw_torque "
                                 f"= {torque!r} N.m (status {exc.status})") from exc
-        return calls.speed()
 
     def _track(self, calls, state, t, h, target, guess, gain, t_scale):
         """Torque held over [t, t + h] that ends the step at ``target``; leaves the FMU there.
