@@ -60,6 +60,10 @@ class StepCalls:
         self._get_integer, self._do_step = raw("fmi2GetInteger"), raw("fmi2DoStep")
         self._get_state, self._set_state = raw("fmi2GetFMUstate"), raw("fmi2SetFMUstate")
         self._free_state = raw("fmi2FreeFMUstate")
+        self._addresses = {name: ctypes.cast(lib[name], ctypes.c_void_p).value for name in (
+            "fmi2SetReal", "fmi2GetReal", "fmi2GetInteger", "fmi2DoStep", "fmi2GetFMUstate",
+            "fmi2SetFMUstate", "fmi2FreeFMUstate")}
+        self._vrs = (torque_vr, speed_vr, rhs_vr)
         self._c = ctypes.c_void_p(fmu.component)
         self._double = ctypes.c_double
         uint = ctypes.c_uint
@@ -71,6 +75,13 @@ class StepCalls:
         self._one = (ctypes.c_double * 1)()
         self._torque = (ctypes.c_double * 1)()
         self._int = (ctypes.c_int * 1)()
+
+    def raw(self) -> tuple[dict[str, int], int, tuple[int, int, int], ctypes.Array]:
+        """What a compiled master needs to make these calls itself
+        (:mod:`prsm_fmu.sweep.native_track`): the functions' addresses by FMI name, the
+        instance's address, the value references of the torque, the speed and the
+        right-hand-side count, and the array of the outputs' value references."""
+        return dict(self._addresses), self._c.value, self._vrs, self._out_vrs
 
     def _failed(self, name: str, status: int):
         return self.failure(function=name, status=status)

@@ -24,6 +24,12 @@ the next.  After a failure inside the FMU (fmi2Error, fmi2Fatal) the instance is
 new one is made for the next point.  The FMU is instantiated with logging on and its messages
 are kept (:class:`~prsm_fmu.fmu_log.FmuLog`): a point that fails says the FMU's own reason.
 
+The step loop runs compiled by default (``loop = "auto"``: ``prsm_fmu/sweep/native/fmu_track.c``,
+:mod:`~prsm_fmu.sweep.native_track`, built with gcc on first use), the loop below translated
+operation for operation: the same FMI calls with the same arguments, so the same results bit
+for bit (tests/test_fmu_track.py); :meth:`FmuRunner._python_loop` is its readable reference and
+runs where the C cannot be built.
+
 Imports fmpy (only when a runner is made); never imported by the physics.
 """
 
@@ -49,6 +55,11 @@ TORQUE_RTOL = 1e-10
 
 #: most trials per communication step before the best one is taken (and its error recorded)
 MAX_TRIALS = 30
+
+#: the step loops a runner can take: ``native`` the compiled one
+#: (:mod:`prsm_fmu.sweep.native_track`: the same calls and results), ``python`` this module's,
+#: ``auto`` the compiled one where it can be built (gcc), else this module's
+LOOPS = ("auto", "native", "python")
 
 
 class FmuPointError(RuntimeError):
@@ -76,11 +87,27 @@ class FmuRunner:
     tolerance : float
         The FMU's ``tolerance`` parameter (rtol of its adaptive steppers; atol = 0.01·tolerance),
         default 1e-8, the tolerances of :func:`prsm_fmu.simulate`.
+    loop : {"auto", "native", "python"}
+        The step loop (:data:`LOOPS`): the compiled one or this module's; the same results.
+        ``native`` raises where it cannot be built; ``auto`` then takes this module's (and
+        :attr:`loop_note` says why).
     """
 
-    def __init__(self, fmu_path: str, tolerance: float = 1e-8) -> None:
+    def __init__(self, fmu_path: str, tolerance: float = 1e-8, loop: str = "auto") -> None:
         from fmpy import extract, read_model_description
 
+        if loop not in LOOPS:
+            raise ValueError(f"loop = {loop!r} is not allowed: must be one of {', '.join(LOOPS)}")
+        self._lib = None
+        #: why the compiled loop is not used (None where it is, or where loop = "python")
+        self.loop_note: str | None = None
+        if loop != "python":
+            from .native_track import loop_library
+
+            self._lib, self.loop_note = loop_library()
+            if self._lib is None and loop == "native":
+                raise RuntimeError(self.loop_note)
+        self._loop = None           # the instance's compiled loop (CompiledLoop), if any
         self.fmu_path = str(fmu_path)
         self.tolerance = float(tolerance)
         self.md = read_model_description(self.fmu_path)
@@ -109,6 +136,10 @@ class FmuRunner:
             self.fmu.instantiate(callbacks=self.log.callbacks, loggingOn=True)
             self._calls = StepCalls(self.fmu, self.vr["screw_torque"], self.vr["screw_speed"],
                                     self.vr["step_rhs_calls"], self._out_vrs)
+            if self._lib is not None:
+                from .native_track import CompiledLoop
+
+                self._loop = CompiledLoop(self._lib, self._calls)
             self.instances_made += 1
             self._fresh = True
         elif not self._fresh:
@@ -125,6 +156,7 @@ class FmuRunner:
                 pass
         self.fmu = None
         self._calls = None
+        self._loop = None
 
     def close(self) -> None:
         """Free the instance and forget the FMU."""
@@ -240,6 +272,24 @@ class FmuRunner:
 
         ref = np.empty(n_steps + 1)
         ref[0] = w0
+        if self._loop is not None:              # the same loop, compiled
+            ref[1:] = [float(speed((i + 1) * h)) for i in range(n_steps)]
+            trials, rhs_calls = self._loop.run(n_steps, h, ref[1:], torque, TORQUE_RTOL,
+                                               MAX_TRIALS, t_scale, out[1:])
+        else:
+            trials, rhs_calls = self._python_loop(speed, n_steps, h, torque, t_scale, ref, out)
+        fmu.terminate()
+        res = {"time": np.arange(n_steps + 1) * h}
+        res.update({name: out[:, j] for j, name in enumerate(self.output_names)})
+        res["speed_reference"] = ref
+        res["trials"] = trials
+        res["rhs_calls"] = rhs_calls
+        return res
+
+    def _python_loop(self, speed, n_steps, h, torque, t_scale, ref, out) -> tuple[int, int]:
+        """Steps 0 … n_steps − 1: each step's torque tracked, the reference speeds into
+        ``ref[1:]`` and the outputs into ``out[1:]``; (trials, right-hand-side calls).  The
+        readable reference of the compiled loop (:mod:`~prsm_fmu.sweep.native_track`)."""
         trials = 0
         rhs_calls = 0
         last, before = torque, None     # the tracked torques of the last two steps [N·m]
@@ -263,13 +313,7 @@ class FmuRunner:
             last, before = torque, last
             calls.outputs_into(row0 + (i + 1) * row_bytes)
             rhs_calls += calls.rhs_calls()
-        fmu.terminate()
-        res = {"time": np.arange(n_steps + 1) * h}
-        res.update({name: out[:, j] for j, name in enumerate(self.output_names)})
-        res["speed_reference"] = ref
-        res["trials"] = trials
-        res["rhs_calls"] = rhs_calls
-        return res
+        return trials, rhs_calls
 
     @staticmethod
     def _trial(calls: StepCalls, state, restore: bool, t: float, h: float,
