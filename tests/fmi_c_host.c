@@ -3,7 +3,10 @@
  * Used by tests/test_fmu_c_host.py and tests/test_native_fmu.py (outputs of every step on
  * stdout) and by benchmarks/native_step_cost.py (no output rows; on stderr, in ns per step:
  * PRSM_HOST_TIME=loop the process CPU time of the whole loop, PRSM_HOST_TIME=step the
- * monotonic-clock time of the fmi2DoStep calls alone). */
+ * monotonic-clock time of the fmi2DoStep calls alone; PRSM_HOST_TIME=restore as a master that
+ * tries each step first: fmi2GetFMUstate, the trial fmi2DoStep, fmi2SetFMUstate back, then the
+ * step again, with the monotonic-clock time per call of the trial doStep, of fmi2SetFMUstate and
+ * of fmi2GetFMUstate; the loop's values are those of the other modes). */
 #define _POSIX_C_SOURCE 200809L
 #include <dlfcn.h>
 #include <math.h>
@@ -44,6 +47,13 @@ int main(int argc, char **argv) {
     fmi2DoStepTYPE *do_step = (fmi2DoStepTYPE *)sym(lib, "fmi2DoStep");
     fmi2TerminateTYPE *terminate = (fmi2TerminateTYPE *)sym(lib, "fmi2Terminate");
     fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)sym(lib, "fmi2FreeInstance");
+    const char *mode = getenv("PRSM_HOST_TIME");
+    const int timing = mode != NULL, per_step = mode != NULL && mode[0] == 's';
+    const int restore = mode != NULL && mode[0] == 'r';
+    /* looked up in restore mode only: the other modes run FMUs without FMU states too */
+    fmi2GetFMUstateTYPE *get_state = restore ? (fmi2GetFMUstateTYPE *)sym(lib, "fmi2GetFMUstate") : NULL;
+    fmi2SetFMUstateTYPE *set_state = restore ? (fmi2SetFMUstateTYPE *)sym(lib, "fmi2SetFMUstate") : NULL;
+    fmi2FreeFMUstateTYPE *free_state = restore ? (fmi2FreeFMUstateTYPE *)sym(lib, "fmi2FreeFMUstate") : NULL;
 
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
     fmi2Component c = instantiate("c_host", fmi2CoSimulation, argv[3], argv[2], &callbacks,
@@ -66,10 +76,9 @@ int main(int argc, char **argv) {
 
     const double h = 1e-3;
     double speed, integral = 0.0;
-    const char *mode = getenv("PRSM_HOST_TIME");
-    const int timing = mode != NULL, per_step = mode != NULL && mode[0] == 's';
     struct timespec t0, t1, s0, s1;
-    double step_ns = 0.0;
+    double step_ns = 0.0, set_ns = 0.0, get_ns = 0.0;
+    fmi2FMUstate state = NULL;
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t0);
     CHECK(get_real(c, &vr_speed, 1, &speed));
     for (int k = 0; k < steps; k++) {          /* test_fmu.controller, operation for operation */
@@ -80,6 +89,20 @@ int main(int argc, char **argv) {
         torque = fmin(40.0, fmax(-40.0, torque));
         fmi2Real u[2] = {torque, 3000.0};
         CHECK(set_real(c, vr_in, 2, u));
+        if (restore) {      /* the trial step and its undoing; the step itself follows */
+            clock_gettime(CLOCK_MONOTONIC, &s0);
+            CHECK(get_state(c, &state));
+            clock_gettime(CLOCK_MONOTONIC, &s1);
+            get_ns += (s1.tv_sec - s0.tv_sec) * 1e9 + (s1.tv_nsec - s0.tv_nsec);
+            clock_gettime(CLOCK_MONOTONIC, &s0);
+            CHECK(do_step(c, k * h, h, fmi2False));
+            clock_gettime(CLOCK_MONOTONIC, &s1);
+            step_ns += (s1.tv_sec - s0.tv_sec) * 1e9 + (s1.tv_nsec - s0.tv_nsec);
+            clock_gettime(CLOCK_MONOTONIC, &s0);
+            CHECK(set_state(c, state));
+            clock_gettime(CLOCK_MONOTONIC, &s1);
+            set_ns += (s1.tv_sec - s0.tv_sec) * 1e9 + (s1.tv_nsec - s0.tv_nsec);
+        }
         if (per_step) clock_gettime(CLOCK_MONOTONIC, &s0);
         CHECK(do_step(c, k * h, h, fmi2True));
         if (per_step) {
@@ -94,7 +117,11 @@ int main(int argc, char **argv) {
         CHECK(get_real(c, &vr_speed, 1, &speed));
     }
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t1);
-    if (per_step) fprintf(stderr, "dostep_ns_per_step %.6g\n", step_ns / steps);
+    if (restore) {
+        fprintf(stderr, "dostep_ns_per_step %.6g\nsetstate_ns_per_call %.6g\n"
+                "getstate_ns_per_call %.6g\n", step_ns / steps, set_ns / steps, get_ns / steps);
+        CHECK(free_state(c, &state));
+    } else if (per_step) fprintf(stderr, "dostep_ns_per_step %.6g\n", step_ns / steps);
     else if (timing)
         fprintf(stderr, "loop_ns_per_step %.6g\n",
                 ((t1.tv_sec - t0.tv_sec) * 1e9 + (t1.tv_nsec - t0.tv_nsec)) / steps);

@@ -5,9 +5,10 @@
  * -fsanitize=address,undefined, and runs it.  Each round instantiates two instances, sets
  * parameters drawn from a pool of good and bad values, initializes, then makes random calls:
  * inputs and step sizes from pools (huge, tiny, subnormal, non-finite), communication points
- * that are and are not the FMU's time, FMU states got, set, serialized, corrupted at random
- * 8-byte offsets with values from the pool, deserialized and set, a state of the other instance
- * handed in, status queries.  After every accepted doStep and every accepted state every Real
+ * that are and are not the FMU's time, FMU states got, set back after a trial step (the
+ * instance's own state: its model kept), serialized, corrupted at random 8-byte offsets with
+ * values from the pool, deserialized and set, a state of the other instance handed in, status
+ * queries; at the end of a round a state restored after fmi2Reset (its model built again).  After every accepted doStep and every accepted state every Real
  * output is read and must be finite.
  *
  * argv: seed rounds n_real_par vr... n_int_par vr... n_out vr... vr_torque vr_load
@@ -137,6 +138,13 @@ int main(int argc, char **argv) {
             } else if (action == 3) {        /* a state round trip, corrupted */
                 fmi2FMUstate s = NULL;
                 if (fmi2GetFMUstate(c, &s) != fmi2OK) return 5;
+                /* a trial step from here (the inputs set, which may be refused) and the state
+                   restored: the instance is then as it was (no random number drawn) */
+                count(fmi2DoStep(c, t, 1e-3, fmi2False));
+                fmi2Status back = fmi2SetFMUstate(c, s);
+                count(back);
+                if (back != fmi2OK) return 7;
+                check_outputs(c, "a state restored after a trial step");
                 size_t size = 0;
                 count(fmi2SerializedFMUstateSize(c, s, &size));
                 unsigned char *bytes = malloc(size);
@@ -190,6 +198,14 @@ int main(int argc, char **argv) {
                 if (n_real) count(fmi2SetReal(c, &real_vr[pick(n_real)], 1, &v));
             }
         }
+        fmi2FMUstate last = NULL;
+        if (fmi2GetFMUstate(c, &last) != fmi2OK) return 8;
+        count(fmi2Reset(c));
+        fmi2Status back = fmi2SetFMUstate(c, last);
+        count(back);
+        if (back != fmi2OK) return 9;
+        check_outputs(c, "a state restored after fmi2Reset");
+        count(fmi2FreeFMUstate(c, &last));
         count(fmi2Terminate(c));
         fmi2FreeInstance(c);
         fmi2FreeInstance(other);

@@ -92,7 +92,11 @@ typedef struct {
 
 typedef struct {
     snapshot s;
-    prsm_model model;          /* valid in phases stepping and terminated (auto: au.dyn) */
+    /* valid in phases stepping and terminated (auto: au.dyn), and then built (with au and
+       is_auto) by build_model from the parameters s holds: they are fixed from
+       exitInitializationMode on, and fmi2SetFMUstate replaces them only with the model of the
+       state it restores (model_built_from) */
+    prsm_model model;
     int is_auto;               /* auto switches between the dynamic and quasi-static level (au) */
     prsm_auto au;
     double y[N_OUT_REAL > 0 ? N_OUT_REAL : 1];
@@ -975,10 +979,29 @@ static int auto_memory_ok(const prsm_auto_memory *a) {
            && memory_ok(&a->dyn) && memory_ok(&a->qs);
 }
 
-/* the whole snapshot checked; builds the model it needs into m (and for auto its stepper into
- * au, *is_auto).  0, or -1 and the reason */
-static int check_snapshot(const snapshot *s, prsm_model *m, prsm_auto *au, int *is_auto,
-                          char *msg, int len) {
+/* Is c's built model (c->model, c->au, c->is_auto) the one build_model builds from the
+ * parameters of s (a snapshot in phase stepping or terminated)?  build_model reads the
+ * parameters (par_real, par_int, par_bool, par_str) and auto_start of its snapshot and nothing
+ * else, and is deterministic; c's model was built from c->s's (the invariant on component.model)
+ * while c is in phase stepping or terminated.  So when these are bytewise equal, building again
+ * would give the same model and accept it (it was accepted when built).  The model's only
+ * contents that stepping changes are the lazily computed slaved laws (prsm_model.law): each is a
+ * function of the model's built constants alone, the same values whenever it is computed. */
+static int model_built_from(const component *c, const snapshot *s) {
+    return c->s.phase >= PH_STEPPING && s->phase >= PH_STEPPING
+           && s->auto_start == c->s.auto_start
+           && !memcmp(s->par_real, c->s.par_real, sizeof s->par_real)
+           && !memcmp(s->par_int, c->s.par_int, sizeof s->par_int)
+           && !memcmp(s->par_bool, c->s.par_bool, sizeof s->par_bool)
+           && !memcmp(s->par_str, c->s.par_str, sizeof s->par_str);
+}
+
+/* the whole snapshot checked; the model it needs is built into m (and for auto its stepper into
+ * au, *is_auto), or with built (model_built_from(built, s) true) taken from built: built->model
+ * is then what build_model would give, and nothing is written to m and au.  The other checks
+ * are the same either way.  0, or -1 and the reason */
+static int check_snapshot(const snapshot *s, const component *built, prsm_model *m,
+                          prsm_auto *au, int *is_auto, char *msg, int len) {
     *is_auto = 0;
     if (memcmp(s->magic, MAGIC, 8) || strncmp(s->guid, PRSM_GUID, sizeof s->guid)
         || s->n_stages != PRSM_N_STAGES) {
@@ -1018,16 +1041,20 @@ static int check_snapshot(const snapshot *s, prsm_model *m, prsm_auto *au, int *
         }
         if (prsm_input_violation(s->u_held, msg, len)) return -1;
         char why[600];
-        if (build_model(s, m, au, is_auto, why, sizeof why)) {
+        const prsm_model *model = m;
+        if (built) {
+            model = &built->model;
+            *is_auto = built->is_auto;
+        } else if (build_model(s, m, au, is_auto, why, sizeof why)) {
             snprintf(msg, (size_t)len, "its parameters are not valid: %s", why);
             return -1;
         }
-        if (prsm_model_state_violation(s->x, m, msg, len)) return -1;
+        if (prsm_model_state_violation(s->x, model, msg, len)) return -1;
         if (*is_auto && !auto_memory_ok(&s->amem)) {
             snprintf(msg, (size_t)len, "bad memory of fidelity auto");
             return -1;
         }
-        if (s->stats[2] != (*is_auto ? auto_level(&s->amem) : model_level(m))) {
+        if (s->stats[2] != (*is_auto ? auto_level(&s->amem) : model_level(model))) {
             snprintf(msg, (size_t)len, "step_fidelity %d does not match the fidelity parameter", s->stats[2]);
             return -1;
         }
@@ -1035,13 +1062,16 @@ static int check_snapshot(const snapshot *s, prsm_model *m, prsm_auto *au, int *
     return 0;
 }
 
-/* What fmi2GetFMUstate hands out: a tag, the instance it belongs to and the snapshot.  Every call
- * that takes a state checks the tag and the owner before it reads further (a state of another
- * FMU or instance is refused whole: a PRSM2 state is smaller than a PRSM3 snapshot). */
+/* What fmi2GetFMUstate hands out: a tag, the instance it belongs to, where its snapshot came
+ * from and the snapshot.  Every call that takes a state checks the tag and the owner before it
+ * reads further (a state of another FMU or instance is refused whole: a PRSM2 state is smaller
+ * than a PRSM3 snapshot). */
 #define BLOCK_TAG "PRSMBLK1"
 typedef struct {
     char tag[8];
     const component *owner;
+    int from_get;              /* 1: copied from the owner's state by fmi2GetFMUstate; 0: read
+                                  from bytes by fmi2DeSerializeFMUstate */
     snapshot s;
 } state_block;
 
@@ -1062,6 +1092,7 @@ static state_block *new_block(component *c) {
     if (!b) return NULL;
     memcpy(b->tag, BLOCK_TAG, 8);
     b->owner = c;
+    b->from_get = 0;
     return b;
 }
 
@@ -1074,6 +1105,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *state) {
         return fmi2Error;
     }
     memcpy(&b->s, &c->s, sizeof b->s);
+    b->from_get = 1;
     *state = b;
     return fmi2OK;
 }
@@ -1084,15 +1116,25 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
     if (!b) return fmi2Error;
     const snapshot *s = &b->s;
     char msg[800];
-    prsm_model *m = (prsm_model *)malloc(sizeof *m);
-    prsm_auto *au = (prsm_auto *)malloc(sizeof *au);
+    /* A state this instance saved with the parameters its model was built from (a master
+     * saving and restoring around trial steps) keeps that model: building it again (the
+     * parameters' checks, the contact solve of prsm_geometry.c) would give the same one
+     * (model_built_from).  Every other state, deserialized ones included, is built from its
+     * parameters.  Both are checked whole by check_snapshot, with the same messages. */
+    int reuse = b->from_get && model_built_from(c, s);
+    prsm_model *m = NULL;
+    prsm_auto *au = NULL;
     int is_auto = 0;
-    if (!m || !au) {
-        free(m);
-        free(au);
-        return fmi2Error;
+    if (!reuse) {
+        m = (prsm_model *)malloc(sizeof *m);
+        au = (prsm_auto *)malloc(sizeof *au);
+        if (!m || !au) {
+            free(m);
+            free(au);
+            return fmi2Error;
+        }
     }
-    if (check_snapshot(s, m, au, &is_auto, msg, sizeof msg)) {
+    if (check_snapshot(s, reuse ? c : NULL, m, au, &is_auto, msg, sizeof msg)) {
         log_msg(c, fmi2Error, "fmi2SetFMUstate: the state cannot be restored, nothing changed: %s", msg);
         free(m);
         free(au);
@@ -1100,7 +1142,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
     }
     memcpy(&c->s, s, sizeof c->s);
     c->has_refused = c->stuck = 0;
-    if (c->s.phase >= PH_STEPPING) {
+    if (!reuse && c->s.phase >= PH_STEPPING) {
         c->model = *m;
         c->is_auto = is_auto;
         if (is_auto) c->au = *au;
@@ -1159,7 +1201,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte bytes[], s
         return fmi2Error;
     }
     memcpy(&b->s, bytes, sizeof b->s);
-    if (check_snapshot(&b->s, m, au, &is_auto, msg, sizeof msg)) {
+    if (check_snapshot(&b->s, NULL, m, au, &is_auto, msg, sizeof msg)) {
         log_msg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state: %s", msg);
         free(b);
         free(m);
