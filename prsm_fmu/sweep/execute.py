@@ -28,7 +28,8 @@ processes (default: the machine's cores) with one thread each is started and clo
 the loopback interface only, so a local study exposes nothing beyond this machine); only with
 ``scheduler="tcp://host:port"`` do the points go to another cluster, and the FMU files are sent
 to its workers once (``Client.scatter(..., broadcast=True)``), since they may not share this
-machine's file system (they need ``prsm_fmu``, numpy, scipy, fmpy and pythonfmu installed).
+machine's file system (they need ``prsm_fmu``, numpy, scipy and fmpy installed, pythonfmu for
+the Python FMU).
 A ready ``client`` may be passed instead.  ``executor="loop"`` runs the points one after the
 other in this process (the reference the Dask overhead is measured against).
 
