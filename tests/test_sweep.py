@@ -68,6 +68,18 @@ def client():
     cluster.close()
 
 
+def _assert_same_results(a, b) -> None:
+    """Two runs of a study gave the same table (every number equal as a double) and the same
+    series bit for bit."""
+    assert same_table(Path(a.table_path).read_text(encoding="utf-8"),
+                      Path(b.table_path).read_text(encoding="utf-8"))
+    for r in a.rows:
+        sa, sb = load_series(a.out_dir, r["id"]), load_series(b.out_dir, r["id"])
+        assert sa.keys() == sb.keys()
+        for k in sa:
+            np.testing.assert_array_equal(sa[k], sb[k])
+
+
 def _by(rows, **fixed):
     """The rows whose swept values equal ``fixed``."""
     return [r for r in rows if all(r[k] == v for k, v in fixed.items())]
@@ -150,15 +162,7 @@ def test_li2021_friction_end_values_equal_the_independent_steady_state(friction)
 
 
 def test_one_and_two_workers_give_identical_tables(friction):
-    two, one = friction
-    a = Path(two.table_path).read_text(encoding="utf-8")
-    b = Path(one.table_path).read_text(encoding="utf-8")
-    assert same_table(a, b)                               # every number equal as a double
-    for r in two.rows:
-        s2, s1 = load_series(two.out_dir, r["id"]), load_series(one.out_dir, r["id"])
-        assert s2.keys() == s1.keys()
-        for k in s2:
-            np.testing.assert_array_equal(s2[k], s1[k])
+    _assert_same_results(*friction)
 
 
 def test_the_fmu_backend_runs_on_the_native_fmu_and_the_python_fmu_gives_the_same_table(
@@ -173,13 +177,7 @@ def test_the_fmu_backend_runs_on_the_native_fmu_and_the_python_fmu_gives_the_sam
     py = run_study(study, str(tmp_path / "py"), executor="loop", fmu_dir=fmu_dir,
                    progress=None, figures=False, fmu="python")
     assert py.fmu == "python" and len(py.rows) == 4
-    assert same_table(Path(two.table_path).read_text(encoding="utf-8"),
-                      Path(py.table_path).read_text(encoding="utf-8"))
-    for r in two.rows:
-        a, b = load_series(two.out_dir, r["id"]), load_series(py.out_dir, r["id"])
-        assert a.keys() == b.keys()
-        for k in a:
-            np.testing.assert_array_equal(a[k], b[k])
+    _assert_same_results(two, py)
 
 
 def test_without_zig_the_fmu_backend_says_so_and_runs_the_python_fmu(tmp_path, fmu_dir,
@@ -346,13 +344,7 @@ def test_short_points_go_in_chunks_and_give_the_loops_table(tmp_path, client):
     assert 1 <= dask.dask_tasks < 64
     assert loop.dask_tasks == 0
     assert sorted(p.index for p in dask.results) == list(range(64))      # each point once
-    assert same_table(Path(loop.table_path).read_text(encoding="utf-8"),
-                      Path(dask.table_path).read_text(encoding="utf-8"))
-    for r in loop.rows:
-        a, b = load_series(loop.out_dir, r["id"]), load_series(dask.out_dir, r["id"])
-        assert a.keys() == b.keys()
-        for k in a:
-            np.testing.assert_array_equal(a[k], b[k])
+    _assert_same_results(loop, dask)
 
 
 def test_the_dashboard_serves_the_studys_progress(tmp_path, client):
