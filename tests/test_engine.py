@@ -25,7 +25,7 @@ from prsm_fmu.simulate import simulate
 
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))
-from test_fmu import OK, Host, subprocess_env  # noqa: E402
+from test_fmu import OK, Host, built_fmus, built_prsm2_dynamic, subprocess_env  # noqa: E402
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
@@ -153,11 +153,10 @@ def _build(dest: Path, *args: str) -> Path:
 
 @pytest.fixture(scope="module")
 def builds() -> dict[str, Path]:
-    """PRSM2 three ways, each in a child process: plain, ``--start fidelity=dynamic`` and
-    ``--engine python`` (the reference)."""
+    """PRSM2 three ways, each in a child process: plain and ``--start fidelity=dynamic`` (the
+    session's shared builds, tests/test_fmu.py), and ``--engine python`` (the reference)."""
     root = Path(tempfile.mkdtemp(prefix="prsm_engine_"))
-    return {"plain": _build(root / "plain"),
-            "dynamic": _build(root / "dynamic", "--start", "fidelity=dynamic"),
+    return {"plain": built_fmus()["PRSM2"], "dynamic": built_prsm2_dynamic(),
             "reference": _build(root / "reference", "--engine", "python")}
 
 

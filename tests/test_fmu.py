@@ -86,6 +86,20 @@ def built_fmus() -> dict[str, Path]:
 
 
 @functools.cache
+def built_prsm2_dynamic() -> Path:
+    """PRSM2 built with the start value fidelity = dynamic (for hosts that cannot set an
+    Enumeration, and to load beside the plain build), once per test session, shared by the
+    workers like :func:`built_fmus`, in a child process."""
+    def build(dest: Path) -> None:
+        proc = subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest),
+                               "--start", "fidelity=dynamic"], env=subprocess_env(),
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, f"python -m fmu_build failed:\n{proc.stdout}\n{proc.stderr}"
+
+    return shared_build("prsm2_dynamic", build) / "PRSM2.fmu"
+
+
+@functools.cache
 def unzipped(name: str) -> Path:
     """The FMU extracted once per process (fmpy loads the binary from there)."""
     return Path(extract(str(built_fmus()[name])))
