@@ -100,6 +100,19 @@ def built_prsm2_dynamic() -> Path:
 
 
 @functools.cache
+def built_prsm2_reference() -> Path:
+    """PRSM2 built with ``--engine python`` (the Python reference model, no engine packed), once
+    per test session, shared by the workers like :func:`built_fmus`, in a child process."""
+    def build(dest: Path) -> None:
+        proc = subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest),
+                               "--engine", "python"], env=subprocess_env(),
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, f"python -m fmu_build failed:\n{proc.stdout}\n{proc.stderr}"
+
+    return shared_build("prsm2_reference", build) / "PRSM2.fmu"
+
+
+@functools.cache
 def unzipped(name: str) -> Path:
     """The FMU extracted once per process (fmpy loads the binary from there)."""
     return Path(extract(str(built_fmus()[name])))
