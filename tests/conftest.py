@@ -7,8 +7,8 @@
 * The test files in :data:`FIRST` (tests that need a process without other threads) are run
   first, then those in :data:`LONGEST_FIRST` (the costliest, heaviest first), then any other
   file with a test marked ``stress`` (long by design: many runs, many steps), then the rest in
-  collection order: with ``--dist loadfile`` each worker takes the next file when it is done
-  with one, so that the short files at the end fill in and both workers finish together
+  collection order: with ``--dist loadfile`` each worker takes the next file when it is
+  nearly done with one, so that the short files at the end fill in and both workers finish together
   instead of one running a long file alone at the end.
 """
 
@@ -46,7 +46,8 @@ def pytest_unconfigure(config: pytest.Config) -> None:
 FIRST = ("test_plot_layout.py",)
 
 #: the test files that cost most, heaviest first: CPU seconds (the worker's and its child
-#: processes') of one run of the whole suite on two workers (docs/testing.md, "Profile"):
+#: processes') of one run of the whole suite on two workers (docs/testing.md, "Profile of
+#: the order and the shared builds"):
 #: exit stress 38, co-simulation stability 19, sweep 19, command endings 18, engine 17,
 #: actuator loop 13, regression 13, bad inputs 12.5, FMU 11.5, FMU hosts 10, kink landing 8,
 #: showcase 7, platform binaries 6, dynamics 6; every other file 6 or less (plot layout, 9,
