@@ -25,7 +25,8 @@ from prsm_fmu.simulate import simulate
 
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))
-from test_fmu import OK, Host, subprocess_env  # noqa: E402
+from test_fmu import (OK, Host, built_fmus, built_prsm2_dynamic,  # noqa: E402
+                      built_prsm2_reference)
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
@@ -143,22 +144,12 @@ def test_simulate_runs_the_engine_equal_to_the_reference():
 
 # ---- the pythonfmu FMU ------------------------------------------------------------------------
 
-def _build(dest: Path, *args: str) -> Path:
-    proc = subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest),
-                           *args], env=subprocess_env(), capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return dest / "PRSM2.fmu"
-
-
 @pytest.fixture(scope="module")
 def builds() -> dict[str, Path]:
-    """PRSM2 three ways, each in a child process: plain, ``--start fidelity=dynamic`` and
-    ``--engine python`` (the reference)."""
-    root = Path(tempfile.mkdtemp(prefix="prsm_engine_"))
-    return {"plain": _build(root / "plain"),
-            "dynamic": _build(root / "dynamic", "--start", "fidelity=dynamic"),
-            "reference": _build(root / "reference", "--engine", "python")}
+    """PRSM2 three ways, each built in a child process once per session (tests/test_fmu.py):
+    plain, ``--start fidelity=dynamic`` and ``--engine python`` (the reference)."""
+    return {"plain": built_fmus()["PRSM2"], "dynamic": built_prsm2_dynamic(),
+            "reference": built_prsm2_reference()}
 
 
 def test_the_fmu_packs_the_physics_engine_and_slave_not_the_tools(builds):

@@ -72,17 +72,38 @@ def subprocess_env() -> dict:
     return env
 
 
+def _shared_fmu_build(name: str, *args: str) -> Path:
+    """The directory ``python -m fmu_build ARGS --dest DIR`` filled once per test session,
+    in a child process, shared by pytest-xdist's workers (tests/conftest.py)."""
+    def build(dest: Path) -> None:
+        proc = subprocess.run([sys.executable, "-m", "fmu_build", *args, "--dest", str(dest)],
+                              env=subprocess_env(), capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, f"python -m fmu_build failed:\n{proc.stdout}\n{proc.stderr}"
+
+    return shared_build(name, build)
+
+
 @functools.cache
 def built_fmus() -> dict[str, Path]:
     """Build PRSM1..3 once per test session (shared by pytest-xdist's workers: tests/conftest.py),
     in a child process; name -> FMU path."""
-    def build(dest: Path) -> None:
-        proc = subprocess.run([sys.executable, "-m", "fmu_build", "--all", "--dest", str(dest)],
-                              env=subprocess_env(), capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, f"python -m fmu_build failed:\n{proc.stdout}\n{proc.stderr}"
-
-    dest = shared_build("prsm_fmus", build)
+    dest = _shared_fmu_build("prsm_fmus", "--all")
     return {n: dest / f"{n}.fmu" for n in NAMES}
+
+
+@functools.cache
+def built_prsm2_dynamic() -> Path:
+    """PRSM2 built with the start value fidelity = dynamic (for hosts that cannot set an
+    Enumeration, and to load beside the plain build), once per test session like
+    :func:`built_fmus`."""
+    return _shared_fmu_build("prsm2_dynamic", "PRSM2", "--start", "fidelity=dynamic") / "PRSM2.fmu"
+
+
+@functools.cache
+def built_prsm2_reference() -> Path:
+    """PRSM2 built with ``--engine python`` (the Python reference model, no engine packed), once
+    per test session like :func:`built_fmus`."""
+    return _shared_fmu_build("prsm2_reference", "PRSM2", "--engine", "python") / "PRSM2.fmu"
 
 
 @functools.cache

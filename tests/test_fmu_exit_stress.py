@@ -30,14 +30,18 @@ def test_fmpy_simulate_cli_50_runs_under_cpu_load_all_exit_cleanly(fmus, tmp_pat
     """The command that aborted with ``corrupted double-linked list`` (exit 134), run 50 times
     through fmpy's console script, 2 at a time next to a busy loop that loads a core.
     Whether pythonfmu's exit-time write into freed memory hits a heap list depended on the
-    layout (hash seed, argv, what the run allocated): each run gets its own PYTHONHASHSEED."""
+    layout (hash seed, argv, what the run allocated): each run gets its own PYTHONHASHSEED.
+    The busy loop runs at the lowest priority (nice 19): it loads a core the runs and the
+    other tests leave idle, as before, but no longer takes a core from the suite's other
+    worker (under pytest-xdist that worker's tests are load enough)."""
     import concurrent.futures
     import time
 
     script = Path(sys.executable).parent / "fmpy"
     args = [str(script), "simulate", str(fmus["PRSM2"]), "--stop-time", "0.01",
             "--start-values", "fidelity", "3", "screw_torque", "15", "load_force", "1000"]
-    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])]
+    busy_loop = "import os\nos.nice(19)\nwhile True: pass"        # lowest priority: docstring
+    burners = [subprocess.Popen([sys.executable, "-c", busy_loop])]
 
     def run(seed: int) -> tuple[int, int, str]:
         env = dict(os.environ, PYTHONHASHSEED=str(seed))

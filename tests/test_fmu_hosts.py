@@ -31,7 +31,7 @@ pytest.importorskip("pythonfmu")
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from test_fmu import NAMES, built_fmus, subprocess_env  # noqa: E402
+from test_fmu import NAMES, built_fmus, built_prsm2_dynamic, subprocess_env  # noqa: E402
 from text_numbers import number_after  # noqa: E402
 
 OUTPUTS = ("screw_speed", "rod_position", "stage[1].contact_force", "friction_work",
@@ -75,14 +75,9 @@ def fmpy_run(fmu: Path, times: list[tuple[float, float]], start: dict) -> list[l
 
 
 @pytest.fixture(scope="module")
-def dynamic_prsm2(tmp_path_factory) -> Path:
+def dynamic_prsm2() -> Path:
     """PRSM2 built with the start value fidelity = dynamic (hosts without Enumerations)."""
-    dest = tmp_path_factory.mktemp("prsm2_dynamic")
-    proc = subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest),
-                           "--start", "fidelity=dynamic"], env=subprocess_env(),
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return dest / "PRSM2.fmu"
+    return built_prsm2_dynamic()
 
 
 # ---- libcosim ---------------------------------------------------------------------------------

@@ -29,6 +29,7 @@ from prsm_fmu import presets  # noqa: E402
 from prsm_fmu.sweep import ensure_fmus  # noqa: E402
 from prsm_fmu.sweep.fmu_runner import FmuRunner  # noqa: E402
 from prsm_fmu.sweep.points import speed_profile  # noqa: E402
+from test_fmu import built_fmus  # noqa: E402
 
 BASELINE = Path(__file__).parent / "data" / "fmu_runner_startup_c7f5419.csv"
 #: relative to a column's largest magnitude (module docstring)
@@ -48,7 +49,12 @@ def _baseline() -> tuple[dict[str, list[float]], int, int]:
 
 @pytest.fixture(scope="module")
 def fmu_path(tmp_path_factory) -> str:
-    return ensure_fmus([2], str(tmp_path_factory.mktemp("fmu")))[2]
+    """PRSM2 as the sweep finds it: taken from the session's shared build (tests/test_fmu.py)."""
+    shared = built_fmus()["PRSM2"].parent
+    path = ensure_fmus([2], str(tmp_path_factory.mktemp("fmu")), fmu_dir=str(shared),
+                       build=False)[2]
+    assert Path(path).parent == shared
+    return path
 
 
 def test_runner_reproduces_the_stored_start_up(fmu_path, monkeypatch):

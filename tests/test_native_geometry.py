@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import struct
-import subprocess
 import sys
 from pathlib import Path
 
@@ -23,26 +22,22 @@ import pytest
 pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")
 
-from test_fmu import Host  # noqa: E402
+from test_fmu import Host, built_prsm2_reference  # noqa: E402
+from test_native_fmu import built_native  # noqa: E402
 from test_param_ranges import _init  # noqa: E402 - reset, set, exitInitializationMode: why refused
 from zig_skip import skip_without_ziglang  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 STEPS = 100
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory) -> dict[str, Path]:
-    """PRSM2 native (linux64, FMI 2.0 only: the suite's time) and the Python reference FMU."""
+def fmus() -> dict[str, Path]:
+    """PRSM2 native (linux64, FMI 2.0) and the Python reference FMU (``--engine python``): the
+    session's shared builds (tests/test_native_fmu.py, tests/test_fmu.py)."""
     if sys.platform != "linux":
         pytest.skip("the native FMU is built here for Linux only")
     skip_without_ziglang(module_level=False)
-    dest = tmp_path_factory.mktemp("native_geometry")
-    for args in (["--native", "--platform", "linux64", "--fmi-version", "2"],
-                 ["--engine", "python"]):
-        subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", *args, "--dest", str(dest)],
-                       check=True, capture_output=True, cwd=ROOT, timeout=600)
-    return {"native": dest / "PRSM2-native.fmu", "python": dest / "PRSM2.fmu"}
+    return {"native": built_native()["PRSM2"], "python": built_prsm2_reference()}
 
 
 def _bits(values: list[float]) -> list[bytes]:

@@ -12,7 +12,7 @@
   the FMU's unit, and every unit written is one the FMU defines, or one of the scaled or
   electrical units listed here that the FMU has no variable in.
 
-The FMU is built once in a child process (see tests/test_fmu.py for why).
+The FMU is the session's shared build of PRSM2, made in a child process (tests/test_fmu.py).
 """
 
 from __future__ import annotations
@@ -36,6 +36,8 @@ import pytest
 pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")
 
+from test_fmu import built_fmus  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: units written outside the FMU's vocabulary: time (no FMU variable is a time, so its
@@ -45,12 +47,8 @@ OTHER_UNITS = {"s", "ms", "mm", "µm", "mm/s", "kN", "A", "V"}
 
 
 @pytest.fixture(scope="module")
-def fmu(tmp_path_factory) -> Path:
-    dest = tmp_path_factory.mktemp("fmu")
-    proc = subprocess.run([sys.executable, "-m", "fmu_build", "PRSM2", "--dest", str(dest)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    return dest / "PRSM2.fmu"
+def fmu() -> Path:
+    return built_fmus()["PRSM2"]
 
 
 @pytest.fixture(scope="module")
