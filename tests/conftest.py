@@ -51,12 +51,15 @@ FIRST = ("test_plot_layout.py",)
 #: exit stress 38, co-simulation stability 19, sweep 19, command endings 18, engine 17,
 #: actuator loop 13, regression 13, bad inputs 12.5, FMU 11.5, FMU hosts 10, kink landing 8,
 #: showcase 7, platform binaries 6, dynamics 6; every other file 6 or less (plot layout, 9,
-#: is in FIRST).  The co-simulation file follows the stress test: it builds no FMU, so
+#: is in FIRST); measured alone (one process, its FMU builds included): the sweep master's
+#: compiled loop 12, the native FMU's state restore 8.5.  The co-simulation file follows
+#: the stress test: it builds no FMU, so
 #: neither worker waits at the start for the FMU build the stress test begins with.
 LONGEST_FIRST = (
     "test_fmu_exit_stress.py", "test_cosim_stability.py", "test_sweep.py",
     "test_command_endings.py", "test_engine.py", "test_system_ema.py", "test_regress.py",
-    "test_bad_inputs.py", "test_fmu.py", "test_fmu_hosts.py", "test_kink_landing.py",
+    "test_bad_inputs.py", "test_fmu_track.py", "test_fmu.py", "test_fmu_hosts.py",
+    "test_native_state_restore.py", "test_kink_landing.py",
     "test_showcase_and_units.py", "test_platform_binaries.py", "test_dynamics.py",
 )
 
