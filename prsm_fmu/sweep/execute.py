@@ -69,7 +69,8 @@ from ..atomic import atomic_path
 from ..command import child_failure, deferred_interrupt
 from ..extras import require
 from .metrics import standard_metrics
-from .points import FmuFile, PointResult, PointTask, run_point, run_points
+from .points import (FmuFile, PointResult, PointTask, pack_chunk, run_chunk, run_point,
+                     unpack_chunk)
 from .series_files import load_series, save_series
 from .study import Study
 from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
@@ -398,7 +399,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         chunk = tasks[k:k + size]
         state["next"] = k + len(chunk)
         # the dashboard's progress shows these tasks (prsm-points) done of those submitted
-        fut = client.submit(run_points, chunk, blobs, save_dir,
+        fut = client.submit(run_chunk, pack_chunk(chunk), blobs, save_dir,
                             key=f"prsm-points-{chunk[0].index}-{len(chunk)}-{chunk[0].id}",
                             pure=False, retries=0)
         futures[fut] = chunk
@@ -414,7 +415,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for fut in pending:
             chunk = futures.pop(fut)
             try:
-                done = fut.result()
+                done = unpack_chunk(fut.result())
             except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
                 done = [PointResult(t.index, t.id, dict(t.values), "error",
                                     f"{type(exc).__name__}: {exc}") for t in chunk]
