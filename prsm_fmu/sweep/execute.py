@@ -34,8 +34,9 @@ other in this process (the reference the Dask overhead is measured against).
 
 The points go to the workers in chunks (:func:`chunk_size`), each submitted once
 (``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of CPU each at the latest
-chunk's CPU time per point (so Dask's cost per task, a few ms of CPU, stays near 1 % of the
-work; a point of more than that is a chunk of its own), shrinking to single points towards
+chunk's CPU time per point (so Dask's cost per task, ~7 ms of CPU, stays near 0.35 % of the
+work; a point of more than that is a chunk of its own), packed into one pickle each way
+(:func:`~prsm_fmu.sweep.points.pack_chunk`), shrinking to single points towards
 the end (so the workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as
 soon as one comes back.  A chunk's results are appended to the table as soon as it is done,
 so an interrupted study keeps every finished chunk; where the workers share this file system
@@ -255,12 +256,18 @@ def _label(values: dict[str, Any]) -> str:
 #: cluster's own cost grows with its wall time, not with its points): no statistical profiler
 #: (it samples the running task's stack every 10 ms), no work stealing (the chunks are handed
 #: out as workers free up, IN_FLIGHT each), the event loops' health check every second
-#: instead of every 20 ms, the workers' memory check every second instead of every 100 ms
+#: instead of every 20 ms, the workers' memory check every second instead of every 100 ms,
+#: the system monitor (CPU, memory, disk and network counters of each process, read through
+#: psutil for the dashboard) every 5 s instead of every 0.5 s, and no active memory manager
+#: (it looks for replicas to drop every 2 s; a local study makes none).  The last two took an
+#: idle 1-worker cluster from 13-15 ms to 9-10 ms of CPU a second (two runs each, interleaved)
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.scheduler.work-stealing": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.scheduler.active-memory-manager.start": False,
 }
 
 
@@ -319,11 +326,13 @@ def _quiet_logs() -> None:
         logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
-#: CPU time [s] a Dask task (a chunk of points) aims at: Dask's cost per task (scheduler,
-#: worker, this process: ~5 ms of CPU on a local cluster, benchmarks/sweep_scaling.py) stays
-#: near 1 % of it.  CPU, not wall time: on a loaded machine a point's wall time grows with the
-#: other jobs while Dask's cost per task does not shrink
-CHUNK_SECONDS = 0.5
+#: CPU time [s] a Dask task (a chunk of points) aims at: Dask's cost per task (this process
+#: with its scheduler, the worker and its nanny: ~7 ms of CPU on a local cluster,
+#: benchmarks/dask_task_cost.py) stays near 0.35 % of it (it was 1.4 % at 0.5 s).  CPU, not
+#: wall time: on a loaded machine a point's wall time grows with the other jobs while Dask's
+#: cost per task does not shrink.  The price of a longer chunk: the progress and the table
+#: move a chunk at a time, and a Ctrl-C loses the chunks running (up to this much CPU a worker)
+CHUNK_SECONDS = 2.0
 #: chunks in flight per worker: while one runs the next waits on the worker, so that no worker
 #: idles during a round trip to this process
 IN_FLIGHT = 2
