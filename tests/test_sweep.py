@@ -366,6 +366,31 @@ def test_the_local_cluster_listens_on_loopback_only(client):
     assert not exposed, f"listening beyond this machine: {exposed}"
 
 
+def test_the_local_clusters_workers_keep_glibcs_malloc_defaults(monkeypatch):
+    """Dask's nanny gives its workers MALLOC_TRIM_THRESHOLD_=65536 (freed memory handed back
+    to the system at once, glibc's mmap threshold fixed): every point then takes its arrays
+    from the system again (page faults, more CPU a point, docs/sweeps.md).  A study's local
+    cluster leaves it out; the other variables Dask sets are kept."""
+    import dask
+    from dask.distributed import Client
+
+    from prsm_fmu.sweep.execute import local_cluster
+
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    dask_env = dask.config.get("distributed.nanny.pre-spawn-environ")
+    assert "MALLOC_TRIM_THRESHOLD_" in dask_env          # what the test is about is there
+    cluster = local_cluster(1)
+    try:
+        with Client(cluster) as c:
+            seen = c.run(lambda: {k: os.environ.get(k) for k in
+                                  ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")})
+    finally:
+        cluster.close()
+    (env,) = seen.values()
+    assert env["MALLOC_TRIM_THRESHOLD_"] is None, env
+    assert env["OMP_NUM_THREADS"] == str(dask_env["OMP_NUM_THREADS"])
+
+
 def test_a_point_the_fmu_refuses_records_the_fmus_own_reason(fmu_dir):
     """A refused step (a non-finite load on the FMU's input) and a failed initialization (a
     friction coefficient out of the FMU's range, bypassing the caller's validation): the point's
