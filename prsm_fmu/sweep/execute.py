@@ -418,8 +418,10 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
     bar.publish = publisher(client)               # the dashboard's progress page
     bar.publish(bar.state())
-    page = page_served(client)
-    if bar.stream is not None and page:
+    # asked over HTTP only when there is a stream to name it on (up to 2 s on a remote cluster
+    # that does not answer)
+    page = page_served(client) if bar.stream is not None else None
+    if page:
         bar.stream.write(f"{chr(10) if bar.tty else ''}progress page: {page}\n")
     n_workers = max(1, len(client.scheduler_info().get("workers", {})) or (workers or 1))
     save_dir = None if ship_fmus else series_dir
