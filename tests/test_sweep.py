@@ -309,6 +309,28 @@ def test_short_points_go_in_chunks_and_give_the_loops_table(tmp_path, client):
             np.testing.assert_array_equal(a[k], b[k])
 
 
+def test_series_sent_back_by_the_workers_equal_the_loops(tmp_path, client):
+    """Workers that do not share this file system (ship_fmus) send each point's series back in
+    the chunk's pickled results (points.pack_chunk) and this process saves them: table and
+    series equal the plain loop's, arrays bit for bit, a failed point included."""
+    study = load_study(_write_study(tmp_path / "s.toml", "mu_screw_roller = [0.1, 1.5, 0.2]\n"
+                                    "mu_spline = [0.1, 0.2, 0.3]", backend="model"))
+    loop = run_study(study, str(tmp_path / "loop"), executor="loop", progress=None,
+                     figures=False)
+    sent = run_study(study, str(tmp_path / "sent"), client=client, ship_fmus=True,
+                     progress=None, figures=False)
+    assert [r["status"] for r in sent.rows].count("error") == 3        # µ_SR 1.5, 3 times
+    assert same_table(Path(loop.table_path).read_text(encoding="utf-8"),
+                      Path(sent.table_path).read_text(encoding="utf-8"))
+    ok = [r for r in loop.rows if r["status"] == "ok"]
+    assert len(ok) == 6
+    for r in ok:
+        a, b = load_series(loop.out_dir, r["id"]), load_series(sent.out_dir, r["id"])
+        assert a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+
+
 def test_the_dashboard_serves_the_studys_progress(tmp_path, client):
     """The local cluster's dashboard server has the page /prsm-progress; after a study of three
     points of which one fails it says so, and the progress stream named the page."""
