@@ -286,6 +286,10 @@ def main() -> None:
         ensure_fmus([2], fmu_dir)
         print(f"start-up study of Li et al. (2021) (dynamic, 1 ms at 1 µs steps), "
               f"{os.cpu_count()} cores, {_load()}")
+        if os.getloadavg()[0] > 0.5:
+            print("  other jobs share the cores (load average above 0.5 before the run): the "
+                  "wall-time figures and the goals are for a quiet machine; the CPU-time "
+                  "figures vary by ±15 % or more at a load above the cores")
         engine_goal(fmu_dir, tmp, args.repeat)
         if not args.goal_only:
             for backend, points in (("fmu", args.points), ("model", args.model_points)):
