@@ -330,9 +330,9 @@ def _worker_environ() -> dict[str, Any]:
     Dask sets ``MALLOC_TRIM_THRESHOLD_=65536`` so that a worker hands freed memory back to the
     system at once; setting it also fixes glibc's mmap threshold at 128 kB.  A point's arrays
     are then taken from the system and given back at every point: ~130-195 page faults a
-    model point in a worker against none in this process, and 4-7 % more CPU a point, model
+    model point in a worker against none in this process, and 5-13 % more CPU a point, model
     and FMU backends alike (the same chunk run alternately on two 1-worker clusters, with and
-    without it; docs/sweeps.md).  A study's workers hold a few MB at a time: glibc's own
+    without it, three runs; docs/sweeps.md).  A study's workers hold a few MB at a time: glibc's own
     defaults suit them.  (The nanny also writes its variables into this process's
     ``os.environ`` before it spawns; a value there is inherited by the workers as before.)
     """
