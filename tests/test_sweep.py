@@ -347,6 +347,28 @@ def test_short_points_go_in_chunks_and_give_the_loops_table(tmp_path, client):
     _assert_same_results(loop, dask)
 
 
+def test_series_sent_back_by_the_workers_equal_the_loops(tmp_path, client):
+    """Workers that do not share this file system (ship_fmus) send each point's series back in
+    the chunk's pickled results (points.pack_chunk) and this process saves them: table and
+    series equal the plain loop's, arrays bit for bit, a failed point included."""
+    study = load_study(_write_study(tmp_path / "s.toml", "mu_screw_roller = [0.1, 1.5, 0.2]\n"
+                                    "mu_spline = [0.1, 0.2, 0.3]", backend="model"))
+    loop = run_study(study, str(tmp_path / "loop"), executor="loop", progress=None,
+                     figures=False)
+    sent = run_study(study, str(tmp_path / "sent"), client=client, ship_fmus=True,
+                     progress=None, figures=False)
+    assert [r["status"] for r in sent.rows].count("error") == 3        # µ_SR 1.5, 3 times
+    assert same_table(Path(loop.table_path).read_text(encoding="utf-8"),
+                      Path(sent.table_path).read_text(encoding="utf-8"))
+    ok = [r for r in loop.rows if r["status"] == "ok"]
+    assert len(ok) == 6
+    for r in ok:
+        a, b = load_series(loop.out_dir, r["id"]), load_series(sent.out_dir, r["id"])
+        assert a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+
+
 def test_the_dashboard_serves_the_studys_progress(tmp_path, client):
     """The local cluster's dashboard server has the page /prsm-progress; after a study of three
     points of which one fails it says so, and the progress stream named the page."""
@@ -402,6 +424,31 @@ def test_the_local_cluster_listens_on_loopback_only(client):
     assert len(socks) >= 2 + 2 * 2, socks
     exposed = [s for s in socks if s[1] not in ("127.0.0.1", "::1")]
     assert not exposed, f"listening beyond this machine: {exposed}"
+
+
+def test_the_local_clusters_workers_keep_glibcs_malloc_defaults(monkeypatch):
+    """Dask's nanny gives its workers MALLOC_TRIM_THRESHOLD_=65536 (freed memory handed back
+    to the system at once, glibc's mmap threshold fixed): every point then takes its arrays
+    from the system again (page faults, more CPU a point, docs/sweeps.md).  A study's local
+    cluster leaves it out; the other variables Dask sets are kept."""
+    import dask
+    from dask.distributed import Client
+
+    from prsm_fmu.sweep.execute import local_cluster
+
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    dask_env = dask.config.get("distributed.nanny.pre-spawn-environ")
+    assert "MALLOC_TRIM_THRESHOLD_" in dask_env          # what the test is about is there
+    cluster = local_cluster(1)
+    try:
+        with Client(cluster) as c:
+            seen = c.run(lambda: {k: os.environ.get(k) for k in
+                                  ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")})
+    finally:
+        cluster.close()
+    (env,) = seen.values()
+    assert env["MALLOC_TRIM_THRESHOLD_"] is None, env
+    assert env["OMP_NUM_THREADS"] == str(dask_env["OMP_NUM_THREADS"])
 
 
 def test_a_point_the_fmu_refuses_records_the_fmus_own_reason(fmu_dir):

@@ -33,13 +33,17 @@ def test_progress_bar_shows_done_failed_and_time_left():
     assert "left" not in out.getvalue().splitlines()[-1]
 
 
-def test_chunks_hold_half_a_cpu_second_and_shrink_to_single_points_at_the_end():
-    # the start-up study on the model backend, ~6 ms of CPU a point, 1000 left on 2 workers:
-    # 0.5 s / 6 ms = 83.3 -> 83 points (guided bound 1000 // (2 x 2) = 250 is larger)
-    assert chunk_size(1000, 2, 0.006) == 83
-    # on the FMU backend, ~0.12 s of CPU a point: 0.5 / 0.12 = 4.2 -> 4; 0.6 s: one
-    assert chunk_size(1000, 2, 0.12) == 4
-    assert chunk_size(1000, 2, 0.6) == 1
+def test_chunks_hold_two_cpu_seconds_and_shrink_to_single_points_at_the_end():
+    # the start-up study on the model backend, ~6 ms of CPU a point, 10000 left on 2 workers:
+    # 2 s / 6 ms = 333.3 -> 333 points (guided bound 10000 // (2 x 2) = 2500 is larger)
+    assert chunk_size(10000, 2, 0.006) == 333
+    # 1000 left: the guided bound 1000 // 4 = 250 is smaller than 333
+    assert chunk_size(1000, 2, 0.006) == 250
+    # on the FMU backend, ~0.12 s of CPU a point: 2 / 0.12 = 16.7 -> 16; 0.6 s: 3.3 -> 3;
+    # 2.5 s: 0.8 -> a point of its own
+    assert chunk_size(1000, 2, 0.12) == 16
+    assert chunk_size(1000, 2, 0.6) == 3
+    assert chunk_size(1000, 2, 2.5) == 1
     # towards the end the guided bound: 20 left on 2 workers -> 20 // 4 = 5; 7 left -> 1
     assert chunk_size(20, 2, 0.006) == 5
     assert chunk_size(7, 2, 0.006) == 1

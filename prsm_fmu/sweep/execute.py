@@ -35,8 +35,9 @@ other in this process (the reference the Dask overhead is measured against).
 
 The points go to the workers in chunks (:func:`chunk_size`), each submitted once
 (``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of CPU each at the latest
-chunk's CPU time per point (so Dask's cost per task, a few ms of CPU, stays near 1 % of the
-work; a point of more than that is a chunk of its own), shrinking to single points towards
+chunk's CPU time per point (so Dask's cost per task, ~7 ms of CPU, stays near 0.35 % of the
+work; a point of more than that is a chunk of its own), packed into one pickle each way
+(:func:`~prsm_fmu.sweep.points.pack_chunk`), shrinking to single points towards
 the end (so the workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as
 soon as one comes back.  A chunk's results are appended to the table as soon as it is done,
 so an interrupted study keeps every finished chunk; where the workers share this file system
@@ -70,7 +71,8 @@ from ..atomic import atomic_path
 from ..command import child_failure, deferred_interrupt
 from ..extras import require
 from .metrics import standard_metrics
-from .points import FmuFile, PointResult, PointTask, run_point, run_points
+from .points import (FmuFile, PointResult, PointTask, pack_chunk, run_chunk, run_point,
+                     unpack_chunk)
 from .series_files import load_series, save_series
 from .study import Study
 from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
@@ -288,12 +290,18 @@ def _label(values: dict[str, Any]) -> str:
 #: cluster's own cost grows with its wall time, not with its points): no statistical profiler
 #: (it samples the running task's stack every 10 ms), no work stealing (the chunks are handed
 #: out as workers free up, IN_FLIGHT each), the event loops' health check every second
-#: instead of every 20 ms, the workers' memory check every second instead of every 100 ms
+#: instead of every 20 ms, the workers' memory check every second instead of every 100 ms,
+#: the system monitor (CPU, memory, disk and network counters of each process, read through
+#: psutil for the dashboard) every 5 s instead of every 0.5 s, and no active memory manager
+#: (it looks for replicas to drop every 2 s; a local study makes none).  The last two took an
+#: idle 1-worker cluster from 13-15 ms to 9-10 ms of CPU a second (two runs each, interleaved)
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.scheduler.work-stealing": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.scheduler.active-memory-manager.start": False,
 }
 
 
@@ -331,6 +339,7 @@ def local_cluster(workers: int | None = None):
 
     routes = list(dask.config.get("distributed.scheduler.http.routes", []))
     settings = dict(QUIET_CLUSTER)
+    settings["distributed.nanny.pre-spawn-environ"] = _worker_environ()
     # the study's progress page on the dashboard's server (prsm_fmu.sweep.dashboard)
     settings["distributed.scheduler.http.routes"] = \
         routes + [ROUTE_MODULE] * (ROUTE_MODULE not in routes)
@@ -344,6 +353,30 @@ def local_cluster(workers: int | None = None):
             signal.signal(signal.SIGINT, previous)
 
 
+#: environment variable of glibc's malloc that Dask's nanny sets for its workers
+#: (``distributed.nanny.pre-spawn-environ``) and a local study's workers go without
+MALLOC_TRIM = "MALLOC_TRIM_THRESHOLD_"
+
+
+def _worker_environ() -> dict[str, Any]:
+    """Dask's ``distributed.nanny.pre-spawn-environ`` without :data:`MALLOC_TRIM`.
+
+    Dask sets ``MALLOC_TRIM_THRESHOLD_=65536`` so that a worker hands freed memory back to the
+    system at once; setting it also fixes glibc's mmap threshold at 128 kB.  A point's arrays
+    are then taken from the system and given back at every point: ~130-195 page faults a
+    model point in a worker against none in this process, and 5-13 % more CPU a point, model
+    and FMU backends alike (the same chunk run alternately on two 1-worker clusters, with and
+    without it, three runs; docs/sweeps.md).  A study's workers hold a few MB at a time: glibc's own
+    defaults suit them.  (The nanny also writes its variables into this process's
+    ``os.environ`` before it spawns; a value there is inherited by the workers as before.)
+    """
+    import dask
+
+    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
+    env.pop(MALLOC_TRIM, None)
+    return env
+
+
 def _quiet_logs() -> None:
     """Run here and on each worker before an interrupted study closes its cluster: no shutdown
     logs (Dask's own, and tornado's: a callback that Dask's sync cancels mid-way can log a
@@ -352,11 +385,13 @@ def _quiet_logs() -> None:
         logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
-#: CPU time [s] a Dask task (a chunk of points) aims at: Dask's cost per task (scheduler,
-#: worker, this process: ~5 ms of CPU on a local cluster, benchmarks/sweep_scaling.py) stays
-#: near 1 % of it.  CPU, not wall time: on a loaded machine a point's wall time grows with the
-#: other jobs while Dask's cost per task does not shrink
-CHUNK_SECONDS = 0.5
+#: CPU time [s] a Dask task (a chunk of points) aims at: Dask's cost per task (this process
+#: with its scheduler, the worker and its nanny: ~7 ms of CPU on a local cluster,
+#: benchmarks/dask_task_cost.py) stays near 0.35 % of it (it was 1.4 % at 0.5 s).  CPU, not
+#: wall time: on a loaded machine a point's wall time grows with the other jobs while Dask's
+#: cost per task does not shrink.  The price of a longer chunk: the progress and the table
+#: move a chunk at a time, and a Ctrl-C loses the chunks running (up to this much CPU a worker)
+CHUNK_SECONDS = 2.0
 #: chunks in flight per worker: while one runs the next waits on the worker, so that no worker
 #: idles during a round trip to this process
 IN_FLIGHT = 2
@@ -417,8 +452,10 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
                 blobs[sha] = client.scatter(fh.read(), broadcast=True)
     bar.publish = publisher(client)               # the dashboard's progress page
     bar.publish(bar.state())
-    page = page_served(client)
-    if bar.stream is not None and page:
+    # asked over HTTP only when there is a stream to name it on (up to 2 s on a remote cluster
+    # that does not answer)
+    page = page_served(client) if bar.stream is not None else None
+    if page:
         bar.stream.write(f"{chr(10) if bar.tty else ''}progress page: {page}\n")
     n_workers = max(1, len(client.scheduler_info().get("workers", {})) or (workers or 1))
     save_dir = None if ship_fmus else series_dir
@@ -432,7 +469,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         chunk = tasks[k:k + size]
         state["next"] = k + len(chunk)
         # the dashboard's progress shows these tasks (prsm-points) done of those submitted
-        fut = client.submit(run_points, chunk, blobs, save_dir,
+        fut = client.submit(run_chunk, pack_chunk(chunk), blobs, save_dir,
                             key=f"prsm-points-{chunk[0].index}-{len(chunk)}-{chunk[0].id}",
                             pure=False, retries=0)
         futures[fut] = chunk
@@ -448,7 +485,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
         for fut in pending:
             chunk = futures.pop(fut)
             try:
-                done = fut.result()
+                done = unpack_chunk(fut.result())
             except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
                 done = [PointResult(t.index, t.id, dict(t.values), "error",
                                     f"{type(exc).__name__}: {exc}") for t in chunk]
