@@ -7,8 +7,9 @@ numpy in double-double arithmetic (a value as the unevaluated sum of two doubles
 1. each value x with 2e-99 ≤ |x| < 9e99 (two exponent digits) gets a decimal exponent e = ⌊log₁₀|x|⌋ and its 17
    significant digits d = round(|x| · 10^k), k = 16 − e, with the signed rest
    r = |x| · 10^k − d.  |x| · 10^k is formed exactly as a product of two doubles (Dekker's
-   split) plus |x| times the table's low part of 10^k, so its error is ~1e-32 relative — r is
-   known to ~1e-15 of a digit;
+   product: |x| cut into its top 27 significant bits and the rest by clearing bits, 10^k into
+   halves of 26 bits by Dekker's split) plus |x| times the table's low part of 10^k, so its
+   error is ~1e-32 relative — r is known to ~1e-15 of a digit;
 2. a text reads back as x exactly when it lies within half a unit in the last place (ulp) of x,
    since ``float()`` rounds correctly: its distance from |x| · 10^k (in units of the 17th digit)
    must be below half the smaller gap from x to a neighbouring double, scaled by 10^k, less
@@ -71,31 +72,19 @@ def _table(rows) -> np.ndarray:
     return np.frombuffer(b"".join(bytes(r) for r in rows), dtype=_QUAD).copy()
 
 
-_P10_HI, _P10_LO = _pow10_table()
-#: word 0 by the first digit: ``-``, the digit, ``.`` (bytes 5..7)
-_HEAD = _table(b"\0\0\0\0\0-%d." % i for i in range(10))
-#: four digits of 0..9999 as the low half of an 8-byte word (words 1 and 2: the 16 digits)
-_GROUPS = _table(b"%04d\0\0\0\0" % i for i in range(10000))
-#: word 3 by the exponent + 99 (−99..99): ``e``, the sign, two digits, ``,``
-_TAIL = _table(b"e%+03d,\0\0\0" % i for i in range(-99, 100))
-#: the digits kept up to and with a group's last nonzero one, by the group (0..9999) and its
-#: place j: 4·j + its digits up to the last nonzero one; 0 for a zero group.  The digits kept
-#: after the point are the largest of the four
-_LAST = np.array([[0 if v == 0 else 4 * j + len(str(v).zfill(4).rstrip("0"))
-                   for v in range(10000)] for j in range(4)], dtype=np.uint8)
-#: bytes kept (1) of word 0 by 2 · negative + (any digit after the point); of words 1 and 2 by
-#: the number m of digits after the point; of word 3, always ``e±XX,``
-_KEEP_HEAD = _table([0, 0, 0, 0, 0, n, 1, p] for n in (0, 1) for p in (0, 1))
-_KEEP_DIGITS = [_table([1 if 8 * w + i < m else 0 for i in range(8)] for m in range(17))
-                for w in (0, 1)]
-_KEEP_TAIL = _table([[1, 1, 1, 1, 1, 0, 0, 0]])[0]
-#: byte 4 of word 3: the separator
-_NEWLINE = np.uint64(ord("\n") << 32)
-_COMMA = np.uint64(ord(",") << 32)
+#: tables below are indexed by j = e + _EOFF, e the decimal exponent (10^k with k = 16 − e):
+#: j = 0.._EOFF + 136 covers k = −120..120
+_EOFF = 104
+_NJ = 2 * _KMAX + 1
+
+
+def _by_exponent(table_by_k: np.ndarray) -> np.ndarray:
+    """A table indexed by k + _KMAX re-indexed by j = e + _EOFF (k = 16 − e)."""
+    return np.ascontiguousarray(table_by_k[::-1])
+
+
+_P10_HI_K, _P10_LO_K = _pow10_table()
 _SPLIT = 134217729.0          # 2^27 + 1, Dekker's splitting constant for float64
-_D16, _D17 = 10 ** 16, 10 ** 17
-_EXPONENT_BITS = np.int64(0x7FF0000000000000)
-_FRACTION_BITS = np.int64(0x000FFFFFFFFFFFFF)
 
 
 def _split(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,84 +93,149 @@ def _split(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return h, a - h
 
 
-def _digits(a: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """round(a · 10^k) as int64 and the signed rest a · 10^k − round(...) [digits] (step 1)."""
-    i = k + _KMAX
-    hi = _P10_HI[i]
-    p = a * hi                                       # a · hi = p + err exactly (Dekker)
-    ah, al = _split(a)
-    bh, bl = _P10_SPLIT_HI[i], _P10_SPLIT_LO[i]      # _split(hi), made once
-    err = ((ah * bh - p) + ah * bl + al * bh) + al * bl
-    yl = err + a * _P10_LO[i]
+#: 10^(16 − e) by j: the nearest double, its Dekker halves (26 bits each), the rest
+_P10_HI = _by_exponent(_P10_HI_K)
+_P10_BH, _P10_BL = (_by_exponent(t) for t in _split(_P10_HI_K))
+_P10_LO = _by_exponent(_P10_LO_K)
+#: 10^(16 − e) less the relative margin (1e-12) of step 2
+_P10_SAFE = _by_exponent(_P10_HI_K * (1.0 - 1e-12))
+#: word 0 by the first digit: ``-``, the digit, ``.`` (bytes 5..7)
+_HEAD = _table(b"\0\0\0\0\0-%d." % i for i in range(10))
+#: four digits of 0..9999 in the low half of an 8-byte word and in its high half (words 1
+#: and 2: the 16 digits after the first)
+_GROUPS = _table(b"%04d\0\0\0\0" % i for i in range(10000))
+_GROUPS_HIGH = _table(b"\0\0\0\0%04d" % i for i in range(10000))
+#: word 3 by j (e = −99..99): ``e``, the sign, two digits, ``,``; never used elsewhere
+_TAIL = _table(b"e%+03d,\0\0\0" % (j - _EOFF) if -99 <= j - _EOFF <= 99 else b"\0" * 8
+               for j in range(_NJ))
+#: the digits kept up to and with a group's last nonzero one, by the group (0..9999) and its
+#: place j: 4·j + its digits up to the last nonzero one; 0 for a zero group.  The digits kept
+#: after the point are the largest of the four
+_LAST = np.array([[0 if v == 0 else 4 * j + len(str(v).zfill(4).rstrip("0"))
+                   for v in range(10000)] for j in range(4)], dtype=np.uint8)
+#: the bytes kept (1) of a value's four words by m + 17 · negative, m = 0..16 the digits after
+#: the point: ``[-]d`` (``.`` and m digits if m > 0), ``e±XX,``
+_KEEP = np.frombuffer(b"".join(
+    bytes([0, 0, 0, 0, 0, neg, 1, m > 0] + [1 if i < m else 0 for i in range(16)]
+          + [1, 1, 1, 1, 1, 0, 0, 0]) for neg in (0, 1) for m in range(17)),
+    dtype=_QUAD).reshape(34, ROW // 8).copy()
+#: byte 4 of word 3: the separator
+_NEWLINE = np.uint64(ord("\n") << 32)
+_COMMA = np.uint64(ord(",") << 32)
+_D16, _D17 = 10 ** 16, 10 ** 17
+_EXPONENT_BITS = np.int64(0x7FF0000000000000)
+_FRACTION_BITS = np.int64(0x000FFFFFFFFFFFFF)
+#: a double's 26 low fraction bits cleared: its top 27 significant bits, exact in any product
+#: with a 26-bit half of 10^k
+_HIGH27 = np.int64(~((1 << 26) - 1))
+_LO_BITS = int(np.float64(_LO).view(np.int64))
+_SPAN_BITS = np.uint64(int(np.float64(_HI).view(np.int64)) - _LO_BITS)
+
+
+def _digits(a: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """round(a · 10^k) as int64 and the signed rest a · 10^k − round(...) [digits] (step 1),
+    k = 16 − e, j = e + _EOFF."""
+    p = np.take(_P10_HI, j, mode="clip")
+    p *= a                                           # a · hi = p + err exactly (Dekker)
+    ah = (a.view(np.int64) & _HIGH27).view(np.float64)
+    al = a - ah
+    bh = np.take(_P10_BH, j, mode="clip")
+    bl = np.take(_P10_BL, j, mode="clip")
+    err = ah * bh
+    err -= p
+    t = ah * bl
+    err += t
+    np.multiply(al, bh, out=t)
+    err += t
+    np.multiply(al, bl, out=t)
+    err += t
+    lo = np.take(_P10_LO, j, mode="clip")
+    lo *= a
+    err += lo                                        # + a · lo: the rest yl
     yr = np.rint(p)
-    f = (p - yr) + yl                                # exact: p − yr is exact for |p| < 2^53,
-    c = np.rint(f)                                   # zero above (p is then an integer)
-    return yr.astype(np.int64) + c.astype(np.int64), f - c
+    f = np.subtract(p, yr, out=p)                    # exact: p − yr is exact for |p| < 2^53,
+    f += err                                         # zero above (p is then an integer)
+    c = np.rint(f)
+    d = yr.astype(np.int64)
+    d += c.astype(np.int64)
+    f -= c
+    return d, f
 
 
-_P10_SPLIT_HI, _P10_SPLIT_LO = _split(_P10_HI)
-#: 10^k less the relative margin (1e-12) of step 2
-_P10_SAFE = _P10_HI * (1.0 - 1e-12)
-
-
-def _half_gap(a: np.ndarray) -> np.ndarray:
-    """Half the smaller gap from a (normal, > 0) to a neighbouring double: half its ulp
-    2^(E − 52), a quarter at a power of two (the gap below is half the gap above); exact."""
-    bits = a.view(np.int64)
-    ulp = ((bits & _EXPONENT_BITS) - (52 << 52)).view(np.float64)
-    return ulp * np.where(bits & _FRACTION_BITS, 0.5, 0.25)
-
-
-def _shortest(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For ``x`` with _LO ≤ |x| < _HI: 17 significant digits (int64, trailing digits zero when
-    15 suffice), the decimal exponent, and whether the text passed step 2."""
-    a = np.abs(x)
-    e = np.floor(np.log10(a)).astype(np.int64)
-    d, r = _digits(a, 16 - e)
-    # log10 a unit off near powers of ten, or a rounding up to 10^17: one decade over
-    off = (d >= _D17).astype(np.int64) - (d < _D16)
-    redo = np.flatnonzero(off)
+def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For ``a`` with _LO ≤ a < _HI: 17 significant digits (int64, trailing digits zero when
+    15 suffice), j = the decimal exponent + _EOFF (intp), and whether the text passed step 2."""
+    j = np.log10(a)
+    j += _EOFF                                       # > 0: truncation is the floor
+    j = j.astype(np.intp)
+    d, r = _digits(a, j)
+    # log10 a unit off near powers of ten (or by adding _EOFF), or a rounding up to 10^17:
+    # one decade over
+    redo = np.flatnonzero((d >= _D17) | (d < _D16))
     if redo.size:
-        e[redo] += off[redo]
-        d[redo], r[redo] = _digits(a[redo], 16 - e[redo])
+        j[redo] += (d[redo] >= _D17).astype(np.intp) - (d[redo] < _D16)
+        d[redo], r[redo] = _digits(a[redo], j[redo])
         # still out of range (log10 two off: not seen) -> repr, through a rest no text passes
         bad = redo[(d[redo] < _D16) | (d[redo] >= _D17)]
         d[bad], r[bad] = _D16, np.inf
-    # the threshold is known to ~1e-16 relative, the rest r to ~1e-15 digits
-    limit = _half_gap(a) * np.take(_P10_SAFE, 16 - e + _KMAX) - 1e-12
+    # the threshold is known to ~1e-16 relative, the rest r to ~1e-15 digits; half the smaller
+    # gap from a to a neighbouring double: half its ulp 2^(E − 52), a quarter at a power of
+    # two (the gap below is half the gap above); exact
+    bits = a.view(np.int64)
+    gap = bits & _EXPONENT_BITS
+    gap -= 53 << 52
+    np.subtract(gap, 1 << 52, out=gap, where=(bits & _FRACTION_BITS) == 0)
+    limit = gap.view(np.float64)
+    limit *= np.take(_P10_SAFE, j, mode="clip")
+    limit -= 1e-12
     q = d // 100
-    rem = d - 100 * q
-    up = (rem + r) > 50.0                            # the 15 digits rounded to nearest
-    ok15 = np.abs((100 * up - rem) - r) < limit
-    d17 = np.where(ok15, 100 * (q + up), d)
-    carry = d17 == _D17                              # 15 digits rounded up to 10^15
-    d17[carry] = _D16
-    e += carry
-    return d17, e, ok15 | (np.abs(r) < limit)
+    rem = (d - 100 * q).astype(np.float64)
+    up = rem + r
+    up = up > 50.0                                   # the 15 digits rounded to nearest
+    dist = up * 100.0
+    dist -= rem                                      # exact: small integers
+    dist -= r
+    ok15 = np.abs(dist, out=dist) < limit
+    q += up
+    q *= 100
+    np.copyto(d, q, where=ok15)                      # d: the 17 digits written
+    carry = np.flatnonzero(d == _D17)                # 15 digits rounded up to 10^15
+    d[carry] = _D16
+    j[carry] += 1
+    settled = np.abs(r, out=r) < limit
+    settled |= ok15
+    return d, j, settled
 
 
 def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.ndarray,
-          e: np.ndarray) -> None:
-    """Write ``[-]d.ddde±XX,`` (17 digits, trailing zeros not kept, |e| ≤ 99) into rows of the
-    (n, 4) 8-byte word arrays ``words`` (characters) and ``keep`` (per byte: 1 kept, 0 not)."""
-    first = d17 // _D16
-    rest = d17 - first * _D16                         # the other 16 digits
-    hi = rest // 10 ** 8
-    lo = rest - hi * 10 ** 8
-    g0 = hi // 10000                                  # in four groups of four
-    g1 = hi - g0 * 10000
+          j: np.ndarray) -> None:
+    """Write ``[-]d.ddde±XX,`` (17 digits, trailing zeros not kept, |e| ≤ 99, j = e + _EOFF)
+    into rows of the (n, 4) 8-byte word arrays ``words`` (characters) and ``keep`` (per byte:
+    1 kept, 0 not)."""
+    hi = d17 // 10 ** 8                               # the first 9 digits
+    lo = hi * 10 ** 8
+    np.subtract(d17, lo, out=lo)                      # the last 8
+    first = hi // 10 ** 8
+    t = first * 10 ** 8
+    hi -= t                                           # digits 2..9
+    g0 = np.floor_divide(hi, 10000, out=t)            # in four groups of four
+    hi -= g0 * 10000
     g2 = lo // 10000
-    g3 = lo - g2 * 10000
-    m = np.maximum(np.maximum(np.take(_LAST[0], g0), np.take(_LAST[1], g1)),
-                   np.maximum(np.take(_LAST[2], g2), np.take(_LAST[3], g3)))
-    words[:, 0] = np.take(_HEAD, first)
-    words[:, 1] = np.take(_GROUPS, g0) | (np.take(_GROUPS, g1) << np.uint64(32))
-    words[:, 2] = np.take(_GROUPS, g2) | (np.take(_GROUPS, g3) << np.uint64(32))
-    words[:, 3] = np.take(_TAIL, e + 99)
-    keep[:, 0] = np.take(_KEEP_HEAD, 2 * negative + (m > 0))
-    keep[:, 1] = np.take(_KEEP_DIGITS[0], m)
-    keep[:, 2] = np.take(_KEEP_DIGITS[1], m)
-    keep[:, 3] = _KEEP_TAIL
+    lo -= g2 * 10000
+    g1, g3 = hi, lo
+    m = np.take(_LAST[0], g0, mode="clip")
+    np.maximum(m, np.take(_LAST[1], g1, mode="clip"), out=m)
+    np.maximum(m, np.take(_LAST[2], g2, mode="clip"), out=m)
+    np.maximum(m, np.take(_LAST[3], g3, mode="clip"), out=m)
+    words[:, 0] = np.take(_HEAD, first, mode="clip")
+    np.bitwise_or(np.take(_GROUPS, g0, mode="clip"), np.take(_GROUPS_HIGH, g1, mode="clip"),
+                  out=words[:, 1])
+    np.bitwise_or(np.take(_GROUPS, g2, mode="clip"), np.take(_GROUPS_HIGH, g3, mode="clip"),
+                  out=words[:, 2])
+    words[:, 3] = np.take(_TAIL, j, mode="clip")
+    code = m.astype(np.intp)
+    code[negative] += 17
+    np.take(_KEEP, code, axis=0, out=keep, mode="clip")
 
 
 def format_cells(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,17 +246,22 @@ def format_cells(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = x.size
     words = np.empty((n, ROW // 8), dtype=_QUAD)
     keep = np.empty((n, ROW // 8), dtype=_QUAD)
-    ax = np.abs(x)
-    inside = (ax >= _LO) & (ax < _HI)
-    if inside.all():                                  # the common case: no gather/scatter
-        d17, e, settled = _shortest(x)
-    else:
-        d17 = np.zeros(n, dtype=np.int64)             # zeros: 0e+00 (or -0e+00)
-        e = np.zeros(n, dtype=np.int64)
-        settled = ax == 0.0
-        fin = np.flatnonzero(inside)
-        d17[fin], e[fin], settled[fin] = _shortest(x[fin])
-    _fill(words, keep, np.signbit(x), d17, e)
+    a = np.abs(x)
+    # _LO ≤ a < _HI, on the bits (NaN's are above +inf's, zero's below _LO's)
+    offset = a.view(np.int64) - _LO_BITS
+    inside = offset.view(np.uint64) < _SPAN_BITS
+    everywhere = bool(inside.all())                   # the common case: no masks
+    if not everywhere:
+        outside = ~inside
+        zero = a == 0.0                               # 0e+00 (or -0e+00)
+        a[outside] = 1.0                              # any value inside: its digits unused
+    d17, j, settled = _shortest(a)
+    if not everywhere:
+        d17[outside] = 0
+        j[outside] = _EOFF
+        settled &= inside
+        settled |= zero
+    _fill(words, keep, np.signbit(x), d17, j)
     chars, kept = words.view(np.uint8), keep.view(np.uint8).view(bool)
     # NaN, ±inf, |x| outside step 1's range and what step 2 did not settle: repr, in bytes
     # 0..23 (the longest repr has 24 characters), padded with NUL bytes that are not kept
