@@ -171,7 +171,7 @@ def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     d, r = _digits(a, j)
     # log10 a unit off near powers of ten (or by adding _EOFF), or a rounding up to 10^17:
     # one decade over
-    redo = np.flatnonzero((d >= _D17) | (d < _D16))
+    redo = np.flatnonzero((d - _D16).view(np.uint64) >= _D17 - _D16)
     if redo.size:
         j[redo] += (d[redo] >= _D17).astype(np.intp) - (d[redo] < _D16)
         d[redo], r[redo] = _digits(a[redo], j[redo])
@@ -233,8 +233,8 @@ def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.nda
     np.bitwise_or(np.take(_GROUPS, g2, mode="clip"), np.take(_GROUPS_HIGH, g3, mode="clip"),
                   out=words[:, 2])
     words[:, 3] = np.take(_TAIL, j, mode="clip")
-    code = m.astype(np.intp)
-    code[negative] += 17
+    code = np.multiply(negative, 17, dtype=np.intp)
+    code += m
     np.take(_KEEP, code, axis=0, out=keep, mode="clip")
 
 
@@ -243,9 +243,18 @@ def format_cells(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     characters, (n, ROW) uint8, and a boolean mask of those to keep: text that ``float()``
     reads back to the same double, bit for bit (module docstring), then ``,`` (byte 28)."""
     x = np.ascontiguousarray(x, dtype=np.float64).ravel()
+    words = np.empty((x.size, ROW // 8), dtype=_QUAD)
+    keep = np.empty((x.size, ROW // 8), dtype=_QUAD)
+    return _cells_into(x, words, keep)
+
+
+def _cells_into(x: np.ndarray, words: np.ndarray,
+                keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`format_cells` of the 1-D float64 ``x`` into the first ``x.size`` rows of the
+    (≥ x.size, 4) 8-byte word arrays ``words`` and ``keep`` (reused by :func:`format_blocks`:
+    no fresh pages for every block); their (x.size, ROW) uint8 and bool views."""
     n = x.size
-    words = np.empty((n, ROW // 8), dtype=_QUAD)
-    keep = np.empty((n, ROW // 8), dtype=_QUAD)
+    words, keep = words[:n], keep[:n]
     a = np.abs(x)
     # _LO ≤ a < _HI, on the bits (NaN's are above +inf's, zero's below _LO's)
     offset = a.view(np.int64) - _LO_BITS
@@ -293,9 +302,11 @@ def format_blocks(data: np.ndarray) -> Iterator[np.ndarray]:
     # blocks of ~8000 values: the temporary arrays then stay in the CPU's cache (whole columns
     # of a long run would stream through memory for every operation)
     step = max(1, _BLOCK // max(cols, 1))
+    words = np.empty((min(rows, step) * cols, ROW // 8), dtype=_QUAD)
+    keep = np.empty_like(words)
     for r0 in range(0, rows, step):
         block = data[r0:r0 + step]
-        chars, kept = format_cells(block)
+        chars, kept = _cells_into(np.ascontiguousarray(block).ravel(), words, keep)
         last = chars.view(_QUAD).reshape(block.shape[0], cols, ROW // 8)[:, -1, 3]
         last ^= _COMMA ^ _NEWLINE                     # the last value's separator
         yield chars[kept]
