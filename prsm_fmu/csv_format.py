@@ -23,8 +23,11 @@ numpy in double-double arithmetic (a value as the unevaluated sum of two doubles
 4. what is left (NaN, ±inf, |x| outside step 1's range, anything not passed) by ``repr``, exact
    by definition (the shortest text that reads back as the same double).
 
-The characters are laid out as 32 bytes per value, four 8-byte words looked up in tables
-(:data:`ROW`), with a mask of the bytes kept; one boolean index then packs every line.
+The characters are laid out as 24 bytes per value, three 8-byte words looked up in tables
+(:data:`ROW`): the separator *before* the value (``,``, or ``\n`` ending the previous line),
+the sign, the first digit and ``.`` in the first four bytes, then the 16 other digits, then
+``e±XX``; with a mask of the bytes kept.  A value of 17 digits is then one run of kept bytes,
+which numpy's boolean index, packing every line at once, copies fastest.
 
 The tests read values back with ``float()`` and compare the bits (tests/test_csv_format.py).
 """
@@ -36,14 +39,14 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["format_cells", "format_values", "format_table", "format_blocks", "ROW"]
+__all__ = ["format_values", "format_table", "format_blocks", "ROW"]
 
-#: bytes per value in the working layout (four 8-byte words): 5 ``-``, 6 the first digit, 7
-#: ``.``, 8..23 the other 16 digits, 24 ``e``, 25 the exponent's sign, 26..27 its two digits,
-#: 28 the separator; bytes 0..4 and 29..31 are never kept.  A value's kept bytes are then two
-#: runs (``[-]d.ddd`` and ``e±XX,``), which numpy's boolean index copies faster than scattered
-#: bytes
-ROW = 32
+#: bytes per value in the working layout (three 8-byte words): 0..1 the separator before the
+#: value and ``-`` (a negative value: ``,-``; a positive one: NUL ``,``), 2 the first digit,
+#: 3 ``.``, 4..19 the other 16 digits, 20 ``e``, 21 the exponent's sign, 22..23 its two
+#: digits.  A text of ``repr`` takes bytes 1..23 after the separator (and its 24th character,
+#: if any, is written after the row)
+ROW = 24
 
 #: values handled by the vectorised path: two exponent digits (|e| ≤ 99, also after rounding
 #: up a decade, or when log10 is a unit off); |x| · 10^k stays within float64's range and
@@ -99,29 +102,28 @@ _P10_BH, _P10_BL = (_by_exponent(t) for t in _split(_P10_HI_K))
 _P10_LO = _by_exponent(_P10_LO_K)
 #: 10^(16 − e) less the relative margin (1e-12) of step 2
 _P10_SAFE = _by_exponent(_P10_HI_K * (1.0 - 1e-12))
-#: word 0 by the first digit: ``-``, the digit, ``.`` (bytes 5..7)
-_HEAD = _table(b"\0\0\0\0\0-%d." % i for i in range(10))
-#: four digits of 0..9999 in the low half of an 8-byte word and in its high half (words 1
-#: and 2: the 16 digits after the first)
+#: the low half of word 0 by the first digit + 10 · negative: ``\0,d.`` or ``,-d.``
+_HEAD = _table(b"%s%d.\0\0\0\0" % (b",-" if neg else b"\0,", i)
+               for neg in (0, 1) for i in range(10))
+#: four digits of 0..9999 in the low half of an 8-byte word and in its high half (the 16
+#: digits after the first: the high half of word 0, word 1, the low half of word 2)
 _GROUPS = _table(b"%04d\0\0\0\0" % i for i in range(10000))
 _GROUPS_HIGH = _table(b"\0\0\0\0%04d" % i for i in range(10000))
-#: word 3 by j (e = −99..99): ``e``, the sign, two digits, ``,``; never used elsewhere
-_TAIL = _table(b"e%+03d,\0\0\0" % (j - _EOFF) if -99 <= j - _EOFF <= 99 else b"\0" * 8
+#: the high half of word 2 by j (e = −99..99): ``e``, the sign, two digits; never used
+#: elsewhere
+_TAIL = _table(b"\0\0\0\0e%+03d" % (j - _EOFF) if -99 <= j - _EOFF <= 99 else b"\0" * 8
                for j in range(_NJ))
 #: the digits kept up to and with a group's last nonzero one, by the group (0..9999) and its
 #: place j: 4·j + its digits up to the last nonzero one; 0 for a zero group.  The digits kept
 #: after the point are the largest of the four
 _LAST = np.array([[0 if v == 0 else 4 * j + len(str(v).zfill(4).rstrip("0"))
                    for v in range(10000)] for j in range(4)], dtype=np.uint8)
-#: the bytes kept (1) of a value's four words by m + 17 · negative, m = 0..16 the digits after
-#: the point: ``[-]d`` (``.`` and m digits if m > 0), ``e±XX,``
+#: the bytes kept (1) of a value's three words by m + 17 · negative, m = 0..16 the digits after
+#: the point: ``,[-]d`` (``.`` and m digits if m > 0), ``e±XX``
 _KEEP = np.frombuffer(b"".join(
-    bytes([0, 0, 0, 0, 0, neg, 1, m > 0] + [1 if i < m else 0 for i in range(16)]
-          + [1, 1, 1, 1, 1, 0, 0, 0]) for neg in (0, 1) for m in range(17)),
-    dtype=_QUAD).reshape(34, ROW // 8).copy()
-#: byte 4 of word 3: the separator
-_NEWLINE = np.uint64(ord("\n") << 32)
-_COMMA = np.uint64(ord(",") << 32)
+    bytes([neg, 1, 1, m > 0] + [1 if i < m else 0 for i in range(16)] + [1, 1, 1, 1])
+    for neg in (0, 1) for m in range(17)), dtype=_QUAD).reshape(34, ROW // 8).copy()
+_COMMA, _NEWLINE = ord(","), ord("\n")
 _D16, _D17 = 10 ** 16, 10 ** 17
 _EXPONENT_BITS = np.int64(0x7FF0000000000000)
 _FRACTION_BITS = np.int64(0x000FFFFFFFFFFFFF)
@@ -209,9 +211,9 @@ def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.ndarray,
           j: np.ndarray) -> None:
-    """Write ``[-]d.ddde±XX,`` (17 digits, trailing zeros not kept, |e| ≤ 99, j = e + _EOFF)
-    into rows of the (n, 4) 8-byte word arrays ``words`` (characters) and ``keep`` (per byte:
-    1 kept, 0 not)."""
+    """Write ``,[-]d.ddde±XX`` (17 digits, trailing zeros not kept, |e| ≤ 99, j = e + _EOFF)
+    into rows of the (n, 3) 8-byte word arrays ``words`` (characters, :data:`ROW`) and
+    ``keep`` (per byte: 1 kept, 0 not)."""
     hi = d17 // 10 ** 8                               # the first 9 digits
     lo = hi * 10 ** 8
     np.subtract(d17, lo, out=lo)                      # the last 8
@@ -227,32 +229,28 @@ def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.nda
     np.maximum(m, np.take(_LAST[1], g1, mode="clip"), out=m)
     np.maximum(m, np.take(_LAST[2], g2, mode="clip"), out=m)
     np.maximum(m, np.take(_LAST[3], g3, mode="clip"), out=m)
-    words[:, 0] = np.take(_HEAD, first, mode="clip")
-    np.bitwise_or(np.take(_GROUPS, g0, mode="clip"), np.take(_GROUPS_HIGH, g1, mode="clip"),
+    code = np.multiply(negative, 10, dtype=np.intp)
+    code += first
+    np.bitwise_or(np.take(_HEAD, code, mode="clip"), np.take(_GROUPS_HIGH, g0, mode="clip"),
+                  out=words[:, 0])
+    np.bitwise_or(np.take(_GROUPS, g1, mode="clip"), np.take(_GROUPS_HIGH, g2, mode="clip"),
                   out=words[:, 1])
-    np.bitwise_or(np.take(_GROUPS, g2, mode="clip"), np.take(_GROUPS_HIGH, g3, mode="clip"),
+    np.bitwise_or(np.take(_GROUPS, g3, mode="clip"), np.take(_TAIL, j, mode="clip"),
                   out=words[:, 2])
-    words[:, 3] = np.take(_TAIL, j, mode="clip")
-    code = np.multiply(negative, 17, dtype=np.intp)
+    np.multiply(negative, 17, out=code)
     code += m
     np.take(_KEEP, code, axis=0, out=keep, mode="clip")
 
 
-def format_cells(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each value of ``x`` (read as float64, flattened in C order) as :data:`ROW` bytes of
-    characters, (n, ROW) uint8, and a boolean mask of those to keep: text that ``float()``
-    reads back to the same double, bit for bit (module docstring), then ``,`` (byte 28)."""
-    x = np.ascontiguousarray(x, dtype=np.float64).ravel()
-    words = np.empty((x.size, ROW // 8), dtype=_QUAD)
-    keep = np.empty((x.size, ROW // 8), dtype=_QUAD)
-    return _cells_into(x, words, keep)
-
-
 def _cells_into(x: np.ndarray, words: np.ndarray,
-                keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`format_cells` of the 1-D float64 ``x`` into the first ``x.size`` rows of the
-    (≥ x.size, 4) 8-byte word arrays ``words`` and ``keep`` (reused by :func:`format_blocks`:
-    no fresh pages for every block); their (x.size, ROW) uint8 and bool views."""
+                keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    """Each value of the 1-D float64 ``x`` as :data:`ROW` bytes of characters, ``,`` then text
+    that ``float()`` reads back to the same double, bit for bit (module docstring), with a mask
+    of those to keep, in the first ``x.size`` rows of the (≥ x.size, 3) 8-byte word arrays
+    ``words`` and ``keep`` (reused by :func:`format_blocks`: no fresh pages for every block).
+
+    Returns their (x.size, ROW) uint8 and bool views and, for a ``repr`` of 24 characters
+    (a negative value of 17 digits and a three-digit exponent), (row, its last character)."""
     n = x.size
     words, keep = words[:n], keep[:n]
     a = np.abs(x)
@@ -273,43 +271,58 @@ def _cells_into(x: np.ndarray, words: np.ndarray,
     _fill(words, keep, np.signbit(x), d17, j)
     chars, kept = words.view(np.uint8), keep.view(np.uint8).view(bool)
     # NaN, ±inf, |x| outside step 1's range and what step 2 did not settle: repr, in bytes
-    # 0..23 (the longest repr has 24 characters), padded with NUL bytes that are not kept
+    # 1..23 after the separator (the longest repr has 24 characters), padded with NUL bytes
+    # that are not kept
     left = np.flatnonzero(~settled)
+    longer: list[tuple[int, int]] = []
     if left.size:
         texts = b"".join(repr(v).encode("ascii").ljust(24, b"\0") for v in x[left].tolist())
         text = np.frombuffer(texts, dtype=np.uint8).reshape(-1, 24)
-        chars[left, :24] = text
-        kept[left, :24] = text != 0
-        kept[left, 24:28] = False
-    return chars, kept
+        chars[left, 0] = _COMMA
+        chars[left, 1:] = text[:, :23]
+        kept[left, 0] = True
+        kept[left, 1:] = text[:, :23] != 0
+        longer = [(int(left[i]), int(text[i, 23])) for i in np.flatnonzero(text[:, 23])]
+    return chars, kept, longer
 
 
 def format_values(x: np.ndarray) -> list[str]:
-    """Each value of ``x`` (read as float64, flattened in C order) as exact text
-    (:func:`format_cells`)."""
+    """Each value of ``x`` (read as float64, flattened in C order) as text that ``float()``
+    reads back to the same double, bit for bit (module docstring)."""
     x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 1)
     return format_table(x).decode("ascii").split("\n")[:-1]
 
 
 def format_blocks(data: np.ndarray) -> Iterator[np.ndarray]:
     """Rows of a 2-D array as CSV lines, ASCII (``,`` between values, ``\\n`` after each row),
-    every value exact (:func:`format_cells`): uint8 arrays of consecutive lines, to be written
-    one after the other (no copy into one bytes object)."""
+    every value read back by ``float()`` as the same double, bit for bit (module docstring):
+    uint8 arrays, to be written one after the other (no copy into one bytes object)."""
     data = np.asarray(data, dtype=np.float64)
-    if data.ndim != 2:
-        raise ValueError(f"data: a 2-D array expected, got shape {data.shape}")
+    if data.ndim != 2 or data.shape[1] == 0:
+        raise ValueError(f"data: a 2-D array of at least one column expected, got shape "
+                         f"{data.shape}")
     rows, cols = data.shape
     # blocks of ~8000 values: the temporary arrays then stay in the CPU's cache (whole columns
     # of a long run would stream through memory for every operation)
-    step = max(1, _BLOCK // max(cols, 1))
+    step = max(1, _BLOCK // cols)
     words = np.empty((min(rows, step) * cols, ROW // 8), dtype=_QUAD)
     keep = np.empty_like(words)
     for r0 in range(0, rows, step):
         block = data[r0:r0 + step]
-        chars, kept = _cells_into(np.ascontiguousarray(block).ravel(), words, keep)
-        last = chars.view(_QUAD).reshape(block.shape[0], cols, ROW // 8)[:, -1, 3]
-        last ^= _COMMA ^ _NEWLINE                     # the last value's separator
-        yield chars[kept]
+        chars, kept, longer = _cells_into(np.ascontiguousarray(block).ravel(), words, keep)
+        # a line's first value: its separator (byte 0 or 1) ends the line before
+        first = chars.reshape(block.shape[0], cols, ROW)[:, 0, :2]
+        first[first == _COMMA] = _NEWLINE
+        if r0 == 0:                                   # nothing before the first line
+            kept[0, :2] &= chars[0, :2] != _NEWLINE
+        done = 0
+        for row, last in longer:                      # a repr's 24th character
+            yield chars[done:row + 1][kept[done:row + 1]]
+            yield np.array([last], dtype=np.uint8)
+            done = row + 1
+        yield chars[done:][kept[done:]]
+    if rows:
+        yield np.array([_NEWLINE], dtype=np.uint8)
 
 
 def format_table(data: np.ndarray) -> bytes:
