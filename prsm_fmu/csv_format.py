@@ -26,8 +26,9 @@ numpy in double-double arithmetic (a value as the unevaluated sum of two doubles
 The characters are laid out as 24 bytes per value, three 8-byte words looked up in tables
 (:data:`ROW`): the separator *before* the value (``,``, or ``\n`` ending the previous line),
 the sign, the first digit and ``.`` in the first four bytes, then the 16 other digits, then
-``e±XX``; with a mask of the bytes kept.  A value of 17 digits is then one run of kept bytes,
-which numpy's boolean index, packing every line at once, copies fastest.
+``e±XX``; the bytes a value does not use (trailing zeros, a ``.`` without digits after it,
+the sign's place of a positive value) are NUL, and ``bytes.translate`` drops them: one pass
+over a block of lines.
 
 The tests read values back with ``float()`` and compare the bits (tests/test_csv_format.py).
 """
@@ -102,27 +103,27 @@ _P10_BH, _P10_BL = (_by_exponent(t) for t in _split(_P10_HI_K))
 _P10_LO = _by_exponent(_P10_LO_K)
 #: 10^(16 − e) less the relative margin (1e-12) of step 2
 _P10_SAFE = _by_exponent(_P10_HI_K * (1.0 - 1e-12))
-#: the low half of word 0 by the first digit + 10 · negative: ``\0,d.`` or ``,-d.``
-_HEAD = _table(b"%s%d.\0\0\0\0" % (b",-" if neg else b"\0,", i)
-               for neg in (0, 1) for i in range(10))
-#: four digits of 0..9999 in the low half of an 8-byte word and in its high half (the 16
-#: digits after the first: the high half of word 0, word 1, the low half of word 2)
-_GROUPS = _table(b"%04d\0\0\0\0" % i for i in range(10000))
-_GROUPS_HIGH = _table(b"\0\0\0\0%04d" % i for i in range(10000))
+#: the low half of word 0 by the first digit + 10 · negative + 20 · (no digit after the point):
+#: ``\0,d.``, ``,-d.``, ``\0,d\0`` or ``,-d\0``
+_HEAD = _table(b"%s%d%s\0\0\0\0" % (b",-" if neg else b"\0,", i, b"\0" if bare else b".")
+               for bare in (0, 1) for neg in (0, 1) for i in range(10))
+
+
+def _group(v: int, last: bool) -> bytes:
+    """Four digits of v (0..9999), the trailing zeros as NUL if no digit follows them."""
+    text = b"%04d" % v
+    return text.rstrip(b"0").ljust(4, b"\0") if last else text
+
+
+#: four digits of 0..9999, + 10000: with trailing zeros as NUL (no nonzero digit after the
+#: group), in the low half of an 8-byte word and in its high half (the 16 digits after the
+#: first: the high half of word 0, word 1, the low half of word 2)
+_GROUPS = _table(_group(v, last) + b"\0" * 4 for last in (0, 1) for v in range(10000))
+_GROUPS_HIGH = _table(b"\0" * 4 + _group(v, last) for last in (0, 1) for v in range(10000))
 #: the high half of word 2 by j (e = −99..99): ``e``, the sign, two digits; never used
 #: elsewhere
 _TAIL = _table(b"\0\0\0\0e%+03d" % (j - _EOFF) if -99 <= j - _EOFF <= 99 else b"\0" * 8
                for j in range(_NJ))
-#: the digits kept up to and with a group's last nonzero one, by the group (0..9999) and its
-#: place j: 4·j + its digits up to the last nonzero one; 0 for a zero group.  The digits kept
-#: after the point are the largest of the four
-_LAST = np.array([[0 if v == 0 else 4 * j + len(str(v).zfill(4).rstrip("0"))
-                   for v in range(10000)] for j in range(4)], dtype=np.uint8)
-#: the bytes kept (1) of a value's three words by m + 17 · negative, m = 0..16 the digits after
-#: the point: ``,[-]d`` (``.`` and m digits if m > 0), ``e±XX``
-_KEEP = np.frombuffer(b"".join(
-    bytes([neg, 1, 1, m > 0] + [1 if i < m else 0 for i in range(16)] + [1, 1, 1, 1])
-    for neg in (0, 1) for m in range(17)), dtype=_QUAD).reshape(34, ROW // 8).copy()
 _COMMA, _NEWLINE = ord(","), ord("\n")
 _D16, _D17 = 10 ** 16, 10 ** 17
 _EXPONENT_BITS = np.int64(0x7FF0000000000000)
@@ -209,11 +210,9 @@ def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return d, j, settled
 
 
-def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.ndarray,
-          j: np.ndarray) -> None:
-    """Write ``,[-]d.ddde±XX`` (17 digits, trailing zeros not kept, |e| ≤ 99, j = e + _EOFF)
-    into rows of the (n, 3) 8-byte word arrays ``words`` (characters, :data:`ROW`) and
-    ``keep`` (per byte: 1 kept, 0 not)."""
+def _fill(words: np.ndarray, negative: np.ndarray, d17: np.ndarray, j: np.ndarray) -> None:
+    """Write ``,[-]d.ddde±XX`` (17 digits, trailing zeros NUL, |e| ≤ 99, j = e + _EOFF) into
+    rows of the (n, 3) 8-byte word array ``words`` (characters, :data:`ROW`)."""
     hi = d17 // 10 ** 8                               # the first 9 digits
     lo = hi * 10 ** 8
     np.subtract(d17, lo, out=lo)                      # the last 8
@@ -225,34 +224,36 @@ def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.nda
     g2 = lo // 10000
     lo -= g2 * 10000
     g1, g3 = hi, lo
-    m = np.take(_LAST[0], g0, mode="clip")
-    np.maximum(m, np.take(_LAST[1], g1, mode="clip"), out=m)
-    np.maximum(m, np.take(_LAST[2], g2, mode="clip"), out=m)
-    np.maximum(m, np.take(_LAST[3], g3, mode="clip"), out=m)
+    # a group's trailing zeros are dropped when every later group is zero: its index + 10000
+    bare = g3 == 0
+    g2 += np.multiply(bare, 10000, dtype=np.int64)
+    bare &= g2 == 10000
+    g1 += np.multiply(bare, 10000, dtype=np.int64)
+    bare &= g1 == 10000
+    g0 += np.multiply(bare, 10000, dtype=np.int64)
+    bare &= g0 == 10000                               # no digit after the point
+    g3 += 10000
     code = np.multiply(negative, 10, dtype=np.intp)
     code += first
+    code += np.multiply(bare, 20, dtype=np.intp)
     np.bitwise_or(np.take(_HEAD, code, mode="clip"), np.take(_GROUPS_HIGH, g0, mode="clip"),
                   out=words[:, 0])
     np.bitwise_or(np.take(_GROUPS, g1, mode="clip"), np.take(_GROUPS_HIGH, g2, mode="clip"),
                   out=words[:, 1])
     np.bitwise_or(np.take(_GROUPS, g3, mode="clip"), np.take(_TAIL, j, mode="clip"),
                   out=words[:, 2])
-    np.multiply(negative, 17, out=code)
-    code += m
-    np.take(_KEEP, code, axis=0, out=keep, mode="clip")
 
 
-def _cells_into(x: np.ndarray, words: np.ndarray,
-                keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+def _cells_into(x: np.ndarray, words: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
     """Each value of the 1-D float64 ``x`` as :data:`ROW` bytes of characters, ``,`` then text
-    that ``float()`` reads back to the same double, bit for bit (module docstring), with a mask
-    of those to keep, in the first ``x.size`` rows of the (≥ x.size, 3) 8-byte word arrays
-    ``words`` and ``keep`` (reused by :func:`format_blocks`: no fresh pages for every block).
+    that ``float()`` reads back to the same double, bit for bit (module docstring), NUL where
+    no character is, in the first ``x.size`` rows of the (≥ x.size, 3) 8-byte word array
+    ``words`` (reused by :func:`format_blocks`: no fresh pages for every block).
 
-    Returns their (x.size, ROW) uint8 and bool views and, for a ``repr`` of 24 characters
-    (a negative value of 17 digits and a three-digit exponent), (row, its last character)."""
+    Returns its (x.size, ROW) uint8 view and, for a ``repr`` of 24 characters (a negative
+    value of 17 digits and a three-digit exponent), (row, its last character)."""
     n = x.size
-    words, keep = words[:n], keep[:n]
+    words = words[:n]
     a = np.abs(x)
     # _LO ≤ a < _HI, on the bits (NaN's are above +inf's, zero's below _LO's)
     offset = a.view(np.int64) - _LO_BITS
@@ -268,11 +269,10 @@ def _cells_into(x: np.ndarray, words: np.ndarray,
         j[outside] = _EOFF
         settled &= inside
         settled |= zero
-    _fill(words, keep, np.signbit(x), d17, j)
-    chars, kept = words.view(np.uint8), keep.view(np.uint8).view(bool)
+    _fill(words, np.signbit(x), d17, j)
+    chars = words.view(np.uint8)
     # NaN, ±inf, |x| outside step 1's range and what step 2 did not settle: repr, in bytes
-    # 1..23 after the separator (the longest repr has 24 characters), padded with NUL bytes
-    # that are not kept
+    # 1..23 after the separator (the longest repr has 24 characters), padded with NUL
     left = np.flatnonzero(~settled)
     longer: list[tuple[int, int]] = []
     if left.size:
@@ -280,10 +280,8 @@ def _cells_into(x: np.ndarray, words: np.ndarray,
         text = np.frombuffer(texts, dtype=np.uint8).reshape(-1, 24)
         chars[left, 0] = _COMMA
         chars[left, 1:] = text[:, :23]
-        kept[left, 0] = True
-        kept[left, 1:] = text[:, :23] != 0
         longer = [(int(left[i]), int(text[i, 23])) for i in np.flatnonzero(text[:, 23])]
-    return chars, kept, longer
+    return chars, longer
 
 
 def format_values(x: np.ndarray) -> list[str]:
@@ -293,10 +291,10 @@ def format_values(x: np.ndarray) -> list[str]:
     return format_table(x).decode("ascii").split("\n")[:-1]
 
 
-def format_blocks(data: np.ndarray) -> Iterator[np.ndarray]:
+def format_blocks(data: np.ndarray) -> Iterator[bytes]:
     """Rows of a 2-D array as CSV lines, ASCII (``,`` between values, ``\\n`` after each row),
     every value read back by ``float()`` as the same double, bit for bit (module docstring):
-    uint8 arrays, to be written one after the other (no copy into one bytes object)."""
+    pieces of text to be written one after the other."""
     data = np.asarray(data, dtype=np.float64)
     if data.ndim != 2 or data.shape[1] == 0:
         raise ValueError(f"data: a 2-D array of at least one column expected, got shape "
@@ -306,25 +304,23 @@ def format_blocks(data: np.ndarray) -> Iterator[np.ndarray]:
     # of a long run would stream through memory for every operation)
     step = max(1, _BLOCK // cols)
     words = np.empty((min(rows, step) * cols, ROW // 8), dtype=_QUAD)
-    keep = np.empty_like(words)
     for r0 in range(0, rows, step):
         block = data[r0:r0 + step]
-        chars, kept, longer = _cells_into(np.ascontiguousarray(block).ravel(), words, keep)
+        chars, longer = _cells_into(np.ascontiguousarray(block).ravel(), words)
         # a line's first value: its separator (byte 0 or 1) ends the line before
         first = chars.reshape(block.shape[0], cols, ROW)[:, 0, :2]
         first[first == _COMMA] = _NEWLINE
         if r0 == 0:                                   # nothing before the first line
-            kept[0, :2] &= chars[0, :2] != _NEWLINE
+            first[0][first[0] == _NEWLINE] = 0
         done = 0
         for row, last in longer:                      # a repr's 24th character
-            yield chars[done:row + 1][kept[done:row + 1]]
-            yield np.array([last], dtype=np.uint8)
+            yield chars[done:row + 1].tobytes().translate(None, b"\0") + bytes([last])
             done = row + 1
-        yield chars[done:][kept[done:]]
+        yield chars[done:].tobytes().translate(None, b"\0")
     if rows:
-        yield np.array([_NEWLINE], dtype=np.uint8)
+        yield b"\n"
 
 
 def format_table(data: np.ndarray) -> bytes:
     """:func:`format_blocks` as one bytes object."""
-    return b"".join(block.tobytes() for block in format_blocks(data))
+    return b"".join(format_blocks(data))
