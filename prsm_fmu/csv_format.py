@@ -127,7 +127,6 @@ _TAIL = _table(b"\0\0\0\0e%+03d" % (j - _EOFF) if -99 <= j - _EOFF <= 99 else b"
 _COMMA, _NEWLINE = ord(","), ord("\n")
 _D16, _D17 = 10 ** 16, 10 ** 17
 _EXPONENT_BITS = np.int64(0x7FF0000000000000)
-_FRACTION_BITS = np.int64(0x000FFFFFFFFFFFFF)
 #: a double's 26 low fraction bits cleared: its top 27 significant bits, exact in any product
 #: with a 26-bit half of 10^k
 _HIGH27 = np.int64(~((1 << 26) - 1))
@@ -184,10 +183,10 @@ def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     # the threshold is known to ~1e-16 relative, the rest r to ~1e-15 digits; half the smaller
     # gap from a to a neighbouring double: half its ulp 2^(E − 52), a quarter at a power of
     # two (the gap below is half the gap above); exact
-    bits = a.view(np.int64)
-    gap = bits & _EXPONENT_BITS
-    gap -= 53 << 52
-    np.subtract(gap, 1 << 52, out=gap, where=(bits & _FRACTION_BITS) == 0)
+    gap = a.view(np.int64) & _EXPONENT_BITS           # 2^E, as a double's bits
+    shift = np.add(gap.view(np.float64) == a, 53, dtype=np.int64)   # 54 at a power of two
+    shift <<= 52
+    gap -= shift
     limit = gap.view(np.float64)
     limit *= np.take(_P10_SAFE, j, mode="clip")
     limit -= 1e-12
@@ -201,7 +200,7 @@ def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ok15 = np.abs(dist, out=dist) < limit
     q += up
     q *= 100
-    np.copyto(d, q, where=ok15)                      # d: the 17 digits written
+    d = np.where(ok15, q, d)                         # the 17 digits written
     carry = np.flatnonzero(d == _D17)                # 15 digits rounded up to 10^15
     d[carry] = _D16
     j[carry] += 1
