@@ -301,7 +301,9 @@ def format_blocks(data: np.ndarray) -> Iterator[bytes]:
     # blocks of ~8000 values: the temporary arrays then stay in the CPU's cache (whole columns
     # of a long run would stream through memory for every operation)
     step = max(1, _BLOCK // cols)
-    words = np.empty((min(rows, step) * cols, ROW // 8), dtype=_QUAD)
+    # the words' memory is a bytearray: a whole block is translated in place of a copy
+    buffer = bytearray(min(rows, step) * cols * ROW)
+    words = np.frombuffer(buffer, dtype=_QUAD).reshape(-1, ROW // 8)
     for r0 in range(0, rows, step):
         block = data[r0:r0 + step]
         chars, longer = _cells_into(np.ascontiguousarray(block).ravel(), words)
@@ -314,7 +316,10 @@ def format_blocks(data: np.ndarray) -> Iterator[bytes]:
         for row, last in longer:                      # a repr's 24th character
             yield chars[done:row + 1].tobytes().translate(None, b"\0") + bytes([last])
             done = row + 1
-        yield chars[done:].tobytes().translate(None, b"\0")
+        if done == 0 and chars.size == len(buffer):
+            yield buffer.translate(None, b"\0")
+        else:
+            yield chars[done:].tobytes().translate(None, b"\0")
     if rows:
         yield b"\n"
 
