@@ -97,10 +97,9 @@ def _split(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return h, a - h
 
 
-#: 10^(16 − e) by j: the nearest double, its Dekker halves (26 bits each), the rest
-_P10_HI = _by_exponent(_P10_HI_K)
-_P10_BH, _P10_BL = (_by_exponent(t) for t in _split(_P10_HI_K))
-_P10_LO = _by_exponent(_P10_LO_K)
+#: 10^(16 − e) by j, a row each (one gather for a value): the nearest double, its Dekker
+#: halves (26 bits each), the rest
+_P10_ROWS = _by_exponent(np.stack([_P10_HI_K, *_split(_P10_HI_K), _P10_LO_K], axis=1))
 #: 10^(16 − e) less the relative margin (1e-12) of step 2
 _P10_SAFE = _by_exponent(_P10_HI_K * (1.0 - 1e-12))
 #: the low half of word 0 by the first digit + 10 · negative + 20 · (no digit after the point):
@@ -137,12 +136,10 @@ _SPAN_BITS = np.uint64(int(np.float64(_HI).view(np.int64)) - _LO_BITS)
 def _digits(a: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """round(a · 10^k) as int64 and the signed rest a · 10^k − round(...) [digits] (step 1),
     k = 16 − e, j = e + _EOFF."""
-    p = np.take(_P10_HI, j, mode="clip")
-    p *= a                                           # a · hi = p + err exactly (Dekker)
+    hi, bh, bl, lo = np.take(_P10_ROWS, j, axis=0, mode="clip").T
+    p = a * hi                                       # a · hi = p + err exactly (Dekker)
     ah = (a.view(np.int64) & _HIGH27).view(np.float64)
     al = a - ah
-    bh = np.take(_P10_BH, j, mode="clip")
-    bl = np.take(_P10_BL, j, mode="clip")
     err = ah * bh
     err -= p
     t = ah * bl
@@ -151,9 +148,8 @@ def _digits(a: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     err += t
     np.multiply(al, bl, out=t)
     err += t
-    lo = np.take(_P10_LO, j, mode="clip")
-    lo *= a
-    err += lo                                        # + a · lo: the rest yl
+    np.multiply(a, lo, out=t)
+    err += t                                         # + a · lo: the rest yl
     yr = np.rint(p)
     f = np.subtract(p, yr, out=p)                    # exact: p − yr is exact for |p| < 2^53,
     f += err                                         # zero above (p is then an integer)
