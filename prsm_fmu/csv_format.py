@@ -150,14 +150,13 @@ def _digits(a: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     err += t
     np.multiply(a, lo, out=t)
     err += t                                         # + a · lo: the rest yl
-    yr = np.rint(p)
-    f = np.subtract(p, yr, out=p)                    # exact: p − yr is exact for |p| < 2^53,
-    f += err                                         # zero above (p is then an integer)
-    c = np.rint(f)
-    d = yr.astype(np.int64)
+    # p ≈ a · 10^k ≥ 10^16 > 2^53 for the right e: an integer, y = p + err exactly.  A p
+    # below 2^53 (e one too high) gives d < 10^16: out of range, and done again
+    c = np.rint(err)
+    d = p.astype(np.int64)
     d += c.astype(np.int64)
-    f -= c
-    return d, f
+    err -= c
+    return d, err
 
 
 def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
