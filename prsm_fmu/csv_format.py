@@ -252,16 +252,12 @@ def _cells_into(x: np.ndarray, words: np.ndarray) -> tuple[np.ndarray, list[tupl
     # _LO ≤ a < _HI, on the bits (NaN's are above +inf's, zero's below _LO's)
     offset = a.view(np.int64) - _LO_BITS
     inside = offset.view(np.uint64) < _SPAN_BITS
-    everywhere = bool(inside.all())                   # the common case: nothing to mend
-    if not everywhere:
-        zero = a == 0.0                               # 0e+00 (or -0e+00)
-        a = np.where(inside, a, 1.0)                  # any value inside: its digits unused
+    outside = np.flatnonzero(~inside)                 # mostly none, or a few zeros
+    a[outside] = 1.0                                  # any value inside: its digits unused
     d17, j, settled = _shortest(a)
-    if not everywhere:
-        d17 *= inside
-        j = np.where(inside, j, _EOFF)
-        settled &= inside
-        settled |= zero
+    d17[outside] = 0                                  # zeros: 0e+00 (or -0e+00)
+    j[outside] = _EOFF
+    settled[outside] = x[outside] == 0.0
     _fill(words, np.signbit(x), d17, j)
     chars = words.view(np.uint8)
     # NaN, ±inf, |x| outside step 1's range and what step 2 did not settle: repr, in bytes
