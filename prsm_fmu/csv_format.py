@@ -280,10 +280,12 @@ def format_values(x: np.ndarray) -> list[str]:
     return format_table(x).decode("ascii").split("\n")[:-1]
 
 
-def format_blocks(data: np.ndarray) -> Iterator[bytes]:
+def format_blocks(data: np.ndarray) -> Iterator[bytes | bytearray]:
     """Rows of a 2-D array as CSV lines, ASCII (``,`` between values, ``\\n`` after each row),
     every value read back by ``float()`` as the same double, bit for bit (module docstring):
-    pieces of text to be written one after the other."""
+    pieces of text (bytes or bytearray) to be written one after the other.
+
+    Raises ValueError (naming ``data``) for an array that is not 2-D or has no column."""
     data = np.asarray(data, dtype=np.float64)
     if data.ndim != 2 or data.shape[1] == 0:
         raise ValueError(f"data: a 2-D array of at least one column expected, got shape "
