@@ -174,3 +174,29 @@ def test_empty_and_malformed_tables():
     for bad in (np.zeros((3, 0)), np.zeros(3), np.zeros((2, 2, 2))):
         with pytest.raises(ValueError, match=r"data: a 2-D array of at least one column"):
             format_table(bad)
+
+
+def test_ties_of_fifteen_digits_round_trip():
+    # a 15-digit decimal exactly halfway between two doubles: m = o · 10^p with o odd, 15
+    # digits, and o · 5^p odd in [2^53, 2^54), so m = (o · 5^p) · 2^p lies in [2^(53+p),
+    # 2^(54+p)) where doubles are 2^(p+1) apart: an odd multiple of 2^p, halfway between the
+    # doubles m − 2^p and m + 2^p.  Only p = 2 (o from 2^53/25 = 3.6e14) and p = 3 (o up to
+    # 2^54/125 = 1.44e14) leave 15-digit o.  float() of the 15-digit text rounds half to even:
+    # it gives back one neighbour only, so each neighbour's text must be the one that reads
+    # back
+    rng = np.random.default_rng(15)
+    x = []
+    for p in (2, 3):
+        lo = max(-(-2**53 // 5**p), 10**14)
+        hi = min(2**54 // 5**p, 10**15)
+        o = rng.integers(lo, hi, size=2000) | 1
+        mid = (o * 10**p).tolist()                       # exact integers (< 2^63)
+        below = np.array([float(m - 2**p) for m in mid])
+        above = np.array([float(m + 2**p) for m in mid])
+        assert [int(v) for v in below] == [m - 2**p for m in mid]     # doubles, exactly
+        assert np.array_equal(np.nextafter(below, np.inf), above)     # neighbours
+        x += [below, above]
+    x = np.concatenate(x)
+    x = np.concatenate([x, -x])
+    print(f"{x.size} neighbours of 15-digit ties, both signs")
+    assert _same_bits(x, _read_back(format_values(x)))
