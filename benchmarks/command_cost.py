@@ -21,11 +21,14 @@ hits both alike.  Printed, each beside its goal:
    its slave's imports, the model's set-up, the engine's load), old FMU / new FMU, and whether
    scipy was imported by then (``--startup-only``: this alone).
 
+``--write-only``: 3. alone (a minute, not several; ``--repeat 7`` steadies it on a loaded
+machine).
+
 Not measured here (say so rather than guess): the sweep's scaling (``benchmarks/sweep_scaling.py``)
 and ``prsm-fmu regress`` (``--regress`` adds it: wall time, old / new).
 
 Run: ``python benchmarks/command_cost.py [--old 707572e] [--repeat 3] [--regress]
-[--startup-only]``
+[--startup-only | --write-only]``
 (several minutes: the README command runs 2 × repeat times).
 """
 
@@ -172,10 +175,35 @@ def _startup(py: str, trees: dict[str, Path], work: dict[str, Path], repeat: int
           f"{scipy['new']}")
 
 
-def _build_fmus(py: str, trees: dict[str, Path], tmp: Path) -> dict[str, Path]:
-    """Each tree's ``dist/PRSM2.fmu`` (the README command's), built before any clock."""
+def _write_cost(py: str, trees: dict[str, Path], work: dict[str, Path], tmp: Path,
+                repeat: int) -> tuple[Path, Path]:
+    """3. ``write_csv`` of the 1.5 s result, old / new, CPU; returns the pickled 0.25 s and
+    1.5 s results (made with the new tree's FMU)."""
+    short, long_ = tmp / "result_0.25s.pkl", tmp / "result_1.5s.pkl"
+    subprocess.run([py, "-c", _RESULT, str(work["new"] / "dist" / "PRSM2.fmu"), str(short),
+                    str(long_)], env=_env(trees["new"]), cwd=NEUTRAL, check=True,
+                   capture_output=True)
+
+    def write(k: str) -> float:
+        return float(_child([py, "-c", _WRITE, str(long_), str(tmp / f"w-{k}.csv")],
+                            trees[k])[2].split()[-1])
+
+    r = _interleaved(repeat, {k: (lambda k=k: write(k)) for k in trees})
+    o, w = _med(r["old"]), _med(r["new"])
+    rows = sum(1 for _ in open(tmp / "w-new.csv", encoding="utf-8")) - 1
+    print(f"3. write_csv, {rows} rows: old {o:.3f} s, new {w:.3f} s CPU, {o / w:.1f}x faster"
+          f"   goal >= 10x [>= 5x]")
+    return short, long_
+
+
+def _build_fmus(py: str, trees: dict[str, Path], tmp: Path,
+                only: tuple[str, ...] | None = None) -> dict[str, Path]:
+    """Each tree's ``dist/PRSM2.fmu`` (the README command's), built before any clock (``only``:
+    those trees' alone)."""
     work = {k: tmp / f"run-{k}" for k in trees}
     for k, tree in trees.items():
+        if only is not None and k not in only:
+            continue
         work[k].mkdir()
         subprocess.run([py, "-m", "fmu_build", "PRSM2", "--dest", str(work[k] / "dist")],
                        env=_env(tree), cwd=work[k], check=True, capture_output=True)
@@ -189,6 +217,8 @@ def main() -> None:
     ap.add_argument("--regress", action="store_true", help="also time prsm-fmu regress")
     ap.add_argument("--startup-only", action="store_true",
                     help="only 5., the FMU's start-up (a minute, not several)")
+    ap.add_argument("--write-only", action="store_true",
+                    help="only 3., writing the results CSV (a minute, not several)")
     args = ap.parse_args()
     py = sys.executable
     with tempfile.TemporaryDirectory(prefix="command_cost_") as tmp:
@@ -198,6 +228,10 @@ def main() -> None:
               f"median of {args.repeat} interleaved runs each, this machine, this run\n")
         if args.startup_only:
             _startup(py, trees, _build_fmus(py, trees, tmp), args.repeat + 2)
+            return
+        if args.write_only:
+            _write_cost(py, trees, _build_fmus(py, trees, tmp, only=("new",)), tmp,
+                        args.repeat)
             return
 
         # 1. prsm-ema list
@@ -227,20 +261,7 @@ def main() -> None:
               f"{files['old'] == files['new']} ({len(files['new'])} files)")
 
         # 3. writing the 1.5 s result; 4. the figures of the 0.25 s run
-        short, long_ = tmp / "result_0.25s.pkl", tmp / "result_1.5s.pkl"
-        subprocess.run([py, "-c", _RESULT, str(work["new"] / "dist" / "PRSM2.fmu"), str(short),
-                        str(long_)], env=_env(trees["new"]), cwd=NEUTRAL, check=True,
-                       capture_output=True)
-
-        def write(k: str) -> float:
-            return float(_child([py, "-c", _WRITE, str(long_), str(tmp / f"w-{k}.csv")],
-                                trees[k])[2].split()[-1])
-
-        r = _interleaved(args.repeat, {k: (lambda k=k: write(k)) for k in trees})
-        o, w = _med(r["old"]), _med(r["new"])
-        rows = sum(1 for _ in open(tmp / "w-new.csv", encoding="utf-8")) - 1
-        print(f"3. write_csv, {rows} rows: old {o:.3f} s, new {w:.3f} s CPU, {o / w:.1f}x faster"
-              f"   goal >= 10x [>= 5x]")
+        short, _ = _write_cost(py, trees, work, tmp, args.repeat)
 
         def plots(k: str) -> float:
             d = tmp / f"plots-{k}"

@@ -7,8 +7,9 @@ numpy in double-double arithmetic (a value as the unevaluated sum of two doubles
 1. each value x with 2e-99 ≤ |x| < 9e99 (two exponent digits) gets a decimal exponent e = ⌊log₁₀|x|⌋ and its 17
    significant digits d = round(|x| · 10^k), k = 16 − e, with the signed rest
    r = |x| · 10^k − d.  |x| · 10^k is formed exactly as a product of two doubles (Dekker's
-   split) plus |x| times the table's low part of 10^k, so its error is ~1e-32 relative — r is
-   known to ~1e-15 of a digit;
+   product: |x| cut into its top 27 significant bits and the rest by clearing bits, 10^k into
+   halves of 26 bits by Dekker's split) plus |x| times the table's low part of 10^k, so its
+   error is ~1e-32 relative — r is known to ~1e-15 of a digit;
 2. a text reads back as x exactly when it lies within half a unit in the last place (ulp) of x,
    since ``float()`` rounds correctly: its distance from |x| · 10^k (in units of the 17th digit)
    must be below half the smaller gap from x to a neighbouring double, scaled by 10^k, less
@@ -22,8 +23,12 @@ numpy in double-double arithmetic (a value as the unevaluated sum of two doubles
 4. what is left (NaN, ±inf, |x| outside step 1's range, anything not passed) by ``repr``, exact
    by definition (the shortest text that reads back as the same double).
 
-The characters are laid out as 32 bytes per value, four 8-byte words looked up in tables
-(:data:`ROW`), with a mask of the bytes kept; one boolean index then packs every line.
+The characters are laid out as 24 bytes per value, three 8-byte words looked up in tables
+(:data:`ROW`): the separator *before* the value (``,``, or ``\n`` ending the previous line),
+the sign, the first digit and ``.`` in the first four bytes, then the 16 other digits, then
+``e±XX``; the bytes a value does not use (trailing zeros, a ``.`` without digits after it,
+the sign's place of a positive value) are NUL, and ``bytes.translate`` drops them: one pass
+over a block of lines.
 
 The tests read values back with ``float()`` and compare the bits (tests/test_csv_format.py).
 """
@@ -35,14 +40,14 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["format_cells", "format_values", "format_table", "format_blocks", "ROW"]
+__all__ = ["format_values", "format_table", "format_blocks", "ROW"]
 
-#: bytes per value in the working layout (four 8-byte words): 5 ``-``, 6 the first digit, 7
-#: ``.``, 8..23 the other 16 digits, 24 ``e``, 25 the exponent's sign, 26..27 its two digits,
-#: 28 the separator; bytes 0..4 and 29..31 are never kept.  A value's kept bytes are then two
-#: runs (``[-]d.ddd`` and ``e±XX,``), which numpy's boolean index copies faster than scattered
-#: bytes
-ROW = 32
+#: bytes per value in the working layout (three 8-byte words): 0..1 the separator before the
+#: value and ``-`` (a negative value: ``,-``; a positive one: NUL ``,``), 2 the first digit,
+#: 3 ``.``, 4..19 the other 16 digits, 20 ``e``, 21 the exponent's sign, 22..23 its two
+#: digits.  A text of ``repr`` takes bytes 1..23 after the separator (and its 24th character,
+#: if any, is written after the row)
+ROW = 24
 
 #: values handled by the vectorised path: two exponent digits (|e| ≤ 99, also after rounding
 #: up a decade, or when log10 is a unit off); |x| · 10^k stays within float64's range and
@@ -71,31 +76,19 @@ def _table(rows) -> np.ndarray:
     return np.frombuffer(b"".join(bytes(r) for r in rows), dtype=_QUAD).copy()
 
 
-_P10_HI, _P10_LO = _pow10_table()
-#: word 0 by the first digit: ``-``, the digit, ``.`` (bytes 5..7)
-_HEAD = _table(b"\0\0\0\0\0-%d." % i for i in range(10))
-#: four digits of 0..9999 as the low half of an 8-byte word (words 1 and 2: the 16 digits)
-_GROUPS = _table(b"%04d\0\0\0\0" % i for i in range(10000))
-#: word 3 by the exponent + 99 (−99..99): ``e``, the sign, two digits, ``,``
-_TAIL = _table(b"e%+03d,\0\0\0" % i for i in range(-99, 100))
-#: the digits kept up to and with a group's last nonzero one, by the group (0..9999) and its
-#: place j: 4·j + its digits up to the last nonzero one; 0 for a zero group.  The digits kept
-#: after the point are the largest of the four
-_LAST = np.array([[0 if v == 0 else 4 * j + len(str(v).zfill(4).rstrip("0"))
-                   for v in range(10000)] for j in range(4)], dtype=np.uint8)
-#: bytes kept (1) of word 0 by 2 · negative + (any digit after the point); of words 1 and 2 by
-#: the number m of digits after the point; of word 3, always ``e±XX,``
-_KEEP_HEAD = _table([0, 0, 0, 0, 0, n, 1, p] for n in (0, 1) for p in (0, 1))
-_KEEP_DIGITS = [_table([1 if 8 * w + i < m else 0 for i in range(8)] for m in range(17))
-                for w in (0, 1)]
-_KEEP_TAIL = _table([[1, 1, 1, 1, 1, 0, 0, 0]])[0]
-#: byte 4 of word 3: the separator
-_NEWLINE = np.uint64(ord("\n") << 32)
-_COMMA = np.uint64(ord(",") << 32)
+#: tables below are indexed by j = e + _EOFF, e the decimal exponent (10^k with k = 16 − e):
+#: j = 0.._EOFF + 136 covers k = −120..120
+_EOFF = 104
+_NJ = 2 * _KMAX + 1
+
+
+def _by_exponent(table_by_k: np.ndarray) -> np.ndarray:
+    """A table indexed by k + _KMAX re-indexed by j = e + _EOFF (k = 16 − e)."""
+    return np.ascontiguousarray(table_by_k[::-1])
+
+
+_P10_HI_K, _P10_LO_K = _pow10_table()
 _SPLIT = 134217729.0          # 2^27 + 1, Dekker's splitting constant for float64
-_D16, _D17 = 10 ** 16, 10 ** 17
-_EXPONENT_BITS = np.int64(0x7FF0000000000000)
-_FRACTION_BITS = np.int64(0x000FFFFFFFFFFFFF)
 
 
 def _split(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,144 +97,226 @@ def _split(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return h, a - h
 
 
-def _digits(a: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """round(a · 10^k) as int64 and the signed rest a · 10^k − round(...) [digits] (step 1)."""
-    i = k + _KMAX
-    hi = _P10_HI[i]
+#: 10^(16 − e) by j, a row each (one gather for a value): the nearest double, its Dekker
+#: halves (26 bits each), the rest
+_P10_ROWS = _by_exponent(np.stack([_P10_HI_K, *_split(_P10_HI_K), _P10_LO_K], axis=1))
+#: 10^(16 − e) less the relative margin (1e-12) of step 2
+_P10_SAFE = _by_exponent(_P10_HI_K * (1.0 - 1e-12))
+#: the low half of word 0 by the first digit + 10 · negative + 20 · (no digit after the point):
+#: ``\0,d.``, ``,-d.``, ``\0,d\0`` or ``,-d\0``
+_HEAD = _table(b"%s%d%s\0\0\0\0" % (b",-" if neg else b"\0,", i, b"\0" if bare else b".")
+               for bare in (0, 1) for neg in (0, 1) for i in range(10))
+
+
+def _group(v: int, last: bool) -> bytes:
+    """Four digits of v (0..9999), the trailing zeros as NUL if no digit follows them."""
+    text = b"%04d" % v
+    return text.rstrip(b"0").ljust(4, b"\0") if last else text
+
+
+#: four digits of 0..9999, + 10000: with trailing zeros as NUL (no nonzero digit after the
+#: group), in the low half of an 8-byte word and in its high half (the 16 digits after the
+#: first: the high half of word 0, word 1, the low half of word 2)
+_GROUPS = _table(_group(v, last) + b"\0" * 4 for last in (0, 1) for v in range(10000))
+_GROUPS_HIGH = _table(b"\0" * 4 + _group(v, last) for last in (0, 1) for v in range(10000))
+#: the high half of word 2 by j (e = −99..99): ``e``, the sign, two digits; never used
+#: elsewhere
+_TAIL = _table(b"\0\0\0\0e%+03d" % (j - _EOFF) if -99 <= j - _EOFF <= 99 else b"\0" * 8
+               for j in range(_NJ))
+_COMMA, _NEWLINE = ord(","), ord("\n")
+_D16, _D17 = 10 ** 16, 10 ** 17
+_EXPONENT_BITS = np.int64(0x7FF0000000000000)
+#: a double's 26 low fraction bits cleared: its top 27 significant bits, exact in any product
+#: with a 26-bit half of 10^k
+_HIGH27 = np.int64(~((1 << 26) - 1))
+_LO_BITS = int(np.float64(_LO).view(np.int64))
+_SPAN_BITS = np.uint64(int(np.float64(_HI).view(np.int64)) - _LO_BITS)
+
+
+def _digits(a: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """round(a · 10^k) as int64 and the signed rest a · 10^k − round(...) [digits] (step 1),
+    k = 16 − e, j = e + _EOFF."""
+    hi, bh, bl, lo = np.take(_P10_ROWS, j, axis=0, mode="clip").T
     p = a * hi                                       # a · hi = p + err exactly (Dekker)
-    ah, al = _split(a)
-    bh, bl = _P10_SPLIT_HI[i], _P10_SPLIT_LO[i]      # _split(hi), made once
-    err = ((ah * bh - p) + ah * bl + al * bh) + al * bl
-    yl = err + a * _P10_LO[i]
-    yr = np.rint(p)
-    f = (p - yr) + yl                                # exact: p − yr is exact for |p| < 2^53,
-    c = np.rint(f)                                   # zero above (p is then an integer)
-    return yr.astype(np.int64) + c.astype(np.int64), f - c
+    ah = (a.view(np.int64) & _HIGH27).view(np.float64)
+    al = a - ah
+    err = ah * bh
+    err -= p
+    t = ah * bl
+    err += t
+    np.multiply(al, bh, out=t)
+    err += t
+    np.multiply(al, bl, out=t)
+    err += t
+    np.multiply(a, lo, out=t)
+    err += t                                         # + a · lo: the rest yl
+    # p ≈ a · 10^k ≥ 10^16 > 2^53 for the right e: an integer, y = p + err exactly.  A p
+    # below 2^53 (e one too high) gives d < 10^16: out of range, and done again
+    c = np.rint(err)
+    d = p.astype(np.int64)
+    d += c.astype(np.int64)
+    err -= c
+    return d, err
 
 
-_P10_SPLIT_HI, _P10_SPLIT_LO = _split(_P10_HI)
-#: 10^k less the relative margin (1e-12) of step 2
-_P10_SAFE = _P10_HI * (1.0 - 1e-12)
-
-
-def _half_gap(a: np.ndarray) -> np.ndarray:
-    """Half the smaller gap from a (normal, > 0) to a neighbouring double: half its ulp
-    2^(E − 52), a quarter at a power of two (the gap below is half the gap above); exact."""
-    bits = a.view(np.int64)
-    ulp = ((bits & _EXPONENT_BITS) - (52 << 52)).view(np.float64)
-    return ulp * np.where(bits & _FRACTION_BITS, 0.5, 0.25)
-
-
-def _shortest(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For ``x`` with _LO ≤ |x| < _HI: 17 significant digits (int64, trailing digits zero when
-    15 suffice), the decimal exponent, and whether the text passed step 2."""
-    a = np.abs(x)
-    e = np.floor(np.log10(a)).astype(np.int64)
-    d, r = _digits(a, 16 - e)
-    # log10 a unit off near powers of ten, or a rounding up to 10^17: one decade over
-    off = (d >= _D17).astype(np.int64) - (d < _D16)
-    redo = np.flatnonzero(off)
+def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For ``a`` with _LO ≤ a < _HI: 17 significant digits (int64, trailing digits zero when
+    15 suffice), j = the decimal exponent + _EOFF (intp), and whether the text passed step 2."""
+    j = np.log10(a)
+    j += _EOFF                                       # > 0: truncation is the floor
+    j = j.astype(np.intp)
+    d, r = _digits(a, j)
+    # log10 a unit off near powers of ten (or by adding _EOFF), or a rounding up to 10^17:
+    # one decade over
+    redo = np.flatnonzero((d - _D16).view(np.uint64) >= _D17 - _D16)
     if redo.size:
-        e[redo] += off[redo]
-        d[redo], r[redo] = _digits(a[redo], 16 - e[redo])
+        j[redo] += (d[redo] >= _D17).astype(np.intp) - (d[redo] < _D16)
+        d[redo], r[redo] = _digits(a[redo], j[redo])
         # still out of range (log10 two off: not seen) -> repr, through a rest no text passes
         bad = redo[(d[redo] < _D16) | (d[redo] >= _D17)]
         d[bad], r[bad] = _D16, np.inf
-    # the threshold is known to ~1e-16 relative, the rest r to ~1e-15 digits
-    limit = _half_gap(a) * np.take(_P10_SAFE, 16 - e + _KMAX) - 1e-12
+    # the threshold is known to ~1e-16 relative, the rest r to ~1e-15 digits; half the smaller
+    # gap from a to a neighbouring double: half its ulp 2^(E − 52), a quarter at a power of
+    # two (the gap below is half the gap above); exact
+    gap = a.view(np.int64) & _EXPONENT_BITS           # 2^E, as a double's bits
+    shift = np.add(gap.view(np.float64) == a, 53, dtype=np.int64)   # 54 at a power of two
+    shift <<= 52
+    gap -= shift
+    limit = gap.view(np.float64)
+    limit *= np.take(_P10_SAFE, j, mode="clip")
+    limit -= 1e-12
     q = d // 100
-    rem = d - 100 * q
-    up = (rem + r) > 50.0                            # the 15 digits rounded to nearest
-    ok15 = np.abs((100 * up - rem) - r) < limit
-    d17 = np.where(ok15, 100 * (q + up), d)
-    carry = d17 == _D17                              # 15 digits rounded up to 10^15
-    d17[carry] = _D16
-    e += carry
-    return d17, e, ok15 | (np.abs(r) < limit)
+    rem = (d - 100 * q).astype(np.float64)
+    up = rem + r
+    up = up > 50.0                                   # the 15 digits rounded to nearest
+    dist = up * 100.0
+    dist -= rem                                      # exact: small integers
+    dist -= r
+    ok15 = np.abs(dist, out=dist) < limit
+    q += up
+    q *= 100
+    d = np.where(ok15, q, d)                         # the 17 digits written
+    carry = np.flatnonzero(d == _D17)                # 15 digits rounded up to 10^15
+    d[carry] = _D16
+    j[carry] += 1
+    settled = np.abs(r, out=r) < limit
+    settled |= ok15
+    return d, j, settled
 
 
-def _fill(words: np.ndarray, keep: np.ndarray, negative: np.ndarray, d17: np.ndarray,
-          e: np.ndarray) -> None:
-    """Write ``[-]d.ddde±XX,`` (17 digits, trailing zeros not kept, |e| ≤ 99) into rows of the
-    (n, 4) 8-byte word arrays ``words`` (characters) and ``keep`` (per byte: 1 kept, 0 not)."""
-    first = d17 // _D16
-    rest = d17 - first * _D16                         # the other 16 digits
-    hi = rest // 10 ** 8
-    lo = rest - hi * 10 ** 8
-    g0 = hi // 10000                                  # in four groups of four
-    g1 = hi - g0 * 10000
+def _fill(words: np.ndarray, negative: np.ndarray, d17: np.ndarray, j: np.ndarray) -> None:
+    """Write ``,[-]d.ddde±XX`` (17 digits, trailing zeros NUL, |e| ≤ 99, j = e + _EOFF) into
+    rows of the (n, 3) 8-byte word array ``words`` (characters, :data:`ROW`)."""
+    hi = d17 // 10 ** 8                               # the first 9 digits
+    lo = hi * 10 ** 8
+    np.subtract(d17, lo, out=lo)                      # the last 8
+    first = hi // 10 ** 8
+    t = first * 10 ** 8
+    hi -= t                                           # digits 2..9
+    g0 = np.floor_divide(hi, 10000, out=t)            # in four groups of four
+    hi -= g0 * 10000
     g2 = lo // 10000
-    g3 = lo - g2 * 10000
-    m = np.maximum(np.maximum(np.take(_LAST[0], g0), np.take(_LAST[1], g1)),
-                   np.maximum(np.take(_LAST[2], g2), np.take(_LAST[3], g3)))
-    words[:, 0] = np.take(_HEAD, first)
-    words[:, 1] = np.take(_GROUPS, g0) | (np.take(_GROUPS, g1) << np.uint64(32))
-    words[:, 2] = np.take(_GROUPS, g2) | (np.take(_GROUPS, g3) << np.uint64(32))
-    words[:, 3] = np.take(_TAIL, e + 99)
-    keep[:, 0] = np.take(_KEEP_HEAD, 2 * negative + (m > 0))
-    keep[:, 1] = np.take(_KEEP_DIGITS[0], m)
-    keep[:, 2] = np.take(_KEEP_DIGITS[1], m)
-    keep[:, 3] = _KEEP_TAIL
+    lo -= g2 * 10000
+    g1, g3 = hi, lo
+    # a group's trailing zeros are dropped when every later group is zero: its index + 10000
+    bare = g3 == 0
+    g2 += np.multiply(bare, 10000, dtype=np.int64)
+    bare &= g2 == 10000
+    g1 += np.multiply(bare, 10000, dtype=np.int64)
+    bare &= g1 == 10000
+    g0 += np.multiply(bare, 10000, dtype=np.int64)
+    bare &= g0 == 10000                               # no digit after the point
+    g3 += 10000
+    code = np.multiply(negative, 10, dtype=np.intp)
+    code += first
+    code += np.multiply(bare, 20, dtype=np.intp)
+    np.bitwise_or(np.take(_HEAD, code, mode="clip"), np.take(_GROUPS_HIGH, g0, mode="clip"),
+                  out=words[:, 0])
+    np.bitwise_or(np.take(_GROUPS, g1, mode="clip"), np.take(_GROUPS_HIGH, g2, mode="clip"),
+                  out=words[:, 1])
+    np.bitwise_or(np.take(_GROUPS, g3, mode="clip"), np.take(_TAIL, j, mode="clip"),
+                  out=words[:, 2])
 
 
-def format_cells(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each value of ``x`` (read as float64, flattened in C order) as :data:`ROW` bytes of
-    characters, (n, ROW) uint8, and a boolean mask of those to keep: text that ``float()``
-    reads back to the same double, bit for bit (module docstring), then ``,`` (byte 28)."""
-    x = np.ascontiguousarray(x, dtype=np.float64).ravel()
+def _cells_into(x: np.ndarray, words: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """Each value of the 1-D float64 ``x`` as :data:`ROW` bytes of characters, ``,`` then text
+    that ``float()`` reads back to the same double, bit for bit (module docstring), NUL where
+    no character is, in the first ``x.size`` rows of the (≥ x.size, 3) 8-byte word array
+    ``words`` (reused by :func:`format_blocks`: no fresh pages for every block).
+
+    Returns its (x.size, ROW) uint8 view and, for a ``repr`` of 24 characters (a negative
+    value of 17 digits and a three-digit exponent), (row, its last character)."""
     n = x.size
-    words = np.empty((n, ROW // 8), dtype=_QUAD)
-    keep = np.empty((n, ROW // 8), dtype=_QUAD)
-    ax = np.abs(x)
-    inside = (ax >= _LO) & (ax < _HI)
-    if inside.all():                                  # the common case: no gather/scatter
-        d17, e, settled = _shortest(x)
-    else:
-        d17 = np.zeros(n, dtype=np.int64)             # zeros: 0e+00 (or -0e+00)
-        e = np.zeros(n, dtype=np.int64)
-        settled = ax == 0.0
-        fin = np.flatnonzero(inside)
-        d17[fin], e[fin], settled[fin] = _shortest(x[fin])
-    _fill(words, keep, np.signbit(x), d17, e)
-    chars, kept = words.view(np.uint8), keep.view(np.uint8).view(bool)
+    words = words[:n]
+    a = np.abs(x)
+    # _LO ≤ a < _HI, on the bits (NaN's are above +inf's, zero's below _LO's)
+    offset = a.view(np.int64) - _LO_BITS
+    inside = offset.view(np.uint64) < _SPAN_BITS
+    outside = np.flatnonzero(~inside)                 # mostly none, or a few zeros
+    a[outside] = 1.0                                  # any value inside: its digits unused
+    d17, j, settled = _shortest(a)
+    d17[outside] = 0                                  # zeros: 0e+00 (or -0e+00)
+    j[outside] = _EOFF
+    settled[outside] = x[outside] == 0.0
+    _fill(words, np.signbit(x), d17, j)
+    chars = words.view(np.uint8)
     # NaN, ±inf, |x| outside step 1's range and what step 2 did not settle: repr, in bytes
-    # 0..23 (the longest repr has 24 characters), padded with NUL bytes that are not kept
+    # 1..23 after the separator (the longest repr has 24 characters), padded with NUL
     left = np.flatnonzero(~settled)
+    longer: list[tuple[int, int]] = []
     if left.size:
         texts = b"".join(repr(v).encode("ascii").ljust(24, b"\0") for v in x[left].tolist())
         text = np.frombuffer(texts, dtype=np.uint8).reshape(-1, 24)
-        chars[left, :24] = text
-        kept[left, :24] = text != 0
-        kept[left, 24:28] = False
-    return chars, kept
+        chars[left, 0] = _COMMA
+        chars[left, 1:] = text[:, :23]
+        longer = [(int(left[i]), int(text[i, 23])) for i in np.flatnonzero(text[:, 23])]
+    return chars, longer
 
 
 def format_values(x: np.ndarray) -> list[str]:
-    """Each value of ``x`` (read as float64, flattened in C order) as exact text
-    (:func:`format_cells`)."""
+    """Each value of ``x`` (read as float64, flattened in C order) as text that ``float()``
+    reads back to the same double, bit for bit (module docstring)."""
     x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 1)
     return format_table(x).decode("ascii").split("\n")[:-1]
 
 
-def format_blocks(data: np.ndarray) -> Iterator[np.ndarray]:
+def format_blocks(data: np.ndarray) -> Iterator[bytes | bytearray]:
     """Rows of a 2-D array as CSV lines, ASCII (``,`` between values, ``\\n`` after each row),
-    every value exact (:func:`format_cells`): uint8 arrays of consecutive lines, to be written
-    one after the other (no copy into one bytes object)."""
+    every value read back by ``float()`` as the same double, bit for bit (module docstring):
+    pieces of text (bytes or bytearray) to be written one after the other.
+
+    Raises ValueError (naming ``data``) for an array that is not 2-D or has no column."""
     data = np.asarray(data, dtype=np.float64)
-    if data.ndim != 2:
-        raise ValueError(f"data: a 2-D array expected, got shape {data.shape}")
+    if data.ndim != 2 or data.shape[1] == 0:
+        raise ValueError(f"data: a 2-D array of at least one column expected, got shape "
+                         f"{data.shape}")
     rows, cols = data.shape
     # blocks of ~8000 values: the temporary arrays then stay in the CPU's cache (whole columns
     # of a long run would stream through memory for every operation)
-    step = max(1, _BLOCK // max(cols, 1))
+    step = max(1, _BLOCK // cols)
+    # the words' memory is a bytearray: a whole block is translated in place of a copy
+    buffer = bytearray(min(rows, step) * cols * ROW)
+    words = np.frombuffer(buffer, dtype=_QUAD).reshape(-1, ROW // 8)
     for r0 in range(0, rows, step):
         block = data[r0:r0 + step]
-        chars, kept = format_cells(block)
-        last = chars.view(_QUAD).reshape(block.shape[0], cols, ROW // 8)[:, -1, 3]
-        last ^= _COMMA ^ _NEWLINE                     # the last value's separator
-        yield chars[kept]
+        chars, longer = _cells_into(np.ascontiguousarray(block).ravel(), words)
+        # a line's first value: its separator (byte 0 or 1) ends the line before
+        first = chars.reshape(block.shape[0], cols, ROW)[:, 0, :2]
+        first[first == _COMMA] = _NEWLINE
+        if r0 == 0:                                   # nothing before the first line
+            first[0][first[0] == _NEWLINE] = 0
+        done = 0
+        for row, last in longer:                      # a repr's 24th character
+            yield chars[done:row + 1].tobytes().translate(None, b"\0") + bytes([last])
+            done = row + 1
+        if done == 0 and chars.size == len(buffer):
+            yield buffer.translate(None, b"\0")
+        else:
+            yield chars[done:].tobytes().translate(None, b"\0")
+    if rows:
+        yield b"\n"
 
 
 def format_table(data: np.ndarray) -> bytes:
     """:func:`format_blocks` as one bytes object."""
-    return b"".join(block.tobytes() for block in format_blocks(data))
+    return b"".join(format_blocks(data))

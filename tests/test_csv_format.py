@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 
 import numpy as np
+import pytest
 
 from prsm_fmu.csv_format import format_table, format_values
 from system_models.master import Result
@@ -122,3 +123,80 @@ def test_values_where_the_exponent_gets_a_third_digit_round_trip():
     assert _same_bits(x, _read_back(texts))
     # two exponent digits where they suffice, as %e writes them
     assert format_values(np.array([1e-99, 1e99, 1e100])) == ["1e-99", "1e+99", "1e+100"]
+
+
+def test_longest_texts_at_line_ends_and_block_edges():
+    # repr's longest texts, 24 characters: a negative value of 17 significant digits with a
+    # three-digit exponent (the smallest normal double, its neighbour, the largest double);
+    # they stand first, inside and last in lines, in tables long enough to be cut into blocks
+    long_ = {-2.2250738585072014e-308: "-2.2250738585072014e-308",
+             -2.2250738585072019e-308: "-2.225073858507202e-308",
+             -1.7976931348623157e308: "-1.7976931348623157e+308"}
+    assert [len(t) for t in long_.values()] == [24, 23, 24]
+    rng = np.random.default_rng(11)
+    for cols in (1, 3, 60):
+        rows = 20_000 // cols                       # 20 000 values: several blocks of rows
+        data = rng.normal(size=(rows, cols)) * 10.0 ** rng.integers(-5, 5, size=(rows, cols))
+        values = np.array(list(long_))
+        at = rng.random(size=data.shape) < 0.02
+        data[at] = rng.choice(values, size=int(at.sum()))
+        data[0, 0], data[-1, -1] = values[0], values[2]
+        text = format_table(data).decode("ascii")
+        lines = text.split("\n")
+        assert lines[-1] == "" and len(lines) == rows + 1
+        cells = [line.split(",") for line in lines[:-1]]
+        assert all(len(c) == cols for c in cells)
+        for v, t in long_.items():
+            assert all(cells[i][j] == t for i, j in zip(*np.nonzero(data == v)))
+        back = np.array([[float(c) for c in line] for line in cells])
+        print(f"{cols} columns x {rows} rows, {int(at.sum())} longest texts placed")
+        assert _same_bits(data.ravel(), back.ravel())
+
+
+def test_line_starts_and_ends_with_every_kind_of_value():
+    # each kind first, inside and last in a line: the separator before a value and the
+    # newline after a line do not depend on its sign or on how it is written
+    kinds = [0.0, -0.0, 1.0, -1.0, 1.5, -1.5, np.nan, np.inf, -np.inf, 5e-324, -5e-324,
+             1e-300, -1e300, 0.1, -0.30000000000000004]
+    texts = ["0e+00", "-0e+00", "1e+00", "-1e+00", "1.5e+00", "-1.5e+00", "nan", "inf",
+             "-inf", "5e-324", "-5e-324", "1e-300", "-1e+300", "1e-01",
+             "-3.0000000000000004e-01"]
+    n = len(kinds)
+    for cols in (1, 2, 3):
+        data = np.array([[kinds[(r + c) % n] for c in range(cols)] for r in range(n)])
+        want = "".join(",".join(texts[(r + c) % n] for c in range(cols)) + "\n"
+                       for r in range(n))
+        assert format_table(data).decode("ascii") == want
+
+
+def test_empty_and_malformed_tables():
+    assert format_table(np.zeros((0, 4))) == b""
+    for bad in (np.zeros((3, 0)), np.zeros(3), np.zeros((2, 2, 2))):
+        with pytest.raises(ValueError, match=r"data: a 2-D array of at least one column"):
+            format_table(bad)
+
+
+def test_ties_of_fifteen_digits_round_trip():
+    # a 15-digit decimal exactly halfway between two doubles: m = o · 10^p with o odd, 15
+    # digits, and o · 5^p odd in [2^53, 2^54), so m = (o · 5^p) · 2^p lies in [2^(53+p),
+    # 2^(54+p)) where doubles are 2^(p+1) apart: an odd multiple of 2^p, halfway between the
+    # doubles m − 2^p and m + 2^p.  Only p = 2 (o from 2^53/25 = 3.6e14) and p = 3 (o up to
+    # 2^54/125 = 1.44e14) leave 15-digit o.  float() of the 15-digit text rounds half to even:
+    # it gives back one neighbour only, so each neighbour's text must be the one that reads
+    # back
+    rng = np.random.default_rng(15)
+    x = []
+    for p in (2, 3):
+        lo = max(-(-2**53 // 5**p), 10**14)
+        hi = min(2**54 // 5**p, 10**15)
+        o = rng.integers(lo, hi, size=2000) | 1
+        mid = (o * 10**p).tolist()                       # exact integers (< 2^63)
+        below = np.array([float(m - 2**p) for m in mid])
+        above = np.array([float(m + 2**p) for m in mid])
+        assert [int(v) for v in below] == [m - 2**p for m in mid]     # doubles, exactly
+        assert np.array_equal(np.nextafter(below, np.inf), above)     # neighbours
+        x += [below, above]
+    x = np.concatenate(x)
+    x = np.concatenate([x, -x])
+    print(f"{x.size} neighbours of 15-digit ties, both signs")
+    assert _same_bits(x, _read_back(format_values(x)))
