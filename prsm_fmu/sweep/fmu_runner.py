@@ -274,8 +274,13 @@ class FmuRunner:
         ref[0] = w0
         if self._loop is not None:              # the same loop, compiled
             ref[1:] = [float(speed((i + 1) * h)) for i in range(n_steps)]
-            trials, rhs_calls = self._loop.run(n_steps, h, ref[1:], torque, TORQUE_RTOL,
-                                               MAX_TRIALS, t_scale, out[1:])
+            from .native_track import LoopFailure
+
+            try:
+                trials, rhs_calls = self._loop.run(n_steps, h, ref[1:], torque, TORQUE_RTOL,
+                                                   MAX_TRIALS, t_scale, out[1:])
+            except LoopFailure as fail:                 # as the Python loop raises it
+                self._raise_failed_step(fail.error, fail.step * h, fail.torque)
         else:
             trials, rhs_calls = self._python_loop(speed, n_steps, h, torque, t_scale, ref, out)
         fmu.terminate()
@@ -322,10 +327,16 @@ class FmuRunner:
         try:
             return calls.trial(state if restore else None, torque, t, h)
         except calls.failure as exc:
-            if exc.function != "fmi2DoStep":
-                raise
-            raise FmuPointError(f"the FMU refused the step at t = {t:.9g} s with screw_torque "
-                                f"= {torque!r} N.m (status {exc.status})") from exc
+            FmuRunner._raise_failed_step(exc, t, torque)
+
+    @staticmethod
+    def _raise_failed_step(exc, t: float, torque: float):
+        """Raise for fmpy's ``exc`` of a trial at ``t`` [s] with ``torque`` [N·m]: a refused
+        ``fmi2DoStep`` as :class:`FmuPointError` naming both, any other call as it is."""
+        if exc.function != "fmi2DoStep":
+            raise exc
+        raise FmuPointError(f"the FMU refused the step at t = {t:.9g} s with screw_torque "
+                            f"= {torque!r} N.m (status {exc.status})") from exc
 
     def _track(self, calls, state, t, h, target, guess, gain, t_scale):
         """Torque held over [t, t + h] that ends the step at ``target``; leaves the FMU there.

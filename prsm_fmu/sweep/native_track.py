@@ -9,7 +9,8 @@ and gives the same calls, the same trial and right-hand-side counts and the same
 for bit (tests/test_fmu_track.py, seeded random points).  What stays in Python: loading and
 initializing the FMU, the t = 0 torque, the reference speed (any profile, evaluated at the
 communication points before the loop) and the errors (a failed call comes back as the call,
-its status, the step and the torque, and is raised as the Python loop raises it).
+its status, the step and the torque, :class:`LoopFailure`; the runner raises from it what its
+Python loop raises).
 
 The C is compiled with gcc on first use (the native FMU's flags: ``-std=c99 -O2
 -ffp-contract=off``) and cached in a directory of the user's own in the temporary directory;
@@ -24,13 +25,22 @@ import ctypes
 from pathlib import Path
 from typing import Any
 
-__all__ = ["loop_library", "CompiledLoop", "CALLS"]
+__all__ = ["loop_library", "CompiledLoop", "CALLS", "LoopFailure"]
 
 #: the FMI functions the loop calls, in the order of fmu_track.c's enum
 CALLS = ("fmi2SetReal", "fmi2GetReal", "fmi2GetInteger", "fmi2DoStep", "fmi2GetFMUstate",
          "fmi2SetFMUstate", "fmi2FreeFMUstate")
 _SOURCE = Path(__file__).resolve().parent / "native" / "fmu_track.c"
-_DO_STEP = CALLS.index("fmi2DoStep")
+
+
+class LoopFailure(Exception):
+    """A call of the compiled loop that failed: ``error`` is fmpy's exception for it (naming
+    the FMI function and its status), ``step`` the index of the communication step and
+    ``torque`` the torque last set [N·m]; the runner raises what its Python loop raises."""
+
+    def __init__(self, error: Exception, step: int, torque: float) -> None:
+        super().__init__(str(error))
+        self.error, self.step, self.torque = error, step, torque
 
 
 class _Fmu(ctypes.Structure):
@@ -98,12 +108,13 @@ class CompiledLoop:
 
         ``targets``: float64 array of the reference speeds at (i + 1)·h [rad/s]; ``rows``: the
         C-contiguous float64 rows of communication points 1 … n_steps of the result (one
-        double per output read).  A failed call raises what the Python loop raises:
-        :class:`~prsm_fmu.sweep.fmu_runner.FmuPointError` for a refused ``fmi2DoStep`` (from
-        fmpy's exception), fmpy's exception for any other call.
-        """
-        from .fmu_runner import FmuPointError
+        double per output read).
 
+        Raises
+        ------
+        LoopFailure
+            If an FMI call fails (status above fmi2Warning).
+        """
         counts = self._counts
         counts[0] = counts[1] = 0
         fail = self._failure
@@ -111,10 +122,6 @@ class CompiledLoop:
                         torque_rtol, max_trials, t_scale, rows.ctypes.data, counts,
                         ctypes.byref(fail))
         if bad:
-            exc = self._calls.failure(function=CALLS[fail.call], status=fail.status)
-            if fail.call != _DO_STEP:
-                raise exc
-            t = fail.step * h
-            raise FmuPointError(f"the FMU refused the step at t = {t:.9g} s with screw_torque "
-                                f"= {fail.torque!r} N.m (status {fail.status})") from exc
+            raise LoopFailure(self._calls.failure(function=CALLS[fail.call], status=fail.status),
+                              fail.step, fail.torque)
         return counts[0], counts[1]
