@@ -47,6 +47,7 @@ import numpy as np
 
 from .blocks import Block, StepRefused
 from .retry_limit import MAX_HALVINGS
+from .step_code import compile_step, step_source
 
 __all__ = ["Master", "RetryPolicy", "Result", "CoSimulationError", "ORDERS"]
 
@@ -334,6 +335,11 @@ class Master:
         self._plan = [[(0, src[1], 0, True) if src[0] == "const" else
                        ((1 if gs and src[1] < i else 2), src[1], src[2], src[3])
                        for src in srcs] for i, srcs in enumerate(self._sources)]
+        #: the step written out for this plan (compiled and bound to the blocks per run)
+        self._step_code = step_source(
+            self._plan, self._sources, [b.interpolates_inputs for b in self.blocks],
+            [b.feedthrough for b in self.blocks], self._read_after_step, self._watched, gs,
+            self.extrapolation)
 
     # ---- stepping ----------------------------------------------------------------------------
     def _values(self, i: int, y: list) -> list[float]:
@@ -361,81 +367,16 @@ class Master:
         for i, b in enumerate(blocks):
             b.set_inputs(self._values(i, y))
         self.y = [b.get_outputs() for b in blocks]
+        self._step_fn = compile_step(self._step_code, blocks, self._sources)
         self.y_prev: list | None = None
         self.t_prev: float | None = None
         self.scale = [[max(abs(v), nom) for v, nom in zip(row, noms)]
                       for row, noms in zip(self.y, self._nominal)]
 
     def _step(self, t: float, h: float) -> float:
-        """One co-simulation step over [t, t + h]; returns the coupling error estimate."""
-        blocks, y, y_prev = self.blocks, self.y, self.y_prev
-        gs = self.order == "gauss-seidel"
-        first = self.extrapolation == 1 and y_prev is not None
-        hold_new = self.extrapolation == 0          # a stepped source's value at t_(k+1), held
-        dtp = (t - self.t_prev) if first else 1.0
-        half_h = 0.5 * h
-        y_new: list[list[float] | None] = [None] * len(blocks)
-        predictions: list[tuple[int, int, float]] = []
-        timers = self._block_time
-        read_after = self._read_after_step
-        clock = _time.perf_counter
-        for i, b in enumerate(blocks):
-            vals, slopes = [], []
-            for kind, s, p, discrete in self._plan[i]:
-                if kind == 0:                           # constant
-                    vals.append(s)
-                    slopes.append(0.0)
-                elif kind == 1:                         # Gauss-Seidel: source already stepped
-                    yn = y_new[s]
-                    if discrete or hold_new:
-                        vals.append(yn[p])
-                        slopes.append(0.0)
-                    else:
-                        yc = y[s][p]
-                        vals.append(yc)
-                        slopes.append((yn[p] - yc) / h)
-                else:
-                    yc = y[s][p]
-                    vals.append(yc)
-                    if discrete:
-                        slopes.append(0.0)
-                        continue
-                    sl = (yc - y_prev[s][p]) / dtp if first else 0.0
-                    slopes.append(sl)
-                    predictions.append((s, p, yc + sl * h))
-            c0 = clock()
-            if b.interpolates_inputs:
-                b.set_inputs(vals, slopes)
-            else:
-                b.set_inputs([v + half_h * sl for v, sl in zip(vals, slopes)])
-            b.do_step(t, h)
-            if gs and read_after[i]:
-                y_new[i] = b.get_outputs()
-            timers[i] += clock() - c0
-        if not gs:
-            for i, b in enumerate(blocks):
-                c0 = clock()
-                y_new[i] = b.get_outputs()
-                timers[i] += clock() - c0
-        for i, b in enumerate(blocks):
-            if b.feedthrough:
-                c0 = clock()
-                b.set_inputs(self._values(i, y_new))
-                b.update_outputs(t + h)
-                y_new[i] = b.get_outputs()
-                timers[i] += clock() - c0
-        err = 0.0
-        scale = self.scale
-        for s, p, pred in predictions:
-            ref = max(scale[s][p], abs(y_new[s][p]))
-            err = max(err, abs(y_new[s][p] - pred) / ref)
-        for s, p in self._watched:      # the only scales the estimate reads
-            v = abs(y_new[s][p])
-            if v > scale[s][p]:
-                scale[s][p] = v
-        self.y_prev, self.t_prev, self.y = y, t, y_new
-        self._stats["substeps"] += 1
-        return err
+        """One co-simulation step over [t, t + h]; returns the coupling error estimate (the
+        step of :mod:`system_models.step_code` for this run's plan and blocks)."""
+        return self._step_fn(self, t, h)
 
     def _snapshot(self) -> tuple:
         states = [b.get_state() for b in self.blocks]
