@@ -328,7 +328,9 @@ class Master:
         # block (the default: every output); else a per-column row
         order = [i for i, _, _, _ in self._record]
         grouped = all(order[k] <= order[k + 1] for k in range(len(order) - 1))
-        self._row_getters = ([(i, itemgetter(*ps) if len(ps) > 1 else (lambda v, q=ps[0]: (v[q],)))
+        # (None: the block's whole row, its every output in order)
+        self._row_getters = ([(i, None if ps == list(range(len(self._nominal[i]))) else
+                               itemgetter(*ps) if len(ps) > 1 else (lambda v, q=ps[0]: (v[q],)))
                               for i, ps in by_block.items()] if grouped else None)
         # each input's branch in _step, fixed by the order: 0 constant, 1 a source that has
         # already stepped (Gauss-Seidel, earlier in the list), 2 a source read at t_k
@@ -448,6 +450,8 @@ class Master:
         rows = array("d")                        # the recorded rows, one after the other
         self._record_row(rows)
         times = [t0]
+        # with a progress callback, one step per _advance (it is called after each); else all
+        self._chunk = 1 if progress is not None else n
         k = 0
         while k < n:
             k = self._advance(k, n, times, rows, wall0)
@@ -456,31 +460,49 @@ class Master:
         return self._result(times, rows, wall0)
 
     def _advance(self, k: int, n: int, times: list[float], rows: array, wall0: float) -> int:
-        """Take macro step ``k`` of ``n``, appending its end time to ``times`` and its recorded
-        outputs to ``rows``; return the index of the next step to take.
+        """Take macro steps from ``k`` of ``n`` (as many as the run's chunk), appending their
+        end times to ``times`` and their recorded outputs to ``rows``; return the index of
+        the next step to take.
 
         Raises
         ------
         CoSimulationError
-            If a block refuses the step and no retry can take it.
+            If a block refuses a step and no retry can take it.
         """
+        return self._steps(k, min(n, k + self._chunk), n, times, rows, wall0)
+
+    def _steps(self, k: int, stop: int, n: int, times: list[float], rows: array,
+               wall0: float) -> int:
+        """Macro steps ``k`` to ``stop`` − 1 of ``n`` (:meth:`_advance`); returns ``stop``."""
         h, t0 = self.step, self.t0
-        t, t_next = t0 + k * h, t0 + (k + 1) * h
-        try:
-            self._macro_step(k, t, t_next)
-        except StepRefused as exc:
-            partial = self._result(times, rows, wall0)
-            tried = (f"; retried with up to {2 ** self.retry.max_halvings} substeps"
-                     if self.retry.max_halvings else "; no retry (max_halvings = 0)")
-            raise CoSimulationError(
-                f"co-simulation stopped at t = {t:.9g} s (macro step {k + 1} of {n}, h = {h:g} s): "
-                f"block {exc.block!r} refused the step from t = {exc.time:.9g} s over "
-                f"{exc.step:.3g} s: {exc.reason}{tried}. The run is incomplete: no result "
-                f"beyond t = {times[-1]:.9g} s.", t, exc.block, exc.reason, partial) from exc
-        self._stats["macro_steps"] += 1
-        self._record_row(rows)
-        times.append(t_next)
-        return k + 1
+        stats = self._stats
+        pol = self.retry
+        plain = pol.max_halvings == 0 and pol.tolerance is None
+        step, record, append = self._step_fn, self._record_row, times.append
+        while k < stop:
+            t, t_next = t0 + k * h, t0 + (k + 1) * h
+            try:
+                if plain:            # _macro_step without roll-back, written out
+                    err = step(self, t, t_next - t)
+                    if err > stats["max_coupling_error"]:
+                        stats["max_coupling_error"] = err
+                else:
+                    self._macro_step(k, t, t_next)
+            except StepRefused as exc:
+                partial = self._result(times, rows, wall0)
+                tried = (f"; retried with up to {2 ** pol.max_halvings} substeps"
+                         if pol.max_halvings else "; no retry (max_halvings = 0)")
+                raise CoSimulationError(
+                    f"co-simulation stopped at t = {t:.9g} s (macro step {k + 1} of {n}, "
+                    f"h = {h:g} s): block {exc.block!r} refused the step from t = "
+                    f"{exc.time:.9g} s over {exc.step:.3g} s: {exc.reason}{tried}. The run is "
+                    f"incomplete: no result beyond t = {times[-1]:.9g} s.", t, exc.block,
+                    exc.reason, partial) from exc
+            stats["macro_steps"] += 1
+            record(rows)
+            append(t_next)
+            k += 1
+        return k
 
     def _record_row(self, rows: array) -> None:
         """Append the recorded outputs at the current communication point to ``rows``."""
@@ -489,8 +511,9 @@ class Master:
         if getters is None:
             rows.extend([y[i][p] for i, p, _, _ in self._record])
             return
+        extend = rows.extend
         for i, get in getters:
-            rows.extend(get(y[i]))
+            extend(y[i] if get is None else get(y[i]))
 
     def _result(self, times: list[float], rows: array, wall0: float) -> Result:
         data = np.frombuffer(rows, dtype=float).reshape(len(times), len(self._record))
