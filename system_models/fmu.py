@@ -181,6 +181,8 @@ class FMUBlock(Block):
         self._alive = True
         dll = self.fmu.dll
         self._c_set_real, self._c_get_real = dll.fmi2SetReal, dll.fmi2GetReal
+        #: the instance's fmi2Component (fixed from instantiation to fmi2FreeInstance)
+        self._component = self.fmu.component
         self._c_get_integer, self._c_do_step = dll.fmi2GetInteger, dll.fmi2DoStep
         try:
             self._call("setupExperiment", startTime=float(start_time))
@@ -288,31 +290,38 @@ class FMUBlock(Block):
     # ---- Block interface ------------------------------------------------------------------
     def set_inputs(self, values: Sequence[float], slopes: Sequence[float] | None = None) -> None:
         buf = self._buf_in
-        if len(values) != len(buf):
-            raise ValueError(f"{self.name}: {len(values)} input values for {len(buf)} inputs")
+        n = len(buf)
+        if len(values) != n:
+            raise ValueError(f"{self.name}: {len(values)} input values for {n} inputs")
         buf[:] = values                  # ctypes converts to double (TypeError if it cannot)
         n0 = len(self.messages)
-        self._check("setReal", self._c_set_real(self.fmu.component, self._arr_in, len(buf), buf),
-                    n0)
+        status = self._c_set_real(self._component, self._arr_in, n, buf)
+        if status > 1:
+            self._check("setReal", status, n0)
 
     def get_outputs(self) -> list[float]:
         """The selected outputs (every output unless :meth:`select_outputs` narrowed them)."""
         n0 = len(self.messages)
-        comp = self.fmu.component
+        comp = self._component
         real = self._buf_real
-        if len(real):
-            self._check("getReal", self._c_get_real(comp, self._arr_real, len(real), real), n0)
+        n = len(real)
+        if n:
+            status = self._c_get_real(comp, self._arr_real, n, real)
+            if status > 1:
+                self._check("getReal", status, n0)
         if not self._vr_int:
             return self._real_values.tolist()
         ints = self._buf_int
-        self._check("getInteger", self._c_get_integer(comp, self._arr_int, len(ints), ints), n0)
-        out = self._real_values.tolist() + [float(v) for v in self._int_values.tolist()]
+        status = self._c_get_integer(comp, self._arr_int, len(ints), ints)
+        if status > 1:
+            self._check("getInteger", status, n0)
+        out = self._real_values.tolist() + list(map(float, self._int_values.tolist()))
         order = self._order
         return out if order is None else [out[k] for k in order]
 
     def do_step(self, t: float, h: float) -> None:
         n0 = len(self.messages)
-        status = self._c_do_step(self.fmu.component, t, h, 1)
+        status = self._c_do_step(self._component, t, h, 1)
         if status == 2:              # fmi2Discard: state unchanged, may retry
             raise StepRefused(self.name, t, h, self._since(n0)[2:])
         if status > 1:
