@@ -114,7 +114,8 @@ def step_source(plan: Sequence[Sequence[tuple]], sources: Sequence[Sequence[tupl
         if interpolates[i]:
             out.append(f"    set_{i}([{', '.join(vals)}], [{', '.join(slopes)}])")
         else:
-            out.append(f"    set_{i}([{', '.join(f'{v} + half_h * {sl}' for v, sl in zip(vals, slopes))}])")
+            held = ", ".join(f"{v} + half_h * {sl}" for v, sl in zip(vals, slopes))
+            out.append(f"    set_{i}([{held}])")
         out.append(f"    do_{i}(t, h)")
         if gauss_seidel and read_after[i]:
             out.append(f"    n{i} = get_{i}()")
