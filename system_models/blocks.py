@@ -182,8 +182,8 @@ class PythonBlock(Block):
     def set_inputs(self, values: Sequence[float], slopes: Sequence[float] | None = None) -> None:
         if len(values) != len(self.inputs):
             raise ValueError(f"{self.name}: {len(values)} input values for {len(self.inputs)} inputs")
-        self.u = [float(v) for v in values]
-        self.du = [0.0] * len(values) if slopes is None else [float(s) for s in slopes]
+        self.u = list(map(float, values))
+        self.du = [0.0] * len(values) if slopes is None else list(map(float, slopes))
 
     def get_state(self) -> Any:
         return copy.deepcopy({a: getattr(self, a) for a in self._state_attrs + ("u", "du")})

@@ -34,6 +34,8 @@ from typing import Callable
 from .blocks import Port, PythonBlock, StepRefused
 from .motor import MotorParams
 
+_isfinite, _sqrt = math.isfinite, math.sqrt
+
 __all__ = ["ControllerParams", "PI", "CascadeController", "MODES"]
 
 MODES = ("position", "speed", "current")
@@ -234,12 +236,24 @@ class CascadeController(PythonBlock):
         self._kaw_position = PI(p.position_kp, p.position_ki, p.sample_time).kaw
         self._kaw_speed = PI(p.speed_kp, p.speed_ki, p.sample_time).kaw
         self._kaw_current = PI(p.current_kp, p.current_ki, p.sample_time).kaw
+        self._motor_c: tuple | None = None       # _motor_constants
+
+    def _motor_constants(self) -> tuple:
+        """(motor, p as a float, L [H], ψ [Wb]) of the controller's motor model, worked out
+        once per motor (p·ω as a float product: the same value as int · float)."""
+        mc = self._motor_c
+        m = self.motor
+        if mc is None or mc[0] is not m:
+            mc = self._motor_c = (m, float(m.pole_pairs), m.inductance, m.flux_linkage)
+        return mc
 
     def _sample(self, t: float, x: float, w: float, idd: float, iq: float) -> None:
         """One sample at ``t`` [s] with the measurements x [m], ω [rad/s], i_d, i_q [A].
 
         The loops are :class:`PI` updates written out (no objects per sample); the arithmetic
-        is :meth:`PI.update`'s, term by term."""
+        is :meth:`PI.update`'s, term by term.  Its saturation ``min(hi, max(lo, u))`` is written
+        as those builtins decide: max(lo, u) is u only if u > lo, min(hi, v) is v only if
+        v < hi (a NaN gives the limit, as with the builtins)."""
         p = self.params
         ts = p.sample_time
         j = self.j
@@ -256,7 +270,10 @@ class CascadeController(PythonBlock):
                     / (2.0 * tp * self.c)
             e = ref - x
             u = p.position_kp * e + integ[0] + ff
-            us = min(p.speed_limit, max(-p.speed_limit, u))
+            hi = p.speed_limit
+            lo = -hi
+            us = u if u > lo else lo
+            us = us if us < hi else hi
             ki = p.position_ki
             if ki > 0.0:
                 integ[0] += tp * (ki * e + self._kaw_position * (us - u))
@@ -267,7 +284,10 @@ class CascadeController(PythonBlock):
         if mode != "current" and j % p.speed_divider == 0:
             e = cmd[3] - w
             u = p.speed_kp * e + integ[1] + 0.0
-            us = min(p.current_limit, max(-p.current_limit, u))
+            hi = p.current_limit
+            lo = -hi
+            us = u if u > lo else lo
+            us = us if us < hi else hi
             ki = p.speed_ki
             if ki > 0.0:
                 integ[1] += (ts * p.speed_divider) * (ki * e + self._kaw_speed * (us - u))
@@ -275,19 +295,26 @@ class CascadeController(PythonBlock):
         elif mode == "current":
             cmd[4] = min(p.current_limit, max(-p.current_limit, ref))
         # current loop, d axis first on the voltage circle
-        m = self.motor
-        we = m.pole_pairs * w
-        ffd, ffq = (-we * m.inductance * iq, we * (m.inductance * idd + m.flux_linkage)) \
-            if p.decoupling else (0.0, 0.0)
+        _, pole_pairs, ell, psi = self._motor_constants()
+        we = pole_pairs * w
+        if p.decoupling:
+            ffd, ffq = -we * ell * iq, we * (ell * idd + psi)
+        else:
+            ffd = ffq = 0.0
         vmax = p.voltage_limit
         kp, ki, kaw = p.current_kp, p.current_ki, self._kaw_current
         ed = 0.0 - idd
         vd_u = kp * ed + integ[2] + ffd
-        vd = min(vmax, max(-vmax, vd_u))
-        vq_lim = math.sqrt(max(0.0, vmax * vmax - vd * vd))
+        lo = -vmax
+        vd = vd_u if vd_u > lo else lo
+        vd = vd if vd < vmax else vmax
+        room = vmax * vmax - vd * vd
+        vq_lim = _sqrt(room if room > 0.0 else 0.0)
         eq = cmd[4] - iq
         vq_u = kp * eq + integ[3] + ffq
-        vq = min(vq_lim, max(-vq_lim, vq_u))
+        lo = -vq_lim
+        vq = vq_u if vq_u > lo else lo
+        vq = vq if vq < vq_lim else vq_lim
         if ki > 0.0:
             integ[2] += ts * (ki * ed + kaw * (vd - vd_u))
             integ[3] += ts * (ki * eq + kaw * (vq - vq_u))
@@ -303,7 +330,7 @@ class CascadeController(PythonBlock):
         u, du = self.u, self.du
         u0, u1, u2, u3 = u
         s0, s1, s2, s3 = du
-        if not (all(map(math.isfinite, u)) and all(map(math.isfinite, du))):
+        if not (all(map(_isfinite, u)) and all(map(_isfinite, du))):
             raise StepRefused(self.name, t, h, f"non-finite measurement: {u}, slopes {du}")
         t_end = t + h - eps
         tj = self.t0 + self.j * ts

@@ -21,6 +21,7 @@ that built it: pythonfmu imports the generated module while building).
 
 from __future__ import annotations
 
+import ctypes
 import os
 import shutil
 import subprocess
@@ -35,6 +36,16 @@ from prsm_fmu.fmu_log import FmuLog
 from .blocks import Block, Port, StepRefused
 
 __all__ = ["FMUBlock", "FMUError", "ensure_fmu", "fmu_is_stale"]
+
+_double = ctypes.c_double
+
+
+def _bare(dll: Any, name: str) -> Any:
+    """The FMI function ``name`` of ``dll`` with no declared argument types (every argument
+    must be a ctypes object, or an int for an fmi2Boolean) and fmi2Status as its result."""
+    f = type(getattr(dll, name))((name, dll))
+    f.restype = ctypes.c_int
+    return f
 
 
 class FMUError(RuntimeError):
@@ -179,9 +190,16 @@ class FMUBlock(Block):
             shutil.rmtree(self._unzipdir, ignore_errors=True)
             raise FMUError(f"{self.path}: instantiation failed: {exc}") from exc
         self._alive = True
+        # the step loop's four functions without fmpy's declared argument types, every
+        # argument passed as a ctypes object made once (the instance, the lengths) or a
+        # c_double: ctypes then converts nothing per call
         dll = self.fmu.dll
-        self._c_set_real, self._c_get_real = dll.fmi2SetReal, dll.fmi2GetReal
-        self._c_get_integer, self._c_do_step = dll.fmi2GetInteger, dll.fmi2DoStep
+        self._c_set_real, self._c_get_real, self._c_get_integer, self._c_do_step = (
+            _bare(dll, name) for name in ("fmi2SetReal", "fmi2GetReal", "fmi2GetInteger",
+                                          "fmi2DoStep"))
+        #: the instance's fmi2Component (fixed from instantiation to fmi2FreeInstance)
+        self._component = ctypes.c_void_p(self.fmu.component)
+        self._n_in = ctypes.c_size_t(len(self._vr_in))
         try:
             self._call("setupExperiment", startTime=float(start_time))
             self._call("enterInitializationMode")
@@ -240,6 +258,8 @@ class FMUBlock(Block):
         self._arr_real = (fmi2ValueReference * len(vr_real))(*vr_real)
         self._buf_int = (fmi2Integer * len(self._vr_int))()
         self._arr_int = (fmi2ValueReference * len(self._vr_int))(*self._vr_int)
+        self._n_real = ctypes.c_size_t(len(vr_real))
+        self._n_int = ctypes.c_size_t(len(self._vr_int))
         # the buffers' values as memoryviews: tolist() reads them all at once, several times
         # faster than slicing a ctypes array
         self._real_values = memoryview(self._buf_real).cast("B").cast("d")
@@ -288,31 +308,37 @@ class FMUBlock(Block):
     # ---- Block interface ------------------------------------------------------------------
     def set_inputs(self, values: Sequence[float], slopes: Sequence[float] | None = None) -> None:
         buf = self._buf_in
-        if len(values) != len(buf):
-            raise ValueError(f"{self.name}: {len(values)} input values for {len(buf)} inputs")
+        n = len(buf)
+        if len(values) != n:
+            raise ValueError(f"{self.name}: {len(values)} input values for {n} inputs")
         buf[:] = values                  # ctypes converts to double (TypeError if it cannot)
         n0 = len(self.messages)
-        self._check("setReal", self._c_set_real(self.fmu.component, self._arr_in, len(buf), buf),
-                    n0)
+        status = self._c_set_real(self._component, self._arr_in, self._n_in, buf)
+        if status > 1:
+            self._check("setReal", status, n0)
 
     def get_outputs(self) -> list[float]:
         """The selected outputs (every output unless :meth:`select_outputs` narrowed them)."""
         n0 = len(self.messages)
-        comp = self.fmu.component
+        comp = self._component
         real = self._buf_real
         if len(real):
-            self._check("getReal", self._c_get_real(comp, self._arr_real, len(real), real), n0)
+            status = self._c_get_real(comp, self._arr_real, self._n_real, real)
+            if status > 1:
+                self._check("getReal", status, n0)
         if not self._vr_int:
             return self._real_values.tolist()
         ints = self._buf_int
-        self._check("getInteger", self._c_get_integer(comp, self._arr_int, len(ints), ints), n0)
-        out = self._real_values.tolist() + [float(v) for v in self._int_values.tolist()]
+        status = self._c_get_integer(comp, self._arr_int, self._n_int, ints)
+        if status > 1:
+            self._check("getInteger", status, n0)
+        out = self._real_values.tolist() + list(map(float, self._int_values.tolist()))
         order = self._order
         return out if order is None else [out[k] for k in order]
 
     def do_step(self, t: float, h: float) -> None:
         n0 = len(self.messages)
-        status = self._c_do_step(self.fmu.component, t, h, 1)
+        status = self._c_do_step(self._component, _double(t), _double(h), 1)
         if status == 2:              # fmi2Discard: state unchanged, may retry
             raise StepRefused(self.name, t, h, self._since(n0)[2:])
         if status > 1:

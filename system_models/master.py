@@ -37,6 +37,7 @@ so far on it.
 from __future__ import annotations
 
 import math
+import struct
 import time as _time
 from array import array
 from dataclasses import dataclass, field
@@ -47,6 +48,7 @@ import numpy as np
 
 from .blocks import Block, StepRefused
 from .retry_limit import MAX_HALVINGS
+from .step_code import compile_step, step_source
 
 __all__ = ["Master", "RetryPolicy", "Result", "CoSimulationError", "ORDERS"]
 
@@ -324,16 +326,27 @@ class Master:
         for i, p_, _, _ in self._record:
             by_block.setdefault(i, []).append(p_)
         # one getter per block in recording order, when the recorded columns come block by
-        # block (the default: every output); else a per-column row
+        # block (the default: every output); else a per-column row.  The values are packed
+        # as doubles with struct (float() of each, as array('d') converts them, at a fraction
+        # of array.extend's cost per value)
         order = [i for i, _, _, _ in self._record]
         grouped = all(order[k] <= order[k + 1] for k in range(len(order) - 1))
-        self._row_getters = ([(i, itemgetter(*ps) if len(ps) > 1 else (lambda v, q=ps[0]: (v[q],)))
+        # (None: the block's whole row, its every output in order)
+        self._row_getters = ([(i, None if ps == list(range(len(self._nominal[i]))) else
+                               itemgetter(*ps) if len(ps) > 1 else (lambda v, q=ps[0]: (v[q],)),
+                               struct.Struct(f"{len(ps)}d").pack)
                               for i, ps in by_block.items()] if grouped else None)
+        self._row_pack = struct.Struct(f"{len(self._record)}d").pack
         # each input's branch in _step, fixed by the order: 0 constant, 1 a source that has
         # already stepped (Gauss-Seidel, earlier in the list), 2 a source read at t_k
         self._plan = [[(0, src[1], 0, True) if src[0] == "const" else
                        ((1 if gs and src[1] < i else 2), src[1], src[2], src[3])
                        for src in srcs] for i, srcs in enumerate(self._sources)]
+        #: the step written out for this plan (compiled and bound to the blocks per run)
+        self._step_code = step_source(
+            self._plan, self._sources, [b.interpolates_inputs for b in self.blocks],
+            [b.feedthrough for b in self.blocks], self._read_after_step, self._watched, gs,
+            self.extrapolation)
 
     # ---- stepping ----------------------------------------------------------------------------
     def _values(self, i: int, y: list) -> list[float]:
@@ -361,81 +374,16 @@ class Master:
         for i, b in enumerate(blocks):
             b.set_inputs(self._values(i, y))
         self.y = [b.get_outputs() for b in blocks]
+        self._step_fn = compile_step(self._step_code, blocks, self._sources)
         self.y_prev: list | None = None
         self.t_prev: float | None = None
         self.scale = [[max(abs(v), nom) for v, nom in zip(row, noms)]
                       for row, noms in zip(self.y, self._nominal)]
 
     def _step(self, t: float, h: float) -> float:
-        """One co-simulation step over [t, t + h]; returns the coupling error estimate."""
-        blocks, y, y_prev = self.blocks, self.y, self.y_prev
-        gs = self.order == "gauss-seidel"
-        first = self.extrapolation == 1 and y_prev is not None
-        hold_new = self.extrapolation == 0          # a stepped source's value at t_(k+1), held
-        dtp = (t - self.t_prev) if first else 1.0
-        half_h = 0.5 * h
-        y_new: list[list[float] | None] = [None] * len(blocks)
-        predictions: list[tuple[int, int, float]] = []
-        timers = self._block_time
-        read_after = self._read_after_step
-        clock = _time.perf_counter
-        for i, b in enumerate(blocks):
-            vals, slopes = [], []
-            for kind, s, p, discrete in self._plan[i]:
-                if kind == 0:                           # constant
-                    vals.append(s)
-                    slopes.append(0.0)
-                elif kind == 1:                         # Gauss-Seidel: source already stepped
-                    yn = y_new[s]
-                    if discrete or hold_new:
-                        vals.append(yn[p])
-                        slopes.append(0.0)
-                    else:
-                        yc = y[s][p]
-                        vals.append(yc)
-                        slopes.append((yn[p] - yc) / h)
-                else:
-                    yc = y[s][p]
-                    vals.append(yc)
-                    if discrete:
-                        slopes.append(0.0)
-                        continue
-                    sl = (yc - y_prev[s][p]) / dtp if first else 0.0
-                    slopes.append(sl)
-                    predictions.append((s, p, yc + sl * h))
-            c0 = clock()
-            if b.interpolates_inputs:
-                b.set_inputs(vals, slopes)
-            else:
-                b.set_inputs([v + half_h * sl for v, sl in zip(vals, slopes)])
-            b.do_step(t, h)
-            if gs and read_after[i]:
-                y_new[i] = b.get_outputs()
-            timers[i] += clock() - c0
-        if not gs:
-            for i, b in enumerate(blocks):
-                c0 = clock()
-                y_new[i] = b.get_outputs()
-                timers[i] += clock() - c0
-        for i, b in enumerate(blocks):
-            if b.feedthrough:
-                c0 = clock()
-                b.set_inputs(self._values(i, y_new))
-                b.update_outputs(t + h)
-                y_new[i] = b.get_outputs()
-                timers[i] += clock() - c0
-        err = 0.0
-        scale = self.scale
-        for s, p, pred in predictions:
-            ref = max(scale[s][p], abs(y_new[s][p]))
-            err = max(err, abs(y_new[s][p] - pred) / ref)
-        for s, p in self._watched:      # the only scales the estimate reads
-            v = abs(y_new[s][p])
-            if v > scale[s][p]:
-                scale[s][p] = v
-        self.y_prev, self.t_prev, self.y = y, t, y_new
-        self._stats["substeps"] += 1
-        return err
+        """One co-simulation step over [t, t + h]; returns the coupling error estimate (the
+        step of :mod:`system_models.step_code` for this run's plan and blocks)."""
+        return self._step_fn(self, t, h)
 
     def _snapshot(self) -> tuple:
         states = [b.get_state() for b in self.blocks]
@@ -507,6 +455,8 @@ class Master:
         rows = array("d")                        # the recorded rows, one after the other
         self._record_row(rows)
         times = [t0]
+        # with a progress callback, one step per _advance (it is called after each); else all
+        self._chunk = 1 if progress is not None else n
         k = 0
         while k < n:
             k = self._advance(k, n, times, rows, wall0)
@@ -515,41 +465,60 @@ class Master:
         return self._result(times, rows, wall0)
 
     def _advance(self, k: int, n: int, times: list[float], rows: array, wall0: float) -> int:
-        """Take macro step ``k`` of ``n``, appending its end time to ``times`` and its recorded
-        outputs to ``rows``; return the index of the next step to take.
+        """Take macro steps from ``k`` of ``n`` (as many as the run's chunk), appending their
+        end times to ``times`` and their recorded outputs to ``rows``; return the index of
+        the next step to take.
 
         Raises
         ------
         CoSimulationError
-            If a block refuses the step and no retry can take it.
+            If a block refuses a step and no retry can take it.
         """
+        return self._steps(k, min(n, k + self._chunk), n, times, rows, wall0)
+
+    def _steps(self, k: int, stop: int, n: int, times: list[float], rows: array,
+               wall0: float) -> int:
+        """Macro steps ``k`` to ``stop`` − 1 of ``n`` (:meth:`_advance`); returns ``stop``."""
         h, t0 = self.step, self.t0
-        t, t_next = t0 + k * h, t0 + (k + 1) * h
-        try:
-            self._macro_step(k, t, t_next)
-        except StepRefused as exc:
-            partial = self._result(times, rows, wall0)
-            tried = (f"; retried with up to {2 ** self.retry.max_halvings} substeps"
-                     if self.retry.max_halvings else "; no retry (max_halvings = 0)")
-            raise CoSimulationError(
-                f"co-simulation stopped at t = {t:.9g} s (macro step {k + 1} of {n}, h = {h:g} s): "
-                f"block {exc.block!r} refused the step from t = {exc.time:.9g} s over "
-                f"{exc.step:.3g} s: {exc.reason}{tried}. The run is incomplete: no result "
-                f"beyond t = {times[-1]:.9g} s.", t, exc.block, exc.reason, partial) from exc
-        self._stats["macro_steps"] += 1
-        self._record_row(rows)
-        times.append(t_next)
-        return k + 1
+        stats = self._stats
+        pol = self.retry
+        plain = pol.max_halvings == 0 and pol.tolerance is None
+        step, record, append = self._step_fn, self._record_row, times.append
+        while k < stop:
+            t, t_next = t0 + k * h, t0 + (k + 1) * h
+            try:
+                if plain:            # _macro_step without roll-back, written out
+                    err = step(self, t, t_next - t)
+                    if err > stats["max_coupling_error"]:
+                        stats["max_coupling_error"] = err
+                else:
+                    self._macro_step(k, t, t_next)
+            except StepRefused as exc:
+                partial = self._result(times, rows, wall0)
+                tried = (f"; retried with up to {2 ** pol.max_halvings} substeps"
+                         if pol.max_halvings else "; no retry (max_halvings = 0)")
+                raise CoSimulationError(
+                    f"co-simulation stopped at t = {t:.9g} s (macro step {k + 1} of {n}, "
+                    f"h = {h:g} s): block {exc.block!r} refused the step from t = "
+                    f"{exc.time:.9g} s over {exc.step:.3g} s: {exc.reason}{tried}. The run is "
+                    f"incomplete: no result beyond t = {times[-1]:.9g} s.", t, exc.block,
+                    exc.reason, partial) from exc
+            stats["macro_steps"] += 1
+            record(rows)
+            append(t_next)
+            k += 1
+        return k
 
     def _record_row(self, rows: array) -> None:
         """Append the recorded outputs at the current communication point to ``rows``."""
         y = self.y
         getters = self._row_getters
+        add = rows.frombytes
         if getters is None:
-            rows.extend([y[i][p] for i, p, _, _ in self._record])
+            add(self._row_pack(*[y[i][p] for i, p, _, _ in self._record]))
             return
-        for i, get in getters:
-            rows.extend(get(y[i]))
+        for i, get, pack in getters:
+            add(pack(*(y[i] if get is None else get(y[i]))))
 
     def _result(self, times: list[float], rows: array, wall0: float) -> Result:
         data = np.frombuffer(rows, dtype=float).reshape(len(times), len(self._record))

@@ -50,6 +50,8 @@ from dataclasses import dataclass
 
 from .blocks import Port, PythonBlock, StepRefused
 
+_isfinite = math.isfinite
+
 __all__ = ["MotorParams", "Motor"]
 
 
@@ -168,7 +170,9 @@ class Motor(PythonBlock):
         #: state: i_d, i_q [A], electrical, copper and air-gap energy [J]
         self.x = [float(i_d), float(i_q), 0.0, 0.0, 0.0]
         p = params
-        self._c = (p.resistance, p.inductance, p.pole_pairs, p.flux_linkage, p.torque_constant)
+        # the pole pairs as a float: p·ω is then a float product (the same value as int · float)
+        self._c = (p.resistance, p.inductance, float(p.pole_pairs), p.flux_linkage,
+                   p.torque_constant)
         self._alpha = p.resistance / p.inductance          # 1/(electrical time constant) [1/s]
         self._vmax = p.voltage_limit
         self._trip = p.trip_factor * p.current_limit
@@ -212,10 +216,11 @@ class Motor(PythonBlock):
 
     def do_step(self, t: float, h: float) -> None:
         u, du = self.u, self.du
-        if not (math.isfinite(h) and h > 0.0):
+        finite = _isfinite
+        if not (finite(h) and h > 0.0):
             raise StepRefused(self.name, t, h, f"step size h = {h!r} s must be a finite number > 0")
-        if not (math.isfinite(u[0]) and math.isfinite(u[1]) and math.isfinite(u[2])
-                and math.isfinite(du[0]) and math.isfinite(du[1]) and math.isfinite(du[2])):
+        if not (finite(u[0]) and finite(u[1]) and finite(u[2])
+                and finite(du[0]) and finite(du[1]) and finite(du[2])):
             raise StepRefused(self.name, t, h, f"non-finite input: u = {u}, slopes = {du}")
         vd, vq = self._applied()
         w0, dw = u[2], du[2]
@@ -230,7 +235,7 @@ class Motor(PythonBlock):
                     x = self._exponential(x, vd, vq, w0 + dw * ((j + 0.5) * dt), dt)
         else:
             x = self._rk4(x, vd, vq, w0, dw, h)
-        if not all(math.isfinite(v) for v in x):
+        if not all(map(finite, x)):
             raise StepRefused(self.name, t, h, f"the motor state became non-finite: {x}")
         mag = math.sqrt(x[0] * x[0] + x[1] * x[1])
         if mag > self._trip:
@@ -253,9 +258,9 @@ class Motor(PythonBlock):
         hdt = 0.5 * dt
         dt6 = dt / 6.0
         i0, i1, e_el, e_cu, e_ag = x
-        for j in range(n):
+        for j in map(float, range(n)):     # j·dt: the same product as with the integer j
             tau = j * dt
-            wa, wm, wb = w0 + dw * tau, w0 + dw * (tau + 0.5 * dt), w0 + dw * (tau + dt)
+            wa, wm, wb = w0 + dw * tau, w0 + dw * (tau + hdt), w0 + dw * (tau + dt)
             # stage 1 at (i0, i1), speed wa
             we = p * wa
             wl = we * ell

@@ -311,7 +311,7 @@ class NativeMaster(Master):
             fmu._check(call, status, n0)
         # _REFUSED or _PROFILE_END (a sample past the references given): the Python master
         # takes the step
-        return super()._advance(k + done, n, times, rows, wall0)
+        return self._steps(k + done, k + done + 1, n, times, rows, wall0)
 
     def terminate(self) -> None:
         super().terminate()

@@ -141,6 +141,26 @@ def test_communication_points_are_t0_plus_k_h_without_drift():
     assert acc != t0 + n * h
 
 
+def test_a_progress_callback_sees_every_communication_point_and_changes_no_value():
+    """With a progress callback the master takes one step per call and reports t_k after each
+    (k = 1..n, t_k = t0 + k h from the integer k); without one it takes the run's steps in one
+    loop: the two runs' results are the same bit for bit."""
+    t0, h, n = 0.3, 1e-3, 200
+    seen = []
+    runs = []
+    for progress in (None, lambda t, t_end: seen.append((t, t_end))):
+        m = Master([Clock(t0=t0), Integrator()], {"int.u": "clock.y"}, h, t0=t0, extrapolation=1)
+        runs.append(m.run(t0 + n * h, progress))
+    assert seen == [(t0 + k * h, t0 + n * h) for k in range(1, n + 1)]
+    assert np.array_equal(runs[0].time, runs[1].time)
+    for name in runs[0].names():
+        assert np.array_equal(runs[0][name], runs[1][name])
+    # the integrator of the clock's y = t (Gauss-Seidel: the ramp interpolated, integrated
+    # exactly) from t0: z = (t² − t0²)/2
+    t = runs[0].time
+    assert np.allclose(runs[0]["int.z"], 0.5 * (t * t - t0 * t0), rtol=1e-12, atol=1e-15)
+
+
 def test_an_end_time_that_is_not_a_whole_number_of_steps_is_refused():
     m = Master([Clock(), Integrator()], {"int.u": "clock.y"}, 1e-3)
     with pytest.raises(ValueError, match="whole"):
