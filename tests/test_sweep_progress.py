@@ -44,21 +44,31 @@ def test_chunks_hold_two_cpu_seconds_and_shrink_to_single_points_at_the_end():
     assert chunk_size(1000, 2, 0.12) == 16
     assert chunk_size(1000, 2, 0.6) == 3
     assert chunk_size(1000, 2, 2.5) == 1
-    # towards the end the guided bound: 20 left on 2 workers -> 20 // 4 = 5; 7 left -> 1
-    assert chunk_size(20, 2, 0.006) == 5
-    assert chunk_size(7, 2, 0.006) == 1
+    # towards the end the guided bound, but not below 0.1 s of CPU: at 0.12 s a point the
+    # floor is 0.1 / 0.12 = 0.83 -> none, so 20 left on 2 workers -> 20 // 4 = 5, 7 left -> 1
+    assert chunk_size(20, 2, 0.12) == 5
+    assert chunk_size(7, 2, 0.12) == 1
+    # at 6 ms a point the floor is 0.1 / 0.006 = 16.7 -> 16 points: 20 left -> 16 (not
+    # 20 // 4 = 5), 7 left -> all 7 (not a tail of single points); at 8 ms: 12.5 -> 12
+    assert chunk_size(20, 2, 0.006) == 16
+    assert chunk_size(7, 2, 0.006) == 7
+    assert chunk_size(30, 2, 0.008) == 12
     # before the first result, or with a time that says nothing: one point
     for seconds in (None, 0.0, -1.0, math.nan):
         assert chunk_size(1000, 2, seconds) == 1
     assert chunk_size(1000, 2, math.inf) == 1
 
 
-def test_chunks_are_never_empty_nor_beyond_the_guided_bound():
+def test_chunks_are_never_empty_nor_beyond_the_guided_bound_but_for_the_floor():
+    """Never empty, never more than the points left, and beyond the guided bound (the points
+    left / (2 × workers)) only by the floor: then at most 0.1 s of CPU in all."""
     cases = 0
     for workers in range(1, 5):
         for remaining in range(1, 301):
             for seconds in (1e-5, 1e-3, 6e-3, 0.05, 0.3, 3.0):
                 size = chunk_size(remaining, workers, seconds)
-                assert 1 <= size <= max(1, remaining // (2 * workers)), (remaining, workers)
+                assert 1 <= size <= remaining, (remaining, workers, seconds)
+                if size > max(1, remaining // (2 * workers)):
+                    assert size * seconds <= 0.1 * (1 + 1e-12), (remaining, workers, seconds)
                 cases += 1
     print(f"{cases} (points left, workers, seconds per point) cases")

@@ -397,12 +397,20 @@ CHUNK_SECONDS = 2.0
 IN_FLIGHT = 2
 
 
+#: CPU time [s] below which a chunk is not cut towards the end of a study: the guided bound
+#: shrinks chunks to single points, which for points of a few ms makes a tail of tasks that cost
+#: Dask more than their points (~7 ms of CPU a task); at least this much keeps Dask's cost
+#: under ~7 % of a tail chunk while the workers still finish within about this much of each other
+MIN_CHUNK_SECONDS = 0.1
+
+
 def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) -> int:
     """Points of the next Dask task: about :data:`CHUNK_SECONDS` of CPU at
     ``seconds_per_point`` (the latest chunk's mean: a worker's first point, which loads the FMU
     or the engine, counts once only; None before the first: one point), at most
-    ``remaining // (2 workers)`` (guided: the chunks shrink to single points towards the end,
-    so that the workers finish within about a point of each other), at least 1.
+    ``remaining // (2 workers)`` (guided: the chunks shrink towards the end, so that the
+    workers finish together) but not below :data:`MIN_CHUNK_SECONDS` of CPU (the points left
+    if fewer), at least 1.
 
     Parameters
     ----------
@@ -413,10 +421,12 @@ def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) ->
     seconds_per_point : float or None
         Mean CPU time of a point of the latest chunk [s] (PointResult.cpu_time).
     """
-    if seconds_per_point is None or not seconds_per_point > 0.0:
+    if seconds_per_point is None or not seconds_per_point > 0.0 \
+            or not math.isfinite(seconds_per_point):
         return 1
-    by_time = int(CHUNK_SECONDS / seconds_per_point) if math.isfinite(seconds_per_point) else 1
-    return max(1, min(by_time, remaining // (2 * max(1, workers))))
+    by_time = int(CHUNK_SECONDS / seconds_per_point)
+    floor = min(remaining, int(MIN_CHUNK_SECONDS / seconds_per_point))
+    return max(1, floor, min(by_time, remaining // (2 * max(1, workers))))
 
 
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
