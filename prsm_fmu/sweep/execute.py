@@ -37,8 +37,8 @@ The points go to the workers in chunks (:func:`chunk_size`), each submitted once
 (``retries=0``, ``pure=False``): about :data:`CHUNK_SECONDS` of CPU each at the latest
 chunk's CPU time per point (so Dask's cost per task, ~7 ms of CPU, stays near 0.35 % of the
 work; a point of more than that is a chunk of its own), packed into one pickle each way
-(:func:`~prsm_fmu.sweep.points.pack_chunk`), shrinking to single points towards
-the end (so the workers finish together), :data:`IN_FLIGHT` per worker, the next submitted as
+(:func:`~prsm_fmu.sweep.points.pack_chunk`), shrinking towards the end (so the workers
+finish together) but not below :data:`MIN_CHUNK_SECONDS` of CPU, :data:`IN_FLIGHT` per worker, the next submitted as
 soon as one comes back.  A chunk's results are appended to the table as soon as it is done,
 so an interrupted study keeps every finished chunk; where the workers share this file system
 they save each point's series themselves (:mod:`~prsm_fmu.sweep.series_files`).  The local
