@@ -400,11 +400,9 @@ class Master:
             b.free_state(s)
 
     def _macro_step(self, k: int, t: float, t_next: float) -> None:
+        """Macro step ``k`` under a retry policy (halvings or a coupling tolerance): rolled
+        back and retried in substeps; a step without one is taken by :meth:`_steps`."""
         pol = self.retry
-        if pol.max_halvings == 0 and pol.tolerance is None:
-            self._stats["max_coupling_error"] = max(self._stats["max_coupling_error"],
-                                                    self._step(t, t_next - t))
-            return
         snap = self._snapshot()
         try:
             m = 1

@@ -138,10 +138,15 @@ def _sha256(path: str) -> str:
 FMU_KINDS = ("native", "python")
 
 
-def fmu_file_name(n_stages: int, kind: str) -> str:
-    """``PRSM<n>-native.fmu`` or ``PRSM<n>.fmu``: the file of an FMU of ``kind``."""
+def check_fmu_kind(kind: str) -> None:
+    """ValueError naming ``fmu`` unless ``kind`` is one of :data:`FMU_KINDS`."""
     if kind not in FMU_KINDS:
         raise ValueError(f"fmu = {kind!r} is not allowed: must be one of {', '.join(FMU_KINDS)}")
+
+
+def fmu_file_name(n_stages: int, kind: str) -> str:
+    """``PRSM<n>-native.fmu`` or ``PRSM<n>.fmu``: the file of an FMU of ``kind``."""
+    check_fmu_kind(kind)
     return f"PRSM{n_stages}{'-native' if kind == 'native' else ''}.fmu"
 
 
@@ -617,7 +622,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     if backend == "fmu":
         if fmu is None:
             fmu, fallback = default_fmu_kind()
-        fmu_file_name(1, fmu)                     # the kind checked before anything is done
+        check_fmu_kind(fmu)                       # before anything is done
         require("fmpy", *(("pythonfmu",) if fmu == "python" else ()),
                 purpose="the FMU backend of a sweep (or --backend model)")
         if progress is not None and fallback is not None:

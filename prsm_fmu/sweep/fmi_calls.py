@@ -60,10 +60,7 @@ class StepCalls:
         self._get_integer, self._do_step = raw("fmi2GetInteger"), raw("fmi2DoStep")
         self._get_state, self._set_state = raw("fmi2GetFMUstate"), raw("fmi2SetFMUstate")
         self._free_state = raw("fmi2FreeFMUstate")
-        self._addresses = {name: ctypes.cast(lib[name], ctypes.c_void_p).value for name in (
-            "fmi2SetReal", "fmi2GetReal", "fmi2GetInteger", "fmi2DoStep", "fmi2GetFMUstate",
-            "fmi2SetFMUstate", "fmi2FreeFMUstate")}
-        self._vrs = (torque_vr, speed_vr, rhs_vr)
+        self._lib = lib
         self._c = ctypes.c_void_p(fmu.component)
         self._double = ctypes.c_double
         uint = ctypes.c_uint
@@ -76,12 +73,15 @@ class StepCalls:
         self._torque = (ctypes.c_double * 1)()
         self._int = (ctypes.c_int * 1)()
 
-    def raw(self) -> tuple[dict[str, int], int, tuple[int, int, int], ctypes.Array]:
+    def raw(self, names: Sequence[str]) -> tuple[dict[str, int], int, tuple[int, int, int],
+                                                 ctypes.Array]:
         """What a compiled master needs to make these calls itself
-        (:mod:`prsm_fmu.sweep.native_track`): the functions' addresses by FMI name, the
-        instance's address, the value references of the torque, the speed and the
-        right-hand-side count, and the array of the outputs' value references."""
-        return dict(self._addresses), self._c.value, self._vrs, self._out_vrs
+        (:mod:`prsm_fmu.sweep.native_track`): the addresses of the FMI functions ``names`` in
+        the FMU's library, the instance's address, the value references of the torque, the
+        speed and the right-hand-side count, and the array of the outputs' value references."""
+        addresses = {name: ctypes.cast(self._lib[name], ctypes.c_void_p).value for name in names}
+        vrs = (self._torque_vr[0], self._speed_vr[0], self._rhs_vr[0])
+        return addresses, self._c.value, vrs, self._out_vrs
 
     def _failed(self, name: str, status: int):
         return self.failure(function=name, status=status)
@@ -99,30 +99,6 @@ class StepCalls:
         status = self._do_step(self._c, double(t), double(h), 0)
         if status > _WARNING:
             raise self._failed("fmi2DoStep", status)
-
-    def trial(self, state: ctypes.c_void_p | None, torque: float, t: float, h: float) -> float:
-        """One trial of the runner: restore ``state`` (unless None), set the torque, step from
-        ``t`` over ``h`` [s] and read the screw speed [rad/s]: :meth:`set_state`,
-        :meth:`set_torque`, :meth:`do_step` and :meth:`speed` in one method (the same calls,
-        each checked and named as there)."""
-        c, warning = self._c, _WARNING
-        if state is not None:
-            status = self._set_state(c, state)
-            if status > warning:
-                raise self._failed("fmi2SetFMUstate", status)
-        self._torque[0] = torque
-        status = self._set_real(c, self._torque_vr, 1, self._torque)
-        if status > warning:
-            raise self._failed("fmi2SetReal", status)
-        double = self._double
-        status = self._do_step(c, double(t), double(h), 0)
-        if status > warning:
-            raise self._failed("fmi2DoStep", status)
-        one = self._one
-        status = self._get_real(c, self._speed_vr, 1, one)
-        if status > warning:
-            raise self._failed("fmi2GetReal", status)
-        return one[0]
 
     def speed(self) -> float:
         """fmi2GetReal of ``screw_speed`` [rad/s]."""

@@ -324,10 +324,14 @@ class FmuRunner:
     def _trial(calls: StepCalls, state, restore: bool, t: float, h: float,
                torque: float) -> float:
         """Step from the saved state with ``torque`` held; the screw speed at t + h."""
+        if restore:
+            calls.set_state(state)
+        calls.set_torque(torque)
         try:
-            return calls.trial(state if restore else None, torque, t, h)
+            calls.do_step(t, h)
         except calls.failure as exc:
             FmuRunner._raise_failed_step(exc, t, torque)
+        return calls.speed()
 
     @staticmethod
     def _raise_failed_step(exc, t: float, torque: float):

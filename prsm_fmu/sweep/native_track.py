@@ -95,7 +95,7 @@ class CompiledLoop:
     def __init__(self, lib: Any, calls: Any) -> None:
         self._run = lib.fmu_track_run
         self._calls = calls
-        funcs, comp, (torque_vr, speed_vr, rhs_vr), out_vrs = calls.raw()
+        funcs, comp, (torque_vr, speed_vr, rhs_vr), out_vrs = calls.raw(CALLS)
         self._out_vrs = out_vrs              # kept alive: the struct holds its address
         self._fmu = _Fmu(comp, *(funcs[name] for name in CALLS), torque_vr, speed_vr, rhs_vr,
                          ctypes.addressof(out_vrs), len(out_vrs))
