@@ -4,37 +4,47 @@ Dask path over a plain loop, per point and per study; and the one-engine goal.
 Study: Li et al. (2021) §3.1's start-up (PRSM2, dynamic level, 100 rad/s step, 5000 N, 1 ms at
 1 µs communication steps = 1000 steps a point), over a grid of µ_SR × µ_SS, on both backends:
 the FMU (the speed prescribed by the FMU master on the native FMU, the studies' default;
-default 60 × 4 = 240 points, ~10 ms each) and the model (``simulate``, the whole run in one
+default 120 × 4 = 480 points, ~10 ms each) and the model (``simulate``, the whole run in one
 call into the engine; default 120 × 4 = 480 points, a few ms each), so that Dask's cost per
 task and per point shows.  Each backend's study is run at two sizes, N and about N/2 points
-(spread over the same µ_SR range), with
-:func:`prsm_fmu.sweep.run_study` on fresh output directories, each timed from the call to its
-return (table, series and report written, figures off):
+(spread over the same µ_SR range), with :func:`prsm_fmu.sweep.run_study` on fresh output
+directories, each timed from the call to its return (table, series and report written,
+figures off):
 
 * ``loop``: the points one after the other in this process (``executor="loop"``), the FMU
-  loaded once and reset between points — the reference; no cluster exists meanwhile;
-* ``dask 1``: a ``LocalCluster`` of 1 worker process (1 thread), both sizes;
-* ``dask 2``: a ``LocalCluster`` of 2 worker processes (1 thread each), N points.
+  loaded once and reset between points — the reference;
+* ``dask 1``: a ``LocalCluster`` of 1 worker process (1 thread);
+* ``dask 2``: a ``LocalCluster`` of 2 worker processes (1 thread each).
 
-Each cluster is started (:func:`prsm_fmu.sweep.execute.local_cluster`) and warmed by one
-untimed run of the N/2 points (imports, the engine library, the FMU instance) before its clock
-starts, and closed (quietly) before the next is started, so that no idle cluster runs beside a
-timed one; the loop is warmed the same way.  Starting a cluster (≈ 1 s) and a worker's first
-point are paid once per study, not timed here.  Each configuration is run ``--repeat`` times,
-interleaved, and the fastest run of each counts.  Printed, measured in this run on this
-machine (with its load average before and after: the machine is shared):
+The machine's speed drifts: the same single-threaded work takes up to ±25 % more or less from
+one second to the next on an idle machine here (other machines' jobs on the same host), which
+a "best of" over runs minutes apart does not cancel.  So every comparison is made in pairs of
+runs next to each other in time, and the medians of the pairs count:
 
-* speed-up = t(dask 1, N) / t(dask 2, N)        (goal ≥ 1.85, floor ≥ 1.7 on 2 cores);
-* Dask's cost over the loop split by the two sizes, in wall time and in CPU time (this
-  process with its scheduler thread, and the worker processes: what Dask costs whatever else
-  runs on the machine): per point = the slope, [(t(dask 1, N) − t(dask 1, N/2)) −
-  (t(loop, N) − t(loop, N/2))] / (N − N/2), as a fraction of the loop's slope (goal ≤ 2 %,
-  judged on this per-point part); per study = the rest, t(dask 1, N) − t(loop, N) − N × the
-  per-point part (the chunks of one point at the start and at the end, the last chunk's
-  round trip, publishing the progress; negative values are the noise of the two fits);
-* the CPU of the points themselves (the sum of their ``PointResult.cpu_time``, measured
-  where they ran) against the rest, loop and 1 worker: whether a point costs more in a worker
-  or Dask costs around it;
+* A, the 1-worker cluster alone started and warmed (one untimed run: imports, the engine
+  library, the FMU instance; the loop is warmed the same way), then ``--repeat`` times: loop
+  N, dask 1 N, loop N/2, dask 1 N/2 (the idle cluster beside the loop's runs, on the other
+  core);
+* B, then the 2-worker cluster started and warmed beside it: ``--repeat`` times, dask 2 N,
+  dask 1 N (the idle 1-worker cluster's ~10 ms of CPU a second counts against the 2-worker
+  runs).
+
+Starting a cluster (≈ 1 s) and a worker's first point are paid once per study, not timed here.
+Printed, measured in this run on this machine (with its load average before and after: the
+machine is shared):
+
+* speed-up = t(dask 1, N) / t(dask 2, N) of each pair of B, their median (goal ≥ 1.85, floor
+  ≥ 1.7 on 2 cores), and the best run against the best;
+* Dask's cost over the loop, each pair of A giving dask 1 − loop, split by the two sizes: per
+  point = the slope, [median(N) − median(N/2)] / (N − N/2), as a fraction of a point's own CPU
+  in the loop (goal ≤ 2 %), and per study = the rest, median(N) − N × the per-point part (the
+  first chunks of one point, the last chunk's round trip, publishing the progress); in wall
+  time, in CPU time (this process with its scheduler thread, the workers and their nannies:
+  what Dask costs whatever else runs on the machine), and in CPU outside the points (that CPU
+  less the sum of the points' own ``PointResult.cpu_time``, measured where they ran: Dask's
+  machinery alone, which the drift of the points' own CPU does not reach);
+* a point's own CPU in the worker against in this process, pair by pair (1 when a worker runs
+  a point as fast as this process);
 * the Dask tasks the points went in (chunks, prsm_fmu.sweep.execute.chunk_size).
 
 Dask's cost per task and per point of a chunk alone (no points run) is
@@ -50,8 +60,8 @@ built with ``--engine python``), and on the ``model`` backend (:func:`prsm_fmu.s
 Python path (floor 20×); printed in wall time and in this process's CPU time (the least of the
 runs; what the other jobs of a shared machine do not change).
 
-Run: ``python benchmarks/sweep_scaling.py [--points 240] [--model-points 480] [--repeat 2]
-[--goal-only]`` (a few minutes).
+Run: ``python benchmarks/sweep_scaling.py [--points 480] [--model-points 480] [--repeat 3]
+[--goal-only]`` (about five minutes).
 """
 
 from __future__ import annotations
@@ -165,6 +175,32 @@ def _verdict(value: float, goal: float, floor: float) -> str:
     return "goal met" if value >= goal else "floor met" if value >= floor else "NOT met"
 
 
+def _proc_cpu(pid: int) -> float:
+    """CPU time [s] (user + system) of process ``pid`` from /proc (10 ms ticks); 0 if gone."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+    except (FileNotFoundError, ProcessLookupError):
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _cluster_cpu(client) -> float:
+    """CPU time [s] of this process (with the scheduler of a local cluster) and, given a
+    client, of its workers (their own clocks) and their nannies (/proc)."""
+    total = time.process_time()
+    if client is not None:
+        total += sum(client.run(time.process_time).values())
+        total += sum(_proc_cpu(pid) for pid in set(client.run(os.getppid).values()))
+    return total
+
+
+def _median(values) -> float:
+    import statistics
+
+    return statistics.median(values)
+
+
 def _close_quietly(client, cluster) -> None:
     """Close a cluster without its screen of INFO lines (levels restored afterwards)."""
     import logging
@@ -183,91 +219,111 @@ def _close_quietly(client, cluster) -> None:
 
 def scaling(studies: dict[int, object], fmu_dir: str, tmp: str, repeat: int,
             label: str) -> None:
-    """Time the loop and 1 worker on two point counts and 2 workers on the larger; print the
-    speed-up, the overhead per point (slope) and the fixed overhead per study (docstring)."""
+    """Time the loop and 1 worker on two point counts, paired, and 1 against 2 workers on the
+    larger, paired; print the speed-up, Dask's cost per point (slope) and per study
+    (docstring)."""
     from dask.distributed import Client
 
     from prsm_fmu.sweep import run_study
     from prsm_fmu.sweep.execute import local_cluster
 
     small, big = sorted(studies)
-    wall: dict[tuple[str, int], float] = {}
-    cpu: dict[tuple[str, int], float] = {}
-    inside: dict[tuple[str, int], float] = {}     # CPU of the points themselves (PointResult)
+    # per configuration and size, the runs in order: (wall, CPU of the processes, CPU of the
+    # points themselves)
+    runs: dict[tuple[str, int], list[tuple[float, float, float]]] = {}
     tasks: dict[str, int] = {}
-
-    def workers_cpu(client) -> float:
-        return sum(client.run(time.process_time).values()) if client is not None else 0.0
 
     def timed(name: str, n: int, r: int, **kw) -> None:
         out = os.path.join(tmp, f"{label}_{name.replace(' ', '_')}_{n}_{r}")
         client = kw.get("client")
-        c0 = time.process_time() + workers_cpu(client)
+        c0 = _cluster_cpu(client)
         t0 = time.perf_counter()
         res = run_study(studies[n], out, fmu_dir=fmu_dir, progress=None, figures=False,
                         resume=False, **kw)
         dt = time.perf_counter() - t0
-        dc = time.process_time() + workers_cpu(client) - c0
+        dc = _cluster_cpu(client) - c0
         assert all(row["status"] == "ok" for row in res.rows), res.failed
         assert len(res.rows) == n
         shutil.rmtree(out)                   # ~0.2 MB of series a point: not kept
-        key = (name, n)
-        wall[key] = min(wall.get(key, float("inf")), dt)
-        cpu[key] = min(cpu.get(key, float("inf")), dc)
-        inside[key] = min(inside.get(key, float("inf")), sum(p.cpu_time for p in res.results))
+        inside = sum(p.cpu_time for p in res.results)
+        runs.setdefault((name, n), []).append((dt, dc, inside))
         tasks[name] = res.dask_tasks
-        print(f"  {name:7s} {n:4d} points, run {r + 1}: {dt:7.3f} s  ({dt / n * 1e3:7.2f} ms "
-              f"per point; CPU {dc / n * 1e3:7.2f} ms per point, this process and the workers)")
+        print(f"  {name:7s} {n:4d} points, run {r + 1}: {dt:7.3f} s  ({dt / n * 1e3:6.2f} ms "
+              f"per point; CPU {dc / n * 1e3:6.2f} ms per point, of which the points "
+              f"{inside / n * 1e3:6.2f} ms)")
 
-    def warm(**kw) -> None:
+    def warm(client=None, **kw) -> None:
         """One untimed run of the first points: imports, engine library, FMU instance."""
         out = os.path.join(tmp, f"{label}_warm")
         run_study(studies[small], out, fmu_dir=fmu_dir, progress=None, figures=False,
-                  resume=False, **kw)
+                  resume=False, client=client, **kw)
         shutil.rmtree(out)
 
     print(f"{label}: {small} and {big} points")
     warm(executor="loop")
-    for r in range(repeat):
-        for n in (big, small):
-            timed("loop", n, r, executor="loop")
-    for workers, counts in ((1, (big, small)), (2, (big,))):
-        cluster = local_cluster(workers)     # the sweep's own (loopback only), alone running
-        client = Client(cluster)
-        try:
-            warm(client=client)
-            for r in range(repeat):
-                for n in counts:
-                    timed(f"dask {workers}", n, r, client=client)
-        finally:
-            _close_quietly(client, cluster)
-    t_loop, t1, t2 = wall["loop", big], wall["dask 1", big], wall["dask 2", big]
-    speedup = t1 / t2
-    print(f"  {big} points: loop {t_loop:.3f} s, dask 1 worker {t1:.3f} s, dask 2 workers "
-          f"{t2:.3f} s (best of {repeat}); Dask tasks: {tasks['dask 1']} (1 worker), "
+    one = local_cluster(1)                   # the sweep's own (loopback only)
+    c1 = Client(one)
+    two = c2 = None
+    try:
+        warm(c1)
+        # A: the loop against 1 worker, paired in time, the 2-worker cluster not yet started
+        for r in range(repeat):
+            for n in (big, small):
+                timed("loop", n, r, executor="loop")
+                timed("dask 1", n, r, client=c1)
+        # B: 1 worker against 2, paired in time; the idle 1-worker cluster beside the
+        # 2-worker runs (its ~10 ms of CPU a second counts against them)
+        two = local_cluster(2)
+        c2 = Client(two)
+        warm(c2)
+        for r in range(repeat):
+            timed("dask 2", big, r, client=c2)
+            timed("dask 1", big, repeat + r, client=c1)
+    finally:
+        if c2 is not None:
+            _close_quietly(c2, two)
+        _close_quietly(c1, one)
+
+    def col(name: str, n: int, k: int, first: int = 0, count: int | None = None) -> list[float]:
+        v = [run[k] for run in runs[name, n]]
+        return v[first:first + (count if count is not None else len(v))]
+
+    # speed-up: each 2-worker run against the 1-worker run next to it (B)
+    t2 = col("dask 2", big, 0)
+    t1 = col("dask 1", big, 0, first=repeat)
+    ratios = [a / b for a, b in zip(t1, t2)]
+    speedup = _median(ratios)
+    print(f"  {big} points, 1 worker against 2, {repeat} pairs: speed-up "
+          f"{', '.join(f'{x:.2f}x' for x in ratios)}; median {speedup:.2f}x, best against best "
+          f"{min(t1) / min(t2):.2f}x   (goal >= 1.85, floor >= 1.7: "
+          f"{_verdict(speedup, 1.85, 1.7)}); Dask tasks: {tasks['dask 1']} (1 worker), "
           f"{tasks['dask 2']} (2 workers)")
-    print(f"  speed-up of 2 workers over 1: {speedup:.2f}x   (goal >= 1.85, floor >= 1.7: "
-          f"{_verdict(speedup, 1.85, 1.7)})")
     dn = big - small
 
-    def split(t: dict[tuple[str, int], float]) -> tuple[float, float, float]:
-        """(loop's cost per point, Dask's extra per point, Dask's extra per study) [s]."""
-        per_loop = (t["loop", big] - t["loop", small]) / dn
-        per_dask = (t["dask 1", big] - t["dask 1", small]) / dn
-        extra = per_dask - per_loop
-        return per_loop, extra, (t["dask 1", big] - t["loop", big]) - extra * big
+    def pairs(k: int, n: int) -> list[float]:
+        """Dask 1 worker − loop, per pair of A, of run field ``k`` (0 wall, 1 CPU, or the CPU
+        outside the points: 3)."""
+        def get(name):
+            if k == 3:
+                return [c - p for c, p in zip(col(name, n, 1, count=repeat),
+                                              col(name, n, 2, count=repeat))]
+            return col(name, n, k, count=repeat)
+        return [d - lp for d, lp in zip(get("dask 1"), get("loop"))]
 
-    for what, t in (("wall time", wall), ("CPU time", cpu)):
-        per_loop, extra, fixed = split(t)
-        share = extra / per_loop * 100
-        print(f"  Dask 1 worker over the loop, {what}: {extra * 1e3:+.2f} ms per point = "
-              f"{share:+.1f} % of the loop's {per_loop * 1e3:.2f} ms   (goal <= 2 %: "
-              f"{'met' if share <= 2.0 else 'NOT met'}), and {fixed:+.3f} s per study")
-    print(f"  CPU of the points themselves (sum of their cpu_time), {big} points: loop "
-          f"{inside['loop', big] / big * 1e3:.2f} ms, dask 1 worker "
-          f"{inside['dask 1', big] / big * 1e3:.2f} ms per point; the rest: loop "
-          f"{(cpu['loop', big] - inside['loop', big]) / big * 1e3:.2f} ms, dask 1 worker "
-          f"{(cpu['dask 1', big] - inside['dask 1', big]) / big * 1e3:.2f} ms per point")
+    loop_point = _median(col("loop", big, 2, count=repeat)) / big   # a point's own CPU
+    for what, k in (("wall time", 0), ("CPU time", 1), ("CPU outside the points", 3)):
+        per_point = (_median(pairs(k, big)) - _median(pairs(k, small))) / dn
+        fixed = _median(pairs(k, big)) - per_point * big
+        share = per_point / loop_point * 100
+        verdict = "" if k == 3 else \
+            f"   (goal <= 2 %: {'met' if share <= 2.0 else 'NOT met'})"
+        print(f"  Dask 1 worker over the loop, {what}: {per_point * 1e3:+.3f} ms per point = "
+              f"{share:+.2f} % of a point's {loop_point * 1e3:.2f} ms{verdict}, and "
+              f"{fixed:+.3f} s per study (medians of {repeat} pairs)")
+    inside = [d / lp for d, lp in zip(col("dask 1", big, 2, count=repeat),
+                                       col("loop", big, 2, count=repeat))]
+    print(f"  a point's own CPU in the worker / in this process (pairs of {big} points): "
+          f"{', '.join(f'{x:.3f}' for x in inside)}")
     print()
 
 
@@ -277,11 +333,12 @@ def _load() -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--points", type=int, default=240, help="FMU backend: about this many "
+    ap.add_argument("--points", type=int, default=480, help="FMU backend: about this many "
                     "points (× 4)")
     ap.add_argument("--model-points", type=int, default=480, help="model backend: about this "
                     "many points (× 4)")
-    ap.add_argument("--repeat", type=int, default=2, help="runs per configuration (best counts)")
+    ap.add_argument("--repeat", type=int, default=3, help="pairs per comparison (their medians "
+                    "count; the one-engine goal: runs, the best counts)")
     ap.add_argument("--goal-only", action="store_true", help="only the one-engine goal")
     args = ap.parse_args()
 
