@@ -75,7 +75,7 @@ from .points import (FmuFile, PointResult, PointTask, pack_chunk, run_chunk, run
                      unpack_chunk)
 from .series_files import load_series, save_series
 from .study import Study
-from .table import (append_row, columns, markdown_table, numeric_rows, read_table, row_of,
+from .table import (append_rows, columns, markdown_table, numeric_rows, read_table, row_of,
                     write_table)
 from .trends import TrendResult, evaluate
 
@@ -232,9 +232,10 @@ class Progress:
         self.publish: Callable[[dict], None] | None = None
         self._draw(force=True)
 
-    def update(self, ok: bool) -> None:
-        self.done += 1
-        self.failed += 0 if ok else 1
+    def update(self, ok: bool, count: int = 1) -> None:
+        """``count`` more points done, all of them ``ok`` or all failed; drawn once."""
+        self.done += count
+        self.failed += 0 if ok else count
         self._draw()
 
     def state(self) -> dict[str, Any]:
@@ -437,8 +438,8 @@ def chunk_size(remaining: int, workers: int, seconds_per_point: float | None) ->
 def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers: int | None,
                   ship_fmus: bool, series_dir: str,
                   bar: Progress) -> tuple[Callable, Callable, dict]:
-    """(iterator over results as they complete, closer, counts: ``{"tasks": submitted}``) for
-    the Dask executor.
+    """(iterator over the chunks' results, a list each, as they complete, closer, counts:
+    ``{"tasks": submitted}``) for the Dask executor.
 
     The points go out in chunks (:func:`chunk_size`), :data:`IN_FLIGHT` per worker, the next
     one submitted as soon as one comes back and before its results are handled; a chunk's
@@ -510,7 +511,7 @@ def _dask_results(tasks: list[PointTask], client, scheduler: str | None, workers
             if timed:
                 state["seconds_per_point"] = sum(timed) / len(timed)
             top_up()                       # the workers go on while these are handled
-            yield from done
+            yield done
 
     def close(quiet: bool = False):
         if quiet:
@@ -671,17 +672,25 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
     done: list[PointResult] = []
     timing_rows: list[list[str]] = []
 
-    def handle(res: PointResult) -> None:
-        if res.status == "ok" and res.series is not None:      # not saved where it ran
-            save_series(series_dir, res.id, res.series)
-        row = row_of(res, header)
-        rows_by_id[res.id] = row
-        append_row(table_path, header, row)
-        timing_rows.append([str(res.index), res.id, res.status, res.worker,
-                            f"{res.wall_time:.6f}", f"{res.cpu_time:.6f}"])
-        res.series = None          # on disk now; keep the memory small
-        done.append(res)
-        bar.update(res.status == "ok")
+    def handle(chunk: Sequence[PointResult]) -> None:
+        """Record the points of a chunk: their series (unless saved where they ran), their
+        rows appended to the table in one write, the progress drawn once."""
+        rows = []
+        for res in chunk:
+            if res.status == "ok" and res.series is not None:      # not saved where it ran
+                save_series(series_dir, res.id, res.series)
+            row = row_of(res, header)
+            rows_by_id[res.id] = row
+            rows.append(row)
+            timing_rows.append([str(res.index), res.id, res.status, res.worker,
+                                f"{res.wall_time:.6f}", f"{res.cpu_time:.6f}"])
+            res.series = None          # on disk now; keep the memory small
+            done.append(res)
+        append_rows(table_path, header, rows)
+        ok = sum(res.status == "ok" for res in chunk)
+        for good, count in ((True, ok), (False, len(chunk) - ok)):
+            if count:
+                bar.update(good, count)
 
     if tasks:
         if executor == "loop":
@@ -690,7 +699,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             with deferred_interrupt() as interrupted:
                 for t in tasks:
                     interrupted()
-                    handle(run_point(t, None, series_dir))
+                    handle([run_point(t, None, series_dir)])
         else:
             ship = (scheduler is not None and client is None) if ship_fmus is None \
                 else bool(ship_fmus)
@@ -704,8 +713,8 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             level = loop_log.level
             loop_log.setLevel(logging.CRITICAL)
             try:
-                for res in results():
-                    handle(res)
+                for chunk in results():
+                    handle(chunk)
             except BaseException:           # Ctrl-C or an error: close without the workers'
                 close(quiet=True)           # shutdown warnings (one line, prsm_fmu.command)
                 raise

@@ -22,7 +22,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from ..atomic import atomic_path
 
-__all__ = ["columns", "format_value", "write_table", "append_row", "read_table", "row_of",
+__all__ = ["columns", "format_value", "write_table", "append_rows", "read_table", "row_of",
            "markdown_table"]
 
 FIXED_HEAD = ("point", "id")
@@ -74,14 +74,14 @@ def write_table(path: str, header: Sequence[str], rows: Iterable[Sequence[str]])
             w.writerow(r)
 
 
-def append_row(path: str, header: Sequence[str], row: Sequence[str]) -> None:
-    """Append one row (writing the header first if the file is new)."""
+def append_rows(path: str, header: Sequence[str], rows: Iterable[Sequence[str]]) -> None:
+    """Append rows, one open of the file (writing the header first if the file is new)."""
     new = not os.path.exists(path)
     with open(path, "a", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n")
         if new:
             w.writerow(header)
-        w.writerow(row)
+        w.writerows(rows)
 
 
 def read_table(path: str) -> tuple[list[str], list[dict[str, str]]]:
