@@ -33,7 +33,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from prsm_fmu.atomic import atomic_path
-from prsm_fmu.csv_format import format_blocks
+from prsm_fmu.csv_format import format_columns
 from prsm_fmu.figures import legend_outside, subplots
 from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MICROMETRE,
                             MILLIMETRE, MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
@@ -63,10 +63,9 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     header = io.StringIO()
     csv.writer(header, lineterminator="\n").writerow(
         [label("time", SECOND)] + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
-    data = np.column_stack([res.time] + [res[c] for c in cols])
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         fh.write(header.getvalue().encode("utf-8"))
-        for block in format_blocks(data):
+        for block in format_columns([res.time] + [res[c] for c in cols]):
             fh.write(block)
     return path
 
