@@ -88,6 +88,38 @@ def _near_middles(rng: np.random.Generator, n: int, window: float) -> tuple[np.n
     return np.concatenate([y, -y]), len(kept)
 
 
+def _constructed_near_ties(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """15-digit decimals D = m · 10^p at a chosen hair from the middle M between two doubles,
+    and the doubles on both sides of M; returns the doubles and (D − M) / gap for each.
+
+    By construction: M = odd · 2^(t+p) and gap = 2^(t+p+1) where D lies in [2^(53+t+p),
+    2^(54+t+p)), so D − M = j · 2^p exactly when m · 5^p = 2^t · odd + j, i.e.
+    m ≡ (2^t + j) · 5^(−p) (mod 2^(t+1)): (D − M) / gap = j / 2^(t+1).  With t = 30..62 and
+    |j| up to 10^4 the hair runs from ~1e-19 to ~1e-6 of a gap — across step 2's margin
+    (1e-12), which random decimals reach once in ~10^12."""
+    xs, hairs = [], []
+    for t in range(30, 63):
+        for p in range(1, 60):
+            lo, hi = 2 ** (53 + t) // 5 ** p + 1, 2 ** (54 + t) // 5 ** p   # m · 5^p in range
+            lo, hi = max(lo, 10 ** 14), min(hi, 10 ** 15 - 1)               # 15 digits
+            if lo > hi:
+                continue
+            inverse = pow(5 ** p, -1, 2 ** (t + 1))
+            for j in rng.integers(1, 10 ** 4, size=12).tolist():
+                for jj in (j, -j):
+                    m0 = (2 ** t + jj) * inverse % 2 ** (t + 1)
+                    first = m0 + -(-(lo - m0) // 2 ** (t + 1)) * 2 ** (t + 1)
+                    for m in range(first, hi + 1, 2 ** (t + 1)):
+                        d = m * 10 ** p
+                        x = float(d)                  # correctly rounded: D's side of M
+                        other = np.nextafter(x, -np.inf if x > d else np.inf)
+                        xs += [x, float(other)]
+                        hairs += [jj / 2 ** (t + 1)] * 2
+                        break                         # one m per (t, p, j)
+    x = np.array(xs)
+    return np.concatenate([x, -x]), np.concatenate([hairs, hairs])
+
+
 def _ties(rng: np.random.Generator, n: int) -> np.ndarray:
     """Both neighbours of 15-digit decimals exactly halfway between two doubles (the
     construction of tests/test_csv_format.py: o · 10^p, o odd, o · 5^p in [2^53, 2^54))."""
@@ -167,10 +199,12 @@ def test_compiled_and_numpy_write_the_same_bytes_on_every_kind_of_value():
     rng = np.random.default_rng(20261127)
     bits = rng.integers(0, 2 ** 64, size=N_BITS, dtype=np.uint64, endpoint=False).view(np.float64)
     near, landed = _near_middles(rng, N_NEAR_MIDDLES, NEAR)
+    constructed, hairs = _constructed_near_ties(rng)
     parts = {"random bit patterns": bits,
              "decimals of 1..17 digits": _decimals(rng, N_DECIMAL),
              "15-digit decimals near a middle": near,
              "neighbours of 15-digit ties": _ties(rng, 2000),
+             "constructed 15-digit near-ties, 1e-19..1e-6 of a gap": constructed,
              "powers, their neighbours, exponent ends": _edges(),
              "specials, subnormals, longest texts": _specials(rng)}
     total = 0
@@ -185,6 +219,9 @@ def test_compiled_and_numpy_write_the_same_bytes_on_every_kind_of_value():
     print(f"{total} values compared in all; {landed} of {N_NEAR_MIDDLES} random 15-digit "
           f"decimals within {NEAR} of a middle")
     assert landed > 0
+    print(f"constructed near-ties: {constructed.size} doubles, hairs from "
+          f"{np.abs(hairs).min():.1e} to {np.abs(hairs).max():.1e} of a gap, "
+          f"{int((np.abs(hairs) < 1e-11).sum())} below 1e-11")
     every = _kinds(np.concatenate(list(parts.values())))
     # every branch reached but one: 17 correctly rounded digits are off by |r| <= 0.5 unit of
     # the 17th digit, and half the gap to a neighbouring double is at least 0.55 of that unit
