@@ -107,11 +107,12 @@ def compiled_blocks(lib: Any, columns: Sequence[np.ndarray], rows: int, block: i
     left_at = np.empty(size, dtype=np.int64)
     n_left = ctypes.c_long()
     run = lib.csv_format_rows
+    # the arrays' addresses once (each .ctypes access builds an object)
+    table = (addresses.ctypes.data, strides.ctypes.data, cols)
+    buffers = (scratch.ctypes.data, out_ptr, left_index.ctypes.data, left_at.ctypes.data,
+               ctypes.byref(n_left))
     for r0 in range(0, rows, step):
-        m = min(step, rows - r0)
-        n = run(addresses.ctypes.data, strides.ctypes.data, cols, r0, m, scratch.ctypes.data,
-                out_ptr,
-                left_index.ctypes.data, left_at.ctypes.data, ctypes.byref(n_left))
+        n = run(*table, r0, min(step, rows - r0), *buffers)
         if not n_left.value:
             yield bytes(text[:n])
             continue

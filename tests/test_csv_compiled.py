@@ -267,6 +267,12 @@ def test_columns_and_strided_arrays_write_as_the_stacked_table():
     wide[:, ::2] = a                                   # every other column: rows 112 bytes apart
     assert format_table(wide[:, ::2], compiled=True) == want
     assert b"".join(format_blocks(a[::-1][::-1], compiled=True)) == want
+    # rows read backwards (negative strides) and a broadcast column (stride 0)
+    assert format_table(a[::-1], compiled=True) == format_table(a[::-1].copy(), compiled=False)
+    same = np.broadcast_to(1.5, a.shape[0])
+    assert (b"".join(format_columns([same, a[:, 0]], compiled=True))
+            == format_table(np.column_stack([np.full(a.shape[0], 1.5), a[:, 0]]),
+                            compiled=False))
 
 
 def test_columns_of_other_lengths_or_shapes_are_refused():
