@@ -56,8 +56,10 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     """All outputs on the macro grid; header ``time [s],prsm.rod_position [m],...`` (UTF-8).
 
     Every value reads back as the same double, bit for bit (15 significant digits where they
-    suffice, else 17; formatted with numpy, :mod:`prsm_fmu.csv_format`; its cost against the
-    old writer: ``benchmarks/command_cost.py``, item 3)."""
+    suffice, else 17; :mod:`prsm_fmu.csv_format`: compiled where gcc builds it, else numpy,
+    the same bytes; the columns formatted as they are, not stacked first; its cost against the
+    old writer: ``benchmarks/command_cost.py``, item 3, compiled against numpy:
+    ``benchmarks/csv_write_cost.py``)."""
     cols = ordered_columns(res, first)
     path = Path(path)
     header = io.StringIO()
