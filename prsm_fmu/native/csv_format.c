@@ -7,8 +7,9 @@
  * round as numpy's do.
  *
  * What the Python module does with whole arrays is done here per value, in the same order of
- * operations; the 24-byte layout and the table look-ups of its step 3 become direct writes of
- * the same characters.  Values left to repr (step 4: |x| outside [CSV_LO, CSV_HI) other than
+ * operations but for the decade's first guess (first_guess: no log10, the same result); the
+ * 24-byte layout and the table look-ups of its step 3 become direct writes of the same
+ * characters.  Values left to repr (step 4: |x| outside [CSV_LO, CSV_HI) other than
  * zeros, NaN and infinities, and what step 2 did not settle) are not written: their flat index
  * and the output offset where their text goes are returned, and Python splices repr in.
  * NaN and the infinities are written as repr writes them (texts passed from Python).
@@ -49,14 +50,14 @@ static long clip(long j) { return j < 0 ? 0 : (j >= CSV_NJ ? CSV_NJ - 1 : j); }
 static double pow10_near(long m) { return CSV_P10_ROWS[4 * clip(16 - m + CSV_EOFF)]; }
 
 /* The first guess of j = e + CSV_EOFF: the largest m with a >= (the double nearest to 10^m),
- * found from the binary exponent E (E log10 2 truncated is the decade, one below it or, for
- * E < 0, one above it) and two comparisons, where the reference takes floor(log10(a) + CSV_EOFF).  Both are the decade of a
- * or one off, which step 1's redo corrects to the same (d, j); the one value where a first
- * guess one too low would end otherwise (a 17-digit rounding up to 10^17, only at a = the
- * double nearest to 10^n below it, d = 10^16 - 1 after rounding) gets m = n here and from
- * log10 (whose error is far below the distance of n to its neighbouring doubles).  Cheaper
- * than log10 (~15 ns), and tested equal (tests/test_csv_compiled.py: powers of ten and their
- * neighbours, both paths) */
+ * from the binary exponent E (E log10 2 truncated: the decade, one below it or, for E < 0, one
+ * above it) corrected by two comparisons; the reference takes floor(log10(a) + CSV_EOFF)
+ * instead (log10 costs ~15 ns here).  Both guesses are the decade of a or one off, and step 1's
+ * redo brings either to the same (d, j); the one double where they could end apart is the
+ * double nearest to 10^n when it lies below 10^n (a guess one low could round its 17 digits
+ * up to 10^17), and there both guess n (log10's error is far below the gap from n to its
+ * neighbouring doubles).  Equal on every power of ten and its neighbours, both paths
+ * (tests/test_csv_compiled.py). */
 static long first_guess(double a)
 {
     int binary = (int)((as_bits(a) >> 52) & 0x7FF) - 1023;
