@@ -308,3 +308,21 @@ def test_without_gcc_the_numpy_path_writes_the_same_text(tmp_path):
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert "numpy path ok" in out.stdout
+
+
+def test_the_c_source_is_package_data():
+    # an installed (non-editable) wheel carries only the package data that pyproject lists:
+    # the C source must match one of prsm_fmu's patterns (checked by hand too: a wheel built
+    # with pip wheel and installed with pip --target builds and loads the library)
+    import fnmatch
+    import tomllib
+    from pathlib import Path
+
+    import prsm_fmu.csv_compiled as cc
+
+    root = Path(__file__).resolve().parents[1]
+    data = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))
+    patterns = data["tool"]["setuptools"]["package-data"]["prsm_fmu"]
+    source = cc._SOURCE.relative_to(root / "prsm_fmu").as_posix()
+    assert source == "native/csv_format.c"
+    assert any(fnmatch.fnmatch(source, p) for p in patterns), patterns
