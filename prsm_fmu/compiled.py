@@ -1,12 +1,13 @@
 """C compiled with gcc on first use and cached: the one build-and-cache step of every compiled
-part (the engine, the native FMU's Linux library, the sweep's step loop, the EMA loop, the CSV
-formatter).
+part (the engine, the sweep's step loop, the EMA loop, the CSV formatter; gcc alone for the
+FMU status wrapper where Zig is missing).
 
 Light on purpose (the standard library only, :mod:`subprocess` imported when gcc runs): a
 caller that only loads a library already built (e.g. :mod:`prsm_fmu.csv_compiled` when a result
 is written) pays no import of the FMU build tools: ~5 ms of CPU to import this module (most of
 it :mod:`hashlib`), against 60–80 ms for :mod:`fmu_build.native` in the same process
-(after ``system_models.output``'s imports; ~0.2 s after numpy's alone).  :mod:`fmu_build` re-exports what is here (``fmu_build.native.cached_library``,
+(after ``system_models.output``'s imports; ~0.2 s after numpy's alone).  :mod:`fmu_build`
+re-exports what is here (``fmu_build.native.cached_library``,
 ``fmu_build.platforms.COMPILE_FLAGS``, ``fmu_build.errors.BuildError``).
 """
 

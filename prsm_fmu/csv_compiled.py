@@ -5,7 +5,8 @@ in C (``prsm_fmu/native/csv_format.c``), the same bytes.
 writes with numpy wherever the library cannot be built (no gcc): :func:`library` says why.  The
 C takes every constant and table of the reference from it (the reference passes them, this
 module does not import it), written by :func:`constants_header` into ``csv_constants.h`` as
-exact literals (doubles in hexadecimal), so that nothing is defined twice; it is compiled with gcc on first use (``-std=c99 -O2 -ffp-contract=off``) and cached
+exact literals (doubles in hexadecimal), so that nothing is defined twice; it is compiled with
+gcc on first use (``-std=c99 -O2 -ffp-contract=off``) and cached
 (:func:`prsm_fmu.compiled.cached_library`).  The two paths give the same bytes on seeded random
 cases that reach every branch (tests/test_csv_compiled.py).
 
