@@ -39,16 +39,6 @@ def _command_cost():
     return mod
 
 
-_WRITE = """
-import pickle, sys, time
-from system_models.output import write_csv
-res = pickle.load(open(sys.argv[1], 'rb'))
-t = time.process_time()
-write_csv(res, sys.argv[2], ["prsm.rod_position"])
-print(time.process_time() - t)
-"""
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5, help="repetitions of each (median counts)")
@@ -71,9 +61,9 @@ def main() -> None:
             env = cc._env(tree)
             if not compiled:
                 env.update(PATH=str(no_gcc / "bin"), TMPDIR=str(no_gcc / "tmp"))
-            out = subprocess.run([py, "-c", _WRITE, str(long_), str(tmp / f"w-{compiled}.csv")],
-                                 env=env, cwd=cc.NEUTRAL, capture_output=True, text=True,
-                                 check=True)
+            out = subprocess.run([py, "-c", cc._WRITE, str(long_),
+                                  str(tmp / f"w-{compiled}.csv")], env=env, cwd=cc.NEUTRAL,
+                                 capture_output=True, text=True, check=True)
             return float(out.stdout.split()[-1])
 
         runs = cc._interleaved(args.repeat, {"compiled": lambda: write(True),
