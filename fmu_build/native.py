@@ -33,7 +33,6 @@ What this module does:
 
 from __future__ import annotations
 
-import getpass
 import hashlib
 import math
 import os
@@ -49,6 +48,8 @@ from xml.dom.minidom import parseString
 
 import prsm_fmu
 from prsm_fmu.atomic import atomic_path
+# the gcc build-and-cache step, shared with every compiled part (re-exported here)
+from prsm_fmu.compiled import cached_library, compile_library
 from prsm_fmu.slave import TIME_MATCH
 from prsm_fmu.models.base import STANDSTILL_SPEED
 from prsm_fmu.params import MechanismParams
@@ -549,49 +550,6 @@ def _fmi_headers(header: str = "fmi2Functions.h", version: str = "2.0") -> Path:
         raise BuildError(f"fmpy ships no {header}" + (f" (the FMI {version} headers)"
                                                       if version != "2.0" else ""))
     return found[0].parent
-
-
-def compile_library(src: Path, out: Path, sources: tuple[str, ...] = SOURCES,
-                    defines: tuple[str, ...] = (), link: tuple[str, ...] = ()) -> None:
-    """Compile ``sources`` (default: the FMU's) in ``src`` into the shared library ``out`` with
-    gcc, with the ``-D`` ``defines`` and the extra linker arguments ``link``."""
-    gcc = shutil.which("gcc")
-    if gcc is None:
-        raise BuildError("gcc is needed to build the native FMU's Linux binary (apt-get install gcc)")
-    cmd = [gcc, *COMPILE_FLAGS, "-Wall", f"-I{src}", *(f"-D{d}" for d in defines),
-           *(str(src / s) for s in sources), "-o", str(out), *link, "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise BuildError(f"gcc failed:\n{proc.stderr}")
-
-
-def cached_library(prefix: str, files: dict[str, bytes], sources: tuple[str, ...]) -> Path:
-    """A shared library compiled from ``files`` (name → contents; ``sources`` are the ones
-    compiled, the others are headers), built once and kept under the hash of every file.
-
-    The cache is a directory of the user's own (mode 0700) in the system's temporary
-    directory, so no other user can put a library there; the library is moved in whole, so
-    a concurrent build finds it complete.
-
-    Raises
-    ------
-    BuildError
-        When gcc is missing or fails.
-    """
-    digest = hashlib.sha256(b"".join(name.encode() + b"\0" + data + b"\0"
-                                     for name, data in sorted(files.items()))).hexdigest()[:20]
-    cache = Path(tempfile.gettempdir()) / f"prsm-fmu-native-{getpass.getuser()}"
-    lib = cache / f"{prefix}_{digest}.so"
-    if not lib.exists():
-        cache.mkdir(mode=0o700, parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(prefix=f"{prefix}_lib_", dir=cache) as tmp:
-            src = Path(tmp)
-            for name, data in files.items():
-                (src / name).write_bytes(data)
-            out = src / lib.name
-            compile_library(src, out, sources)
-            os.replace(out, lib)
-    return lib
 
 
 def build_native(name: str, params: MechanismParams, preset: str, dest: str | Path = "dist",

@@ -38,14 +38,13 @@ import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from prsm_fmu.compiled import COMPILE_FLAGS   # the flags of every target (one definition)
+
 from . import binary_check
 from .errors import BuildError
 
 __all__ = ["Platform", "PLATFORMS", "FMI2_PLATFORMS", "PYTHONFMU_PLATFORMS", "compile_for",
            "check_library", "zig_available", "universal_macho", "COMPILE_FLAGS"]
-
-#: flags of every target (no fused multiply-add, no fast-math: the Python model's rounding)
-COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""Doubles to CSV text at numpy speed, every value read back bit for bit.
+"""Doubles to CSV text at numpy speed (or compiled, the same bytes), every value read back bit
+for bit.
 
 Formatting a double in Python costs ~0.5 µs (``f"{v:.15g}"``, ``repr``), so a 15 001-row result
 with ~60 outputs took ~0.5–1 s to write.  Here the digits of all values are made at once with
@@ -31,16 +32,24 @@ the sign's place of a positive value) are NUL, and ``bytes.translate`` drops the
 over a block of lines.
 
 The tests read values back with ``float()`` and compare the bits (tests/test_csv_format.py).
+
+This module is the reference.  Where gcc builds it, the same algorithm compiled
+(:mod:`prsm_fmu.csv_compiled`, ``prsm_fmu/native/csv_format.c``, every constant and table
+passed from here) writes the same bytes (tests/test_csv_compiled.py: 1.4 million seeded
+values that reach every branch, 15-digit near-ties constructed across the margin, tables of
+1..70 columns) at ~35 ns of CPU a value against ~100 ns here
+(``python benchmarks/csv_write_cost.py``); ``compiled=False`` forces this path, and it runs
+by itself where the library cannot be built.
 """
 
 from __future__ import annotations
 
 from fractions import Fraction
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 
-__all__ = ["format_values", "format_table", "format_blocks", "ROW"]
+__all__ = ["format_values", "format_table", "format_blocks", "format_columns", "ROW"]
 
 #: bytes per value in the working layout (three 8-byte words): 0..1 the separator before the
 #: value and ``-`` (a negative value: ``,-``; a positive one: NUL ``,``), 2 the first digit,
@@ -100,8 +109,10 @@ def _split(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 #: 10^(16 − e) by j, a row each (one gather for a value): the nearest double, its Dekker
 #: halves (26 bits each), the rest
 _P10_ROWS = _by_exponent(np.stack([_P10_HI_K, *_split(_P10_HI_K), _P10_LO_K], axis=1))
-#: 10^(16 − e) less the relative margin (1e-12) of step 2
-_P10_SAFE = _by_exponent(_P10_HI_K * (1.0 - 1e-12))
+#: step 2's margin for the computation's own errors, relative and in digits
+_MARGIN = 1e-12
+#: 10^(16 − e) less the relative margin of step 2
+_P10_SAFE = _by_exponent(_P10_HI_K * (1.0 - _MARGIN))
 #: the low half of word 0 by the first digit + 10 · negative + 20 · (no digit after the point):
 #: ``\0,d.``, ``,-d.``, ``\0,d\0`` or ``,-d\0``
 _HEAD = _table(b"%s%d%s\0\0\0\0" % (b",-" if neg else b"\0,", i, b"\0" if bare else b".")
@@ -125,6 +136,8 @@ _TAIL = _table(b"\0\0\0\0e%+03d" % (j - _EOFF) if -99 <= j - _EOFF <= 99 else b"
                for j in range(_NJ))
 _COMMA, _NEWLINE = ord(","), ord("\n")
 _D16, _D17 = 10 ** 16, 10 ** 17
+#: 10^(17 − 15): the 15 digits are the 17 rounded to hundreds
+_DROP = 100
 _EXPONENT_BITS = np.int64(0x7FF0000000000000)
 #: a double's 26 low fraction bits cleared: its top 27 significant bits, exact in any product
 #: with a 26-bit half of 10^k
@@ -184,17 +197,17 @@ def _shortest(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     gap -= shift
     limit = gap.view(np.float64)
     limit *= np.take(_P10_SAFE, j, mode="clip")
-    limit -= 1e-12
-    q = d // 100
-    rem = (d - 100 * q).astype(np.float64)
+    limit -= _MARGIN
+    q = d // _DROP
+    rem = (d - _DROP * q).astype(np.float64)
     up = rem + r
-    up = up > 50.0                                   # the 15 digits rounded to nearest
-    dist = up * 100.0
+    up = up > _DROP / 2                              # the 15 digits rounded to nearest
+    dist = up * float(_DROP)
     dist -= rem                                      # exact: small integers
     dist -= r
     ok15 = np.abs(dist, out=dist) < limit
     q += up
-    q *= 100
+    q *= _DROP
     d = np.where(ok15, q, d)                         # the 17 digits written
     carry = np.flatnonzero(d == _D17)                # 15 digits rounded up to 10^15
     d[carry] = _D16
@@ -273,24 +286,73 @@ def _cells_into(x: np.ndarray, words: np.ndarray) -> tuple[np.ndarray, list[tupl
     return chars, longer
 
 
-def format_values(x: np.ndarray) -> list[str]:
+def format_values(x: np.ndarray, compiled: bool | None = None) -> list[str]:
     """Each value of ``x`` (read as float64, flattened in C order) as text that ``float()``
-    reads back to the same double, bit for bit (module docstring)."""
+    reads back to the same double, bit for bit (module docstring); ``compiled``: as for
+    :func:`format_blocks`."""
     x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 1)
-    return format_table(x).decode("ascii").split("\n")[:-1]
+    return format_table(x, compiled).decode("ascii").split("\n")[:-1]
 
 
-def format_blocks(data: np.ndarray) -> Iterator[bytes | bytearray]:
+def format_blocks(data: np.ndarray, compiled: bool | None = None) -> Iterator[bytes | bytearray]:
     """Rows of a 2-D array as CSV lines, ASCII (``,`` between values, ``\\n`` after each row),
     every value read back by ``float()`` as the same double, bit for bit (module docstring):
     pieces of text (bytes or bytearray) to be written one after the other.
+
+    ``compiled``: None formats with the compiled formatter (:mod:`prsm_fmu.csv_compiled`, the
+    same bytes) where it can be built, else with numpy here; False with numpy; True with the
+    compiled formatter (RuntimeError saying why if it cannot be built).
 
     Raises ValueError (naming ``data``) for an array that is not 2-D or has no column."""
     data = np.asarray(data, dtype=np.float64)
     if data.ndim != 2 or data.shape[1] == 0:
         raise ValueError(f"data: a 2-D array of at least one column expected, got shape "
                          f"{data.shape}")
-    rows, cols = data.shape
+    return _lines(list(data.T), data.shape[0], compiled)
+
+
+def format_columns(columns: Sequence[np.ndarray],
+                   compiled: bool | None = None) -> Iterator[bytes | bytearray]:
+    """:func:`format_blocks` of the table whose columns are ``columns`` (1-D, as many values
+    each, read as float64), without stacking them into one array first.
+
+    Raises ValueError (naming ``columns``) for no column, one not 1-D or lengths that
+    differ."""
+    cols = [np.asarray(c, dtype=np.float64) for c in columns]
+    shapes = {c.shape for c in cols}
+    if not cols or len(shapes) != 1 or len(cols[0].shape) != 1:
+        raise ValueError(f"columns: at least one column, 1-D and of one length, expected, got "
+                         f"shapes {sorted(shapes)}")
+    return _lines(cols, cols[0].size, compiled)
+
+
+def _lines(columns: list[np.ndarray], rows: int,
+           compiled: bool | None) -> Iterator[bytes | bytearray]:
+    """The CSV lines of the float64 1-D ``columns`` (``rows`` values each): compiled or numpy
+    (:func:`format_blocks`)."""
+    if compiled is not False:
+        from . import csv_compiled
+
+        lib, why = csv_compiled.library(_compiled_constants())
+        if lib is not None:
+            return csv_compiled.compiled_blocks(lib, columns, rows, _BLOCK, ROW)
+        if compiled:
+            raise RuntimeError(why)
+    return _numpy_lines(columns, rows)
+
+
+def _compiled_constants() -> dict[str, int | float | np.ndarray]:
+    """What the compiled formatter takes from here (:mod:`prsm_fmu.csv_compiled`: ``CSV_<name>``
+    in its C): the constants and tables of steps 1–2, one definition each."""
+    return {"EOFF": _EOFF, "NJ": _NJ, "ROW": ROW, "LO_BITS": _LO_BITS,
+            "SPAN_BITS": int(_SPAN_BITS), "HIGH27": int(_HIGH27),
+            "EXPONENT_BITS": int(_EXPONENT_BITS), "D16": _D16, "D17": _D17, "DROP": _DROP,
+            "MARGIN": _MARGIN, "P10_ROWS": _P10_ROWS, "P10_SAFE": _P10_SAFE}
+
+
+def _numpy_lines(columns: list[np.ndarray], rows: int) -> Iterator[bytes | bytearray]:
+    """:func:`_lines` with numpy (the reference)."""
+    cols = len(columns)
     # blocks of ~8000 values: the temporary arrays then stay in the CPU's cache (whole columns
     # of a long run would stream through memory for every operation)
     step = max(1, _BLOCK // cols)
@@ -298,8 +360,8 @@ def format_blocks(data: np.ndarray) -> Iterator[bytes | bytearray]:
     buffer = bytearray(min(rows, step) * cols * ROW)
     words = np.frombuffer(buffer, dtype=_QUAD).reshape(-1, ROW // 8)
     for r0 in range(0, rows, step):
-        block = data[r0:r0 + step]
-        chars, longer = _cells_into(np.ascontiguousarray(block).ravel(), words)
+        block = np.column_stack([c[r0:r0 + step] for c in columns])
+        chars, longer = _cells_into(block.ravel(), words)
         # a line's first value: its separator (byte 0 or 1) ends the line before
         first = chars.reshape(block.shape[0], cols, ROW)[:, 0, :2]
         first[first == _COMMA] = _NEWLINE
@@ -317,6 +379,6 @@ def format_blocks(data: np.ndarray) -> Iterator[bytes | bytearray]:
         yield b"\n"
 
 
-def format_table(data: np.ndarray) -> bytes:
+def format_table(data: np.ndarray, compiled: bool | None = None) -> bytes:
     """:func:`format_blocks` as one bytes object."""
-    return b"".join(format_blocks(data))
+    return b"".join(format_blocks(data, compiled))

@@ -33,7 +33,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from prsm_fmu.atomic import atomic_path
-from prsm_fmu.csv_format import format_blocks
+from prsm_fmu.csv_format import format_columns
 from prsm_fmu.figures import legend_outside, subplots
 from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MICROMETRE,
                             MILLIMETRE, MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
@@ -56,17 +56,18 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     """All outputs on the macro grid; header ``time [s],prsm.rod_position [m],...`` (UTF-8).
 
     Every value reads back as the same double, bit for bit (15 significant digits where they
-    suffice, else 17; formatted with numpy, :mod:`prsm_fmu.csv_format`; its cost against the
-    old writer: ``benchmarks/command_cost.py``, item 3)."""
+    suffice, else 17; :mod:`prsm_fmu.csv_format`: compiled where gcc builds it, else numpy,
+    the same bytes; the columns formatted as they are, not stacked first; its cost against the
+    old writer: ``benchmarks/command_cost.py``, item 3, compiled against numpy:
+    ``benchmarks/csv_write_cost.py``)."""
     cols = ordered_columns(res, first)
     path = Path(path)
     header = io.StringIO()
     csv.writer(header, lineterminator="\n").writerow(
         [label("time", SECOND)] + [label(c, res.units.get(c) or DIMENSIONLESS) for c in cols])
-    data = np.column_stack([res.time] + [res[c] for c in cols])
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         fh.write(header.getvalue().encode("utf-8"))
-        for block in format_blocks(data):
+        for block in format_columns([res.time] + [res[c] for c in cols]):
             fh.write(block)
     return path
 

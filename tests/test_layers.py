@@ -14,16 +14,17 @@ Layers, lowest first (a module may import its own layer or lower ones, never a h
 2. ``models``, ``steppers`` (siblings: a stepper knows a model only by its protocol, so
    ``steppers`` never imports ``models``) and ``presets`` (parameter sets built from the types
    below);
-3. ``simulate``, ``steady_state`` and the package's ``__init__`` that re-exports them, and
-   ``engine`` (which steps a model: the compiled core or the Python steppers);
+3. ``simulate``, ``steady_state`` and the package's ``__init__`` that re-exports them,
+   ``engine`` (which steps a model: the compiled core or the Python steppers) and ``compiled``
+   (C compiled with gcc on first use and cached: the engine's, the CSV formatter's);
 4. ``slave`` and ``configure`` — what the FMU needs, with ``fmu_state`` (its serialized state)
    and ``fmu_exit`` (its exit-time guard);
 5. the tools that use the package: ``cli``, ``report``, ``results`` (what they read off a run),
    ``design_checks``, ``sweep``, ``regress``, ``arguments`` (their argument checks),
    ``fmu_log``, ``fmu_variables``, ``fmi_enum`` and ``result_plot`` (what a host reads off an
    FMU), ``atomic`` (outputs written whole), ``command`` and ``extras`` (how a command ends:
-   Ctrl-C, a missing optional extra), ``csv_format`` and ``figures`` (how results are written:
-   CSV text, figure setup), ``workers`` (processes started ahead of their work).
+   Ctrl-C, a missing optional extra), ``csv_format``, ``csv_compiled`` and ``figures`` (how results
+   are written: CSV text, its compiled formatter, figure setup), ``workers`` (processes started ahead of their work).
 
 Layers 0–3 (the physics and its time stepping) import neither an FMI library nor the tools
 outside the package (``system_models``, ``fmu_build``), with one exception: ``engine`` imports
@@ -46,11 +47,12 @@ LAYERS = {
     "schedule": 0,
     "mechanics": 1, "kinematics": 1,
     "models": 2, "steppers": 2, "presets": 2,
-    "simulate": 3, "steady_state": 3, "": 3, "engine": 3,
+    "simulate": 3, "steady_state": 3, "": 3, "engine": 3, "compiled": 3,
     "slave": 4, "configure": 4, "fmu_state": 4, "fmu_exit": 4,
     "cli": 5, "report": 5, "results": 5, "design_checks": 5, "sweep": 5, "regress": 5,
     "arguments": 5, "fmu_log": 5, "fmu_variables": 5, "result_plot": 5, "fmi_enum": 5,
-    "atomic": 5, "command": 5, "extras": 5, "csv_format": 5, "figures": 5, "workers": 5,
+    "atomic": 5, "command": 5, "extras": 5, "csv_format": 5, "csv_compiled": 5,
+    "figures": 5, "workers": 5,
 }
 
 #: top-level names the physics layers (0-3) must not import
