@@ -44,6 +44,7 @@ import numpy as np
 from ..fmi_enum import enumeration_value
 from ..fmu_log import FmuLog
 from ..params import MECHANISM_FIELD_NAMES, MechanismParams, StageParams
+from ..profiles import ConstantSpeed
 from .fmi_calls import StepCalls
 
 #: mechanism-level parameters of the FMU (fields of MechanismParams that are FMU parameters)
@@ -273,7 +274,7 @@ class FmuRunner:
         ref = np.empty(n_steps + 1)
         ref[0] = w0
         if self._loop is not None:              # the same loop, compiled
-            ref[1:] = [float(speed((i + 1) * h)) for i in range(n_steps)]
+            ref[1:] = _reference(speed, n_steps, h)
             from .native_track import LoopFailure
 
             try:
@@ -384,6 +385,16 @@ class FmuRunner:
             torque, err = new, new_err
             if abs(err) < best[0]:
                 best = (abs(err), torque)
+
+
+def _reference(speed: Callable[[float], float], n_steps: int, h: float) -> float | list[float]:
+    """The reference speeds at the communication points h, 2h, ..., n_steps·h [rad/s], for
+    ``ref[1:]``: ``float(speed((i + 1) * h))`` each, as the Python loop reads them; for a
+    :class:`~prsm_fmu.profiles.ConstantSpeed` its value once (the same double at every point:
+    numpy fills the row with it) instead of n_steps calls."""
+    if getattr(speed, "__func__", None) is ConstantSpeed.speed:       # a ConstantSpeed's .speed
+        return speed.__self__.value
+    return [float(speed((i + 1) * h)) for i in range(n_steps)]
 
 
 def _secant_root(f: Callable[[float], float], x0: float, scale: float, rtol: float) -> float:
