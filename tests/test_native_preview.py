@@ -71,7 +71,7 @@ def _counts(stdout: str) -> tuple[int, int, int]:
 
 
 def test_kept_preview_model_equals_a_fresh_instance_under_sanitizers(native, tmp_path):
-    """60 rounds of 50 random calls (seed 12): 3060 checks of all 28 Real outputs (and one
+    """60 rounds of 50 random calls (seed 12): 3060 checks of all 31 Real outputs (and one
     alone) against a fresh instance, every one equal; most with finite outputs (a model
     built), some with NaN in both (parameters it refuses)."""
     if sys.platform != "linux":
