@@ -10,8 +10,10 @@ process, the FMU loaded once), series files written, figures off.
 The older code (default: commit 721f72e) is unpacked with ``git archive`` into a temporary
 folder, as benchmarks/command_cost.py does, and each tree runs in child processes through
 ``PYTHONPATH`` with its own native FMU (built from its own sources before any clock starts).
-A child runs the study once untimed (imports, the FMU instance, the compiled loop's library)
-and then ``--repeat``-independent times on fresh output folders, timed; old and new children
+A child runs the study once untimed (imports, the FMU instance, the compiled loop's library),
+drops what the code keeps per process from one study to the next (the validated mechanisms and
+presets: the timed run pays them as a process's first study does) and runs it again on a fresh
+output folder, timed; ``--repeat`` children per tree; old and new children
 are interleaved (old, new, old, new, ...) so a load that comes and goes on a shared machine
 hits both alike, and the median of each tree's runs counts.  Printed, per point, in CPU time
 of the child process (``time.process_time``):
@@ -23,7 +25,9 @@ of the child process (``time.process_time``):
   ``MechanismParams.validate``, ``derive_series`` + ``compute_metrics``, and the rest (the
   runner's and ``run_point``'s own work, the table): each part's own time, without the parts
   it calls (a timer around each; their own cost, about a microsecond a call, lands in the rest);
-* the cost outside the loop (the point less its loop), old and new, and old / new.
+* the cost outside the loop (the point less its loop), old and new, and old / new;
+* whether the first timed run of each tree wrote the same results: every cell of
+  ``results.csv`` (numbers compared as doubles) and every array of every series file.
 
 Run: ``python benchmarks/point_cost.py [--old 721f72e] [--points 240] [--repeat 3]``
 (about a minute per repeat).
@@ -33,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -41,6 +46,9 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from command_cost import _env, _old_tree  # noqa: E402 - the same trees and environments
 
 #: the parts of a point, in print order: (label, what is timed)
 PARTS = (
@@ -105,29 +113,21 @@ run(os.path.join(work, "warm"))
 shutil.rmtree(os.path.join(work, "warm"))
 for k in spent:
     spent[k] = 0.0
+# what a tree keeps per process from one study to the next (the warm run had the same points)
+# is dropped: the timed run pays it as a study's first run in a process does
+from prsm_fmu.sweep import points as _points, study as _study_module
+for owner, name in ((_points, "_point_params"), (_study_module, "_preset_of_name")):
+    cached = getattr(owner, name, None)
+    if cached is not None:
+        cached.cache_clear()
 c0 = time.process_time()
 res = run(os.path.join(work, "timed"))          # a fresh folder
 total = time.process_time() - c0
-shutil.rmtree(os.path.join(work, "timed"))
+if sys.argv[6] != "keep":                       # else the parent compares it and removes it
+    shutil.rmtree(os.path.join(work, "timed"))
 points = len(study.points())
 print(json.dumps({"points": points, "total": total, "parts": spent}))
 """
-
-
-def _env(tree: Path) -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(tree)
-    env.pop("PYTHONDONTWRITEBYTECODE", None)
-    return env
-
-
-def _old_tree(commit: str, where: Path) -> Path:
-    tree = where / f"old-{commit}"
-    tree.mkdir()
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], check=True,
-                             capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
-    return tree
 
 
 def _build_fmu(tree: Path, dest: Path) -> None:
@@ -138,14 +138,65 @@ def _build_fmu(tree: Path, dest: Path) -> None:
                    check=True)
 
 
-def _run(tree: Path, work: Path, points: int, fmu_dir: Path) -> dict:
+def _run(tree: Path, work: Path, points: int, fmu_dir: Path, keep: bool) -> dict:
+    """One child's run of the study; with ``keep`` its output stays in ``work/timed``."""
     work.mkdir(parents=True, exist_ok=True)
     proc = subprocess.run([sys.executable, "-c", _CHILD, str(tree), str(work), str(points),
-                           str(fmu_dir), json.dumps(PARTS)], env=_env(tree), cwd=work,
-                          capture_output=True, text=True)
+                           str(fmu_dir), json.dumps(PARTS), "keep" if keep else "drop"],
+                          env=_env(tree), cwd=work, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"the study failed in {tree}:\n{proc.stderr[-3000:]}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _same_number(a: float, b: float) -> bool:
+    """Equal as doubles: the same number with the same sign, or both NaN."""
+    if math.isnan(a) or math.isnan(b):
+        return math.isnan(a) and math.isnan(b)
+    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
+
+
+def _same_arrays(a, b) -> bool:
+    import numpy as np
+
+    if a.dtype != b.dtype or a.shape != b.shape:
+        return False
+    if a.dtype.kind != "f":
+        return bool(np.array_equal(a, b))
+    return bool(np.array_equal(a, b, equal_nan=True)
+                and np.array_equal(np.signbit(a), np.signbit(b)))
+
+
+def compare_outputs(old: Path, new: Path) -> str:
+    """Whether two runs' tables (every cell: numbers as doubles, text as text) and series
+    files (every array: dtype, shape, values) are the same; one line saying what was
+    compared, or raises AssertionError naming the first difference."""
+    import numpy as np
+
+    from prsm_fmu.sweep.table import numeric_rows, read_table
+
+    head_o, rows_o = read_table(str(old / "results.csv"))
+    head_n, rows_n = read_table(str(new / "results.csv"))
+    assert head_o == head_n and len(rows_o) == len(rows_n) > 0, "the tables' shapes differ"
+    cells = 0
+    for ro, rn in zip(numeric_rows(rows_o), numeric_rows(rows_n)):
+        for col in head_o:
+            a, b = ro[col], rn[col]
+            same = _same_number(a, b) if isinstance(a, float) and isinstance(b, float) else a == b
+            assert same, f"results.csv point {ro['point']} column {col}: {a!r} vs {b!r}"
+            cells += 1
+    files = sorted(p.name for p in (old / "series").iterdir())
+    assert files == sorted(p.name for p in (new / "series").iterdir()), "series files differ"
+    arrays = 0
+    for name in files:
+        with np.load(old / "series" / name) as zo, np.load(new / "series" / name) as zn:
+            assert zo.files == zn.files, f"series/{name}: members differ"
+            for k in zo.files:
+                assert _same_arrays(zo[k], zn[k]), f"series/{name}: {k} differs"
+                arrays += 1
+    return (f"old and new outputs the same: results.csv {len(rows_o)} rows x {len(head_o)} "
+            f"columns ({cells} cells, numbers as doubles), {len(files)} series files "
+            f"({arrays} arrays, every value)")
 
 
 def main() -> None:
@@ -165,7 +216,8 @@ def main() -> None:
         runs: dict[str, list[dict]] = {name: [] for name in trees}
         for r in range(args.repeat):
             for name, tree in trees.items():
-                runs[name].append(_run(tree, tmp / f"work-{name}-{r}", args.points, fmus[name]))
+                runs[name].append(_run(tree, tmp / f"work-{name}-{r}", args.points, fmus[name],
+                                       keep=r == 0))
         n = runs["new"][0]["points"]
         load = os.getloadavg()[0]
         print(f"start-up study, {n} points, native FMU + compiled master, executor loop; "
@@ -197,6 +249,7 @@ def main() -> None:
         print(f"  {'outside the loop':<28}{old_o:9.3f}{new_o:9.3f}{old_o / new_o:9.2f}")
         print(f"  the point over its loop: old {old_t / per_point('old', 'compiled loop'):.2f}x, "
               f"new {new_t / per_point('new', 'compiled loop'):.2f}x")
+        print("  " + compare_outputs(tmp / "work-old-0" / "timed", tmp / "work-new-0" / "timed"))
 
 
 if __name__ == "__main__":

@@ -28,22 +28,10 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "fmi_host_random.h"
 
-static unsigned long long rng_state;
-static unsigned long long rnd(void) {      /* xorshift64* */
-    rng_state ^= rng_state >> 12;
-    rng_state ^= rng_state << 25;
-    rng_state ^= rng_state >> 27;
-    return rng_state * 2685821657736338717ULL;
-}
-static int pick(int n) { return (int)(rnd() % (unsigned long long)n); }
 static double uniform(double lo, double hi) {
     return lo + (hi - lo) * (double)(rnd() >> 11) / 9007199254740992.0;
-}
-
-static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                   fmi2String category, fmi2String message, ...) {
-    (void)env; (void)instance; (void)status; (void)category; (void)message;
 }
 
 #define MAXV 256

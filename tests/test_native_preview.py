@@ -16,8 +16,6 @@ import re
 import shutil
 import subprocess
 import sys
-import xml.etree.ElementTree as ET
-import zipfile
 from pathlib import Path
 
 import pytest
@@ -25,23 +23,14 @@ import pytest
 pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")
 
-from test_bad_inputs import _sanitizers_work  # noqa: E402
+from test_bad_inputs import (  # noqa: E402
+    fmu_sources, run_sanitized, skip_without_sanitizers)
 from test_native_fmu import native  # noqa: E402,F401 - fixture
 
 HOST = Path(__file__).resolve().parent / "fmi_preview_host.c"
 
 #: seed, rounds and calls per round of the sanitizer run (each call is checked: 3000 checks)
 SEED, ROUNDS, CALLS = 12, 60, 50
-
-
-def _sources(fmu: Path, where: Path) -> list[str]:
-    """The FMU's C sources unpacked into ``where``: those its modelDescription lists."""
-    with zipfile.ZipFile(fmu) as z:
-        for name in z.namelist():
-            if name.startswith("sources/"):
-                (where / Path(name).name).write_bytes(z.read(name))
-        listed = ET.fromstring(z.read("modelDescription.xml")).find("CoSimulation/SourceFiles")
-    return [str(where / f.get("name")) for f in listed]
 
 
 def _arguments(fmu: Path, seed: int, rounds: int, calls: int) -> list[str]:
@@ -74,26 +63,16 @@ def test_kept_preview_model_equals_a_fresh_instance_under_sanitizers(native, tmp
     """60 rounds of 50 random calls (seed 12): 3060 checks of all 31 Real outputs (and one
     alone) against a fresh instance, every one equal; most with finite outputs (a model
     built), some with NaN in both (parameters it refuses)."""
-    if sys.platform != "linux":
-        pytest.skip("the host is built here for Linux")
-    why = _sanitizers_work(tmp_path)
-    if why:
-        pytest.skip(why)
+    skip_without_sanitizers(tmp_path)
     fmu = native["PRSM2"]
-    sources = _sources(fmu, tmp_path)
+    sources = fmu_sources(fmu, tmp_path)
     p = subprocess.run(["gcc", "-std=c99", "-g", "-O1", "-fsanitize=address,undefined",
                         "-fno-sanitize-recover=undefined", "-ffp-contract=off",
                         f"-I{tmp_path}", *sources, str(HOST), "-o", str(tmp_path / "host"),
                         "-lm"], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
-    run = subprocess.run([str(tmp_path / "host"), *_arguments(fmu, SEED, ROUNDS, CALLS)],
-                         capture_output=True, text=True, timeout=600,
-                         env={"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0",
-                              "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"})
+    run = run_sanitized([str(tmp_path / "host"), *_arguments(fmu, SEED, ROUNDS, CALLS)])
     print(f"  preview host under sanitizers, seed {SEED}: {run.stdout.strip()[-300:]}")
-    assert "ERROR: AddressSanitizer" not in run.stderr and "runtime error" not in run.stderr, \
-        run.stderr[-3000:]
-    assert run.returncode == 0, (run.stdout[-2000:], run.stderr[-2000:])
     checks, finite, mismatches = _counts(run.stdout)
     assert checks == ROUNDS * (CALLS + 1) and mismatches == 0
     # both kinds of parameter set were tried: models built and models refused
@@ -106,7 +85,7 @@ def test_kept_preview_model_under_valgrind(native, tmp_path):
     if sys.platform != "linux" or shutil.which("valgrind") is None or shutil.which("gcc") is None:
         pytest.skip("valgrind or gcc is not installed")
     fmu = native["PRSM2"]
-    sources = _sources(fmu, tmp_path)
+    sources = fmu_sources(fmu, tmp_path)
     p = subprocess.run(["gcc", "-std=c99", "-g", "-O1", "-ffp-contract=off", f"-I{tmp_path}",
                         *sources, str(HOST), "-o", str(tmp_path / "host"), "-lm"],
                        capture_output=True, text=True)
