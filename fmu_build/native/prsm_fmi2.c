@@ -468,7 +468,7 @@ static int same_parameters(const snapshot *a, const snapshot *b) {
  * for the parameters c->s holds now.  build_model reads the parameters and auto_start of its
  * snapshot and nothing else, choose_start (fidelity auto) the parameters and the inputs, and
  * both are deterministic; using the model changes only its lazily computed slaved laws, functions
- * of its built constants alone (model_built_from).  So the model built from preview_from is
+ * of its built constants alone (model_built_from).  So the model built from pv->from is
  * reused while c->s holds the same parameters byte for byte (and for fidelity auto the same
  * inputs): whatever sets a parameter (fmi2Set*, fmi2Reset, fmi2SetFMUstate) changes what is
  * compared, and no call needs to drop the model itself.  A model that fails to build is not
