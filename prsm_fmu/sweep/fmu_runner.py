@@ -35,6 +35,7 @@ Imports fmpy (only when a runner is made); never imported by the physics.
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import fields
 from typing import Callable
@@ -246,9 +247,7 @@ class FmuRunner:
     def _run(self, params, fidelity, speed, acceleration0, load_force, n_steps, h):
         fmu = self._instance()
         vr = self.vr
-        vr_torque, vr_load = vr["screw_torque"], vr["load_force"]
-        vr_acc = vr["screw_acceleration"]
-        vr_rhs = vr["step_rhs_calls"]
+        vr_load = vr["load_force"]
         w0 = float(speed(0.0))
         fmu.setupExperiment(startTime=0.0)
         fmu.enterInitializationMode()
@@ -260,15 +259,19 @@ class FmuRunner:
         # torque scale: the ideal torque of the load (never 0, so relative tolerances work)
         t_scale = abs(load_force) * params.total_lead / (2.0 * math.pi) + 1e-6
 
-        # t = 0: the torque whose preview acceleration is the reference's
+        # t = 0: the torque whose preview acceleration is the reference's (the same calls as
+        # fmpy's setReal and getReal, straight into the library: StepCalls)
+        calls = self._calls
+        vr_acc = (ctypes.c_uint * 1)(vr["screw_acceleration"])
+
         def preview_acc(torque: float) -> float:
-            fmu.setReal([vr_torque], [torque])
-            return fmu.getReal([vr_acc])[0] - acceleration0
+            calls.set_torque(torque)
+            return calls.real(vr_acc) - acceleration0
 
         torque = _secant_root(preview_acc, 0.0, t_scale, TORQUE_RTOL * 1e-2)
-        fmu.setReal([vr_torque], [torque])
+        calls.set_torque(torque)
         out = np.empty((n_steps + 1, len(self.output_names)))
-        out[0] = fmu.getReal(self._out_vrs)
+        calls.outputs_into(out.ctypes.data)         # row 0
         fmu.exitInitializationMode()
 
         ref = np.empty(n_steps + 1)
