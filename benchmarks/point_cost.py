@@ -15,13 +15,17 @@ drops what the code keeps per process from one study to the next (the validated 
 presets: the timed run pays them as a process's first study does) and runs it again on a fresh
 output folder, timed; ``--repeat`` children per tree; old and new children
 are interleaved (old, new, old, new, ...) so a load that comes and goes on a shared machine
-hits both alike, and the median of each tree's runs counts.  Printed, per point, in CPU time
+hits both alike, and of each quantity the least of each tree's runs counts (what the other
+jobs of a shared machine can only add to; ``benchmarks/sweep_scaling.py`` takes the fastest run
+the same way).  The compiled loop is the same code in both trees: its old / new ratio shows
+what the machine's load leaves of the noise.  Printed, per point, in CPU time
 of the child process (``time.process_time``):
 
 * the whole point (``run_study``'s CPU / points), old and new, and old / new;
 * its split: the compiled loop (``CompiledLoop.run``), the series file (``save_series``),
-  fmpy's ``getReal`` (the t = 0 torque and outputs, in initialization mode) and its other calls
-  (``setReal``, ``reset``, ... outside the loop), ``resolve_preset``,
+  the FMI reads of the t = 0 torque and outputs in initialization mode (fmpy's ``getReal``, or
+  the runner's ``StepCalls``) and the other FMI calls outside the loop (``setReal``, ``reset``,
+  ...), ``resolve_preset``,
   ``MechanismParams.validate``, ``derive_series`` + ``compute_metrics``, and the rest (the
   runner's and ``run_point``'s own work, the table): each part's own time, without the parts
   it calls (a timer around each; their own cost, about a microsecond a call, lands in the rest);
@@ -39,7 +43,6 @@ import argparse
 import json
 import math
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -50,15 +53,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from command_cost import _env, _old_tree  # noqa: E402 - the same trees and environments
 
-#: the parts of a point, in print order: (label, what is timed)
+#: the parts of a point, in print order: (label, what is timed: "module:Owner.attr ...", several
+#: modules separated by ";"; a name a tree does not have is skipped)
 PARTS = (
     ("compiled loop", "prsm_fmu.sweep.native_track:CompiledLoop.run"),
     ("series file", "prsm_fmu.sweep.points:save_series"),
-    ("fmpy getReal", "fmpy.fmi2:FMU2Slave.getReal"),
-    ("fmpy other calls", "fmpy.fmi2:FMU2Slave.setReal FMU2Slave.setInteger FMU2Slave.setBoolean "
-                         "FMU2Slave.reset FMU2Slave.setupExperiment "
-                         "FMU2Slave.enterInitializationMode FMU2Slave.exitInitializationMode "
-                         "FMU2Slave.terminate"),
+    ("FMI reads at t = 0", "fmpy.fmi2:FMU2Slave.getReal;"
+                           "prsm_fmu.sweep.fmi_calls:StepCalls.real StepCalls.outputs_into"),
+    ("other FMI calls", "fmpy.fmi2:FMU2Slave.setReal FMU2Slave.setInteger FMU2Slave.setBoolean "
+                        "FMU2Slave.reset FMU2Slave.setupExperiment "
+                        "FMU2Slave.enterInitializationMode FMU2Slave.exitInitializationMode "
+                        "FMU2Slave.terminate;prsm_fmu.sweep.fmi_calls:StepCalls.set_torque"),
     ("resolve_preset", "prsm_fmu.sweep.points:resolve_preset"),
     ("validate", "prsm_fmu.params:MechanismParams.validate"),
     ("metrics", "prsm_fmu.sweep.points:derive_series compute_metrics"),
@@ -91,12 +96,14 @@ def timed(label, f):
 
 
 for label, where in parts:
-    module, names = where.split(":")
-    mod = importlib.import_module(module)
-    for name in names.split():
-        owner, _, attr = name.rpartition(".")
-        target = getattr(mod, owner) if owner else mod
-        setattr(target, attr, timed(label, getattr(target, attr)))
+    for place in where.split(";"):
+        module, names = place.split(":")
+        mod = importlib.import_module(module)
+        for name in names.split():
+            owner, _, attr = name.rpartition(".")
+            target = getattr(mod, owner) if owner else mod
+            if hasattr(target, attr):
+                setattr(target, attr, timed(label, getattr(target, attr)))
 
 work, n = sys.argv[2], int(sys.argv[3])
 path = os.path.join(work, "study.toml")
@@ -203,7 +210,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--old", default="721f72e", help="the older commit (default 721f72e)")
     ap.add_argument("--points", type=int, default=240, help="points of the study (× 4 µ_SS)")
-    ap.add_argument("--repeat", type=int, default=3, help="timed runs per tree (median counts)")
+    ap.add_argument("--repeat", type=int, default=3, help="timed runs per tree (the least counts)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="prsm_point_cost_") as tmp:
         tmp = Path(tmp)
@@ -221,23 +228,23 @@ def main() -> None:
         n = runs["new"][0]["points"]
         load = os.getloadavg()[0]
         print(f"start-up study, {n} points, native FMU + compiled master, executor loop; "
-              f"old = {args.old}, new = this checkout; median of {args.repeat} runs each, "
+              f"old = {args.old}, new = this checkout; least of {args.repeat} runs each, "
               f"interleaved; load average {load:.2f} on {os.cpu_count()} cores")
 
         def per_point(name: str, key: str | None) -> float:
             vals = [(run["total"] if key is None else run["parts"][key]) / run["points"]
                     for run in runs[name]]
-            return 1e3 * statistics.median(vals)
+            return 1e3 * min(vals)
 
         def outside(name: str) -> float:
             vals = [(run["total"] - run["parts"]["compiled loop"]) / run["points"]
                     for run in runs[name]]
-            return 1e3 * statistics.median(vals)
+            return 1e3 * min(vals)
 
         print(f"  {'CPU per point [ms]':<28}{'old':>9}{'new':>9}{'old/new':>9}")
         rows = [(label, per_point("old", label), per_point("new", label)) for label, _ in PARTS]
-        rest = {name: 1e3 * statistics.median((run["total"] - sum(run["parts"].values()))
-                                              / run["points"] for run in runs[name])
+        rest = {name: 1e3 * min((run["total"] - sum(run["parts"].values())) / run["points"]
+                                for run in runs[name])
                 for name in trees}
         rows.append(("rest", rest["old"], rest["new"]))
         for label, old, new in rows:

@@ -221,8 +221,12 @@ def point_params(preset: str, overrides: Mapping[str, Any]) -> MechanismParams:
     """
     key = _exact_key(overrides) if isinstance(preset, str) else None
     if key is None:
-        return apply_overrides(resolve_preset(preset), overrides).validate()
+        return _validated(preset, overrides)
     return _point_params(preset, key)
+
+
+def _validated(preset: str, overrides: Mapping[str, Any]) -> MechanismParams:
+    return apply_overrides(resolve_preset(preset), overrides).validate()
 
 
 #: types of the override values that :func:`point_params` keeps results for
@@ -242,8 +246,7 @@ def _exact_key(overrides: Mapping[str, Any]) -> tuple | None:
 
 @functools.lru_cache(maxsize=256)
 def _point_params(preset: str, key: tuple) -> MechanismParams:
-    overrides = {name: value for name, _, _, value in key}
-    return apply_overrides(resolve_preset(preset), overrides).validate()
+    return _validated(preset, {name: value for name, _, _, value in key})
 
 
 def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None,
