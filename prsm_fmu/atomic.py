@@ -3,18 +3,38 @@
 A command interrupted (Ctrl-C) or failing while it writes leaves the previous file, or none,
 never a half-written one: :func:`atomic_path` hands out a temporary name next to the target
 (same folder, so the rename is atomic on POSIX file systems; same extension, so matplotlib and
-numpy pick the right format) and renames it over the target only when the block completes.
+numpy pick the right format) and renames it over the target only when the block completes;
+:func:`write_atomic` does the same for bytes already in memory, with one open, write and
+rename.
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
-__all__ = ["atomic_path"]
+__all__ = ["atomic_path", "write_atomic"]
+
+
+def _create_temp(target: Path) -> tuple[int, str]:
+    """(descriptor, name) of a new empty file next to ``target``: ``.<name>.<random>.part<ext>``,
+    created exclusively with the mode ``open()`` gives (0666 less the umask: the kernel applies
+    it)."""
+    while True:
+        tmp = str(target.parent / f".{target.name}.{os.urandom(6).hex()}.part{target.suffix}")
+        try:
+            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), tmp
+        except FileExistsError:         # 48 random bits taken: draw again
+            continue
+
+
+def _remove(tmp: str) -> None:
+    try:
+        os.remove(tmp)
+    except FileNotFoundError:
+        pass
 
 
 @contextmanager
@@ -32,19 +52,36 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
         The temporary file to write instead (it exists, empty).
     """
     target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".part{target.suffix}",
-                               dir=target.parent)
+    fd, tmp = _create_temp(target)
     os.close(fd)
-    # mkstemp makes it private (0600): give it the mode open() would, 0666 less the umask
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
     try:
         yield tmp
         os.replace(tmp, target)
     except BaseException:
+        _remove(tmp)
+        raise
+
+
+def write_atomic(path: str | os.PathLike, chunks: Iterable[bytes]) -> None:
+    """Write ``chunks`` one after the other as the file ``path``, whole or not at all.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to write.
+    chunks : iterable of bytes
+        Its content.
+    """
+    target = Path(path)
+    fd, tmp = _create_temp(target)
+    try:
         try:
-            os.remove(tmp)
-        except FileNotFoundError:
-            pass
+            data = memoryview(b"".join(chunks))
+            while data:                 # os.write may write less than it is given
+                data = data[os.write(fd, data):]
+        finally:
+            os.close(fd)
+        os.replace(tmp, target)
+    except BaseException:
+        _remove(tmp)
         raise

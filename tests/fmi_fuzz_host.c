@@ -21,20 +21,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
-
-static unsigned long long rng_state;
-static unsigned long long rnd(void) {      /* xorshift64* */
-    rng_state ^= rng_state >> 12;
-    rng_state ^= rng_state << 25;
-    rng_state ^= rng_state >> 27;
-    return rng_state * 2685821657736338717ULL;
-}
-static int pick(int n) { return (int)(rnd() % (unsigned long long)n); }
-
-static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
-                   fmi2String category, fmi2String message, ...) {
-    (void)env; (void)instance; (void)status; (void)category; (void)message;
-}
+#include "fmi_host_random.h"
 
 static const double POOL[] = {0.0, -0.0, 1.0, -1.0, 40.0, -40.0, 1e-3, 0.5, 0.999, 1e4, -1e4,
                               1e6, -1e6, 1e8, 1e30, -1e30, 1e155, -1e155, 1e300, 1e308, -1e308,

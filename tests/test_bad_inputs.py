@@ -162,25 +162,47 @@ def _sanitizers_work(d: Path) -> str | None:
     return None
 
 
-def test_native_sources_under_sanitizers_survive_random_calls(native, tmp_path):
+def skip_without_sanitizers(d: Path) -> None:
+    """Skip (with the reason) where the sanitizer hosts cannot be built and run."""
     if sys.platform != "linux":
-        pytest.skip("the sanitizer host is written for Linux")
-    why = _sanitizers_work(tmp_path)
+        pytest.skip("the sanitizer hosts are written for Linux")
+    why = _sanitizers_work(d)
     if why:
         pytest.skip(why)
-    from fmpy import read_model_description
 
-    fmu = native["PRSM2"]
+
+def fmu_sources(fmu: Path, where: Path) -> list[str]:
+    """The native FMU's sources unpacked into ``where``; the C files it lists to compile
+    (<SourceFiles> of its modelDescription)."""
     with zipfile.ZipFile(fmu) as z:
         for name in z.namelist():
             if name.startswith("sources/"):
-                (tmp_path / Path(name).name).write_bytes(z.read(name))
-    host_c = Path(__file__).resolve().parent / "fmi_fuzz_host.c"
-    # the C files the FMU lists to compile (<SourceFiles> of its modelDescription)
-    with zipfile.ZipFile(fmu) as z:
+                (where / Path(name).name).write_bytes(z.read(name))
         listed = ET.fromstring(z.read("modelDescription.xml")).find("CoSimulation/SourceFiles")
-    sources = [str(tmp_path / f.get("name")) for f in listed]
+    sources = [str(where / f.get("name")) for f in listed]
     assert sources
+    return sources
+
+
+def run_sanitized(args: list[str]) -> subprocess.CompletedProcess:
+    """Run a host built with the sanitizers (leak check on); assert it reported nothing and
+    exited with 0."""
+    run = subprocess.run(args, capture_output=True, text=True, timeout=600,
+                         env={"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0",
+                              "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"})
+    assert "ERROR: AddressSanitizer" not in run.stderr and "runtime error" not in run.stderr, \
+        run.stderr[-3000:]
+    assert run.returncode == 0, (run.stdout[-2000:], run.stderr[-2000:])
+    return run
+
+
+def test_native_sources_under_sanitizers_survive_random_calls(native, tmp_path):
+    skip_without_sanitizers(tmp_path)
+    from fmpy import read_model_description
+
+    fmu = native["PRSM2"]
+    sources = fmu_sources(fmu, tmp_path)
+    host_c = Path(__file__).resolve().parent / "fmi_fuzz_host.c"
     p = subprocess.run(["gcc", "-std=c99", "-g", "-O0", "-fsanitize=address,undefined",
                         "-fno-sanitize-recover=undefined", "-ffp-contract=off",
                         f"-I{tmp_path}", *sources, str(host_c), "-o", str(tmp_path / "fuzz"),
@@ -200,13 +222,8 @@ def test_native_sources_under_sanitizers_survive_random_calls(native, tmp_path):
     args = [str(tmp_path / "fuzz"), str(seed), str(rounds), str(len(real)), *map(str, real),
             str(len(ints)), *map(str, ints), str(len(outs)), *map(str, outs),
             str(vr["screw_torque"]), str(vr["load_force"]), md.guid]
-    run = subprocess.run(args, capture_output=True, text=True, timeout=300,
-                         env={"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0",
-                              "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"})
+    run = run_sanitized(args)
     print(f"  sanitizer host, seed {seed}: {run.stdout.strip()}")
-    assert "ERROR: AddressSanitizer" not in run.stderr and "runtime error" not in run.stderr, \
-        run.stderr[-3000:]
-    assert run.returncode == 0, (run.stdout[-2000:], run.stderr[-2000:])
     assert "nonfinite 0" in run.stdout
 
 

@@ -221,15 +221,17 @@ def test_a_failed_fmu_build_in_a_child_is_reported_in_one_line(tmp_path, monkeyp
 
 
 def test_atomic_outputs_get_the_mode_a_plain_open_gives(tmp_path):
-    """The temporary file is made private by mkstemp; the renamed output must have the mode
-    open() gives a new file (0666 less the umask), as before."""
-    from prsm_fmu.atomic import atomic_path
+    """The renamed output (atomic_path, and write_atomic's bytes) must have the mode open()
+    gives a new file (0666 less the umask), as before, not a temporary file's private 0600."""
+    from prsm_fmu.atomic import atomic_path, write_atomic
 
     plain = tmp_path / "plain.txt"
     plain.write_text("x", encoding="utf-8")
     with atomic_path(tmp_path / "atomic.txt") as part:
         Path(part).write_text("x", encoding="utf-8")
     assert (tmp_path / "atomic.txt").stat().st_mode == plain.stat().st_mode
+    write_atomic(tmp_path / "bytes.txt", [b"x"])
+    assert (tmp_path / "bytes.txt").stat().st_mode == plain.stat().st_mode
 
 
 def test_ctrl_c_ends_a_dask_sweep_with_one_line_and_keeps_the_finished_points(tmp_path):

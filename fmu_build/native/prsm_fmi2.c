@@ -90,6 +90,17 @@ typedef struct {
     prsm_auto_memory amem;     /* fidelity auto (unless it chose kinematic): its stepper's memory */
 } snapshot;
 
+/* the preview's model (compute_outputs before exitInitializationMode) and the snapshot it was
+ * built from (from: its parameters, and for fidelity auto its inputs, which choose the start
+ * level); valid while ok */
+struct preview_cache {
+    int ok;
+    snapshot from;
+    prsm_model model;
+    int is_auto;
+    prsm_auto au;
+};
+
 typedef struct {
     snapshot s;
     /* valid in phases stepping and terminated (auto: au.dyn), and then built (with au and
@@ -101,6 +112,10 @@ typedef struct {
     prsm_auto au;
     double y[N_OUT_REAL > 0 ? N_OUT_REAL : 1];
     int y_valid;
+    /* before exitInitializationMode the outputs are a preview of the start state (compute_outputs)
+       on a model built from the parameters: that model, kept by preview_model (allocated on the
+       first preview, NULL before it) */
+    struct preview_cache *pv;
     fmi2CallbackFunctions cb;
     char name[256];
     int logging_on;
@@ -441,37 +456,62 @@ static void set_starts(snapshot *s) {
 }
 
 /* ---- outputs ------------------------------------------------------------------------------------ */
+/* Do snapshots a and b hold the same parameters, byte for byte? */
+static int same_parameters(const snapshot *a, const snapshot *b) {
+    return !memcmp(a->par_real, b->par_real, sizeof a->par_real)
+           && !memcmp(a->par_int, b->par_int, sizeof a->par_int)
+           && !memcmp(a->par_bool, b->par_bool, sizeof a->par_bool)
+           && !memcmp(a->par_str, b->par_str, sizeof a->par_str);
+}
+
+/* The preview's model (c->pv->model, and for fidelity auto c->pv->au where c->pv->is_auto)
+ * for the parameters c->s holds now.  build_model reads the parameters and auto_start of its
+ * snapshot and nothing else, choose_start (fidelity auto) the parameters and the inputs, and
+ * both are deterministic; using the model changes only its lazily computed slaved laws, functions
+ * of its built constants alone (model_built_from).  So the model built from pv->from is
+ * reused while c->s holds the same parameters byte for byte (and for fidelity auto the same
+ * inputs): whatever sets a parameter (fmi2Set*, fmi2Reset, fmi2SetFMUstate) changes what is
+ * compared, and no call needs to drop the model itself.  A model that fails to build is not
+ * kept.  0, or -1 and the reason. */
+static int preview_model(component *c, char *msg, int len) {
+    struct preview_cache *pv = c->pv;
+    int is_auto = is_auto_fidelity(&c->s);
+    if (pv && pv->ok && same_parameters(&pv->from, &c->s)
+        && (!is_auto || !memcmp(pv->from.u, c->s.u, sizeof c->s.u)))
+        return 0;
+    if (!pv) {
+        pv = c->pv = (struct preview_cache *)malloc(sizeof *pv);
+        if (!pv) {
+            snprintf(msg, (size_t)len, "out of memory");
+            return -1;
+        }
+    }
+    double errors[2];
+    pv->ok = 0;
+    pv->from = c->s;
+    if ((is_auto && choose_start(&pv->from, errors, msg, len))
+        || build_model(&pv->from, &pv->model, &pv->au, &pv->is_auto, msg, len))
+        return -1;
+    pv->ok = 1;
+    return 0;
+}
+
 static void compute_outputs(component *c) {
-    prsm_model *preview = NULL;
-    prsm_auto *preview_au = NULL;
+    int previewing = c->s.phase < PH_STEPPING;
     const prsm_model *m = &c->model;
     prsm_auto *au = c->is_auto ? &c->au : NULL;
     int mode = c->s.amem.mode;
     const double *x = c->s.x, *u = c->s.u_held;
     double x0[PRSM_NX_MAX];
-    if (c->s.phase < PH_STEPPING) {      /* before exitInitializationMode: the initial state */
+    if (previewing) {      /* before exitInitializationMode: the initial state */
         char msg[600];
-        double errors[2];
-        snapshot *s = (snapshot *)malloc(sizeof *s);
-        preview = (prsm_model *)malloc(sizeof *preview);
-        preview_au = (prsm_auto *)malloc(sizeof *preview_au);
-        int is_auto = 0, failed = !s || !preview || !preview_au;
-        if (failed) snprintf(msg, sizeof msg, "out of memory");
-        if (!failed) {
-            *s = c->s;
-            failed = (is_auto_fidelity(s) && choose_start(s, errors, msg, sizeof msg))
-                     || build_model(s, preview, preview_au, &is_auto, msg, sizeof msg);
-        }
-        free(s);
-        if (failed) {
+        if (preview_model(c, msg, sizeof msg)) {
             log_msg(c, fmi2Error, "outputs cannot be computed: %s", msg);
             for (int i = 0; i < N_OUT_REAL; i++) c->y[i] = NAN;
-            free(preview);
-            free(preview_au);
             return;
         }
-        m = preview;
-        au = is_auto ? preview_au : NULL;
+        m = &c->pv->model;
+        au = c->pv->is_auto ? &c->pv->au : NULL;
         if (au) mode = au->start;
         prsm_initial_state(m, x0, c->s.par_real[P_INITIAL_SCREW_ANGLE],
                            c->s.par_real[P_INITIAL_SCREW_SPEED],
@@ -491,9 +531,7 @@ static void compute_outputs(component *c) {
     }
     for (int i = 0; i < N_OUT_REAL; i++)
         c->y[i] = prsm_quantity(m, x, u, &o, OUT_QUANTITY[i], OUT_STAGE[i]);
-    if (!preview) c->y_valid = 1;
-    free(preview);
-    free(preview_au);
+    if (!previewing) c->y_valid = 1;
 }
 
 /* contact_status: 1 where the rigid contact has no solution at the current state and inputs */
@@ -551,6 +589,9 @@ static int settable(component *c, const prsm_var *v, const char *type) {
 fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     COMPONENT_OR_ERROR(comp);
     if (nvr > 0 && (!vr || !value)) return fmi2Error;
+    /* the preview's outputs (before exitInitializationMode) are not kept from call to call (an
+       input set in between changes them): computed once in this call, for all it asks */
+    int computed = 0;
     for (size_t i = 0; i < nvr; i++) {
         const prsm_var *v = lookup(c, vr[i], T_REAL, "Get");
         if (!v) return fmi2Error;
@@ -558,7 +599,10 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         case K_INPUT: value[i] = c->s.u[v->index]; break;
         case K_PARAM: value[i] = c->s.par_real[v->index]; break;
         default:
-            if (!c->y_valid) compute_outputs(c);
+            if (!c->y_valid && !computed) {
+                compute_outputs(c);
+                computed = 1;
+            }
             value[i] = c->y[v->index];
         }
     }
@@ -716,7 +760,11 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return c;
 }
 
-void fmi2FreeInstance(fmi2Component comp) { free(comp); }
+void fmi2FreeInstance(fmi2Component comp) {
+    component *c = (component *)comp;
+    if (c) free(c->pv);
+    free(c);
+}
 
 static fmi2Status wrong_phase(component *c, const char *call) {
     log_msg(c, fmi2Error, "%s is not allowed in %s", call, PHASE_NAMES[c->s.phase]);

@@ -1,5 +1,5 @@
-"""The few FMI 2.0 calls of :class:`~prsm_fmu.sweep.fmu_runner.FmuRunner`'s step loop, made
-straight into the FMU's library.
+"""The few FMI 2.0 calls of :class:`~prsm_fmu.sweep.fmu_runner.FmuRunner`'s step loop (and of
+its t = 0 torque), made straight into the FMU's library.
 
 fmpy's :class:`fmpy.fmi2.FMU2Slave` builds ctypes arrays, converts every argument and wraps
 every call in Python on each call: about 3 µs per call, a third or more of what a pythonfmu
@@ -102,7 +102,12 @@ class StepCalls:
 
     def speed(self) -> float:
         """fmi2GetReal of ``screw_speed`` [rad/s]."""
-        status = self._get_real(self._c, self._speed_vr, 1, self._one)
+        return self.real(self._speed_vr)
+
+    def real(self, vr: ctypes.Array) -> float:
+        """fmi2GetReal of the one Real variable whose value reference ``vr`` holds (a
+        one-element ``c_uint`` array, made once by the caller)."""
+        status = self._get_real(self._c, vr, 1, self._one)
         if status > _WARNING:
             raise self._failed("fmi2GetReal", status)
         return self._one[0]

@@ -35,6 +35,7 @@ Imports fmpy (only when a runner is made); never imported by the physics.
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import fields
 from typing import Callable
@@ -44,6 +45,7 @@ import numpy as np
 from ..fmi_enum import enumeration_value
 from ..fmu_log import FmuLog
 from ..params import MECHANISM_FIELD_NAMES, MechanismParams, StageParams
+from ..profiles import ConstantSpeed
 from .fmi_calls import StepCalls
 
 #: mechanism-level parameters of the FMU (fields of MechanismParams that are FMU parameters)
@@ -245,9 +247,7 @@ class FmuRunner:
     def _run(self, params, fidelity, speed, acceleration0, load_force, n_steps, h):
         fmu = self._instance()
         vr = self.vr
-        vr_torque, vr_load = vr["screw_torque"], vr["load_force"]
-        vr_acc = vr["screw_acceleration"]
-        vr_rhs = vr["step_rhs_calls"]
+        vr_load = vr["load_force"]
         w0 = float(speed(0.0))
         fmu.setupExperiment(startTime=0.0)
         fmu.enterInitializationMode()
@@ -259,21 +259,25 @@ class FmuRunner:
         # torque scale: the ideal torque of the load (never 0, so relative tolerances work)
         t_scale = abs(load_force) * params.total_lead / (2.0 * math.pi) + 1e-6
 
-        # t = 0: the torque whose preview acceleration is the reference's
+        # t = 0: the torque whose preview acceleration is the reference's (the same calls as
+        # fmpy's setReal and getReal, straight into the library: StepCalls)
+        calls = self._calls
+        vr_acc = (ctypes.c_uint * 1)(vr["screw_acceleration"])
+
         def preview_acc(torque: float) -> float:
-            fmu.setReal([vr_torque], [torque])
-            return fmu.getReal([vr_acc])[0] - acceleration0
+            calls.set_torque(torque)
+            return calls.real(vr_acc) - acceleration0
 
         torque = _secant_root(preview_acc, 0.0, t_scale, TORQUE_RTOL * 1e-2)
-        fmu.setReal([vr_torque], [torque])
+        calls.set_torque(torque)
         out = np.empty((n_steps + 1, len(self.output_names)))
-        out[0] = fmu.getReal(self._out_vrs)
+        calls.outputs_into(out.ctypes.data)         # row 0
         fmu.exitInitializationMode()
 
         ref = np.empty(n_steps + 1)
         ref[0] = w0
         if self._loop is not None:              # the same loop, compiled
-            ref[1:] = [float(speed((i + 1) * h)) for i in range(n_steps)]
+            ref[1:] = _reference(speed, n_steps, h)
             from .native_track import LoopFailure
 
             try:
@@ -384,6 +388,16 @@ class FmuRunner:
             torque, err = new, new_err
             if abs(err) < best[0]:
                 best = (abs(err), torque)
+
+
+def _reference(speed: Callable[[float], float], n_steps: int, h: float) -> float | list[float]:
+    """The reference speeds at the communication points h, 2h, ..., n_steps·h [rad/s], for
+    ``ref[1:]``: ``float(speed((i + 1) * h))`` each, as the Python loop reads them; for a
+    :class:`~prsm_fmu.profiles.ConstantSpeed` its value once (the same double at every point:
+    numpy fills the row with it) instead of n_steps calls."""
+    if getattr(speed, "__func__", None) is ConstantSpeed.speed:       # a ConstantSpeed's .speed
+        return speed.__self__.value
+    return [float(speed((i + 1) * h)) for i in range(n_steps)]
 
 
 def _secant_root(f: Callable[[float], float], x0: float, scale: float, rtol: float) -> float:

@@ -15,6 +15,7 @@ them once to every worker); either way it is identified by its SHA-256.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import os
@@ -28,13 +29,14 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..params import MechanismParams
 from ..profiles import ConstantSpeed, RampSpeed, SpeedProfile
 from .metrics import compute_metrics, derive_series
 from .series_files import save_series
 from .study import apply_overrides, resolve_preset
 
 __all__ = ["PointTask", "PointResult", "FmuFile", "run_point", "run_points", "run_chunk",
-           "pack_chunk", "unpack_chunk", "worker_info", "speed_profile"]
+           "pack_chunk", "unpack_chunk", "worker_info", "speed_profile", "point_params"]
 
 #: largest number of output intervals of one point
 MAX_STEPS = 10_000_000
@@ -202,6 +204,51 @@ def simulate_point(params, scenario: Mapping[str, Any], backend: str,
     return _runner(ref, tolerance).run(params, fidelity, profile.speed, acc0, load, t_end, h)
 
 
+def point_params(preset: str, overrides: Mapping[str, Any]) -> MechanismParams:
+    """The validated mechanism of a point: ``preset`` with ``overrides`` applied
+    (:func:`~prsm_fmu.sweep.study.apply_overrides`), then ``validate()``.
+
+    Points with the same mechanism (a study that sweeps a scenario value, such as the load,
+    beside a parameter) share one: the result is kept per process for overrides equal value
+    for value *and* type (7 and 7.0, 0.0 and -0.0, True and 1 are different inputs: one may be
+    refused where the other is not), in the same order.  An input that fails raises each time,
+    with the same message.
+
+    Raises
+    ------
+    ValueError
+        As ``apply_overrides`` and ``validate``: naming the parameter, its value and range.
+    """
+    key = _exact_key(overrides) if isinstance(preset, str) else None
+    if key is None:
+        return _validated(preset, overrides)
+    return _point_params(preset, key)
+
+
+def _validated(preset: str, overrides: Mapping[str, Any]) -> MechanismParams:
+    return apply_overrides(resolve_preset(preset), overrides).validate()
+
+
+#: types of the override values that :func:`point_params` keeps results for
+_KEYED = (bool, int, float, str)
+
+
+def _exact_key(overrides: Mapping[str, Any]) -> tuple | None:
+    """``overrides`` as a key equal only for the same names, types and values (a float's
+    bits by its hex form: -0.0 is not 0.0), or None for a value of another type."""
+    key = []
+    for name, value in overrides.items():
+        if type(value) not in _KEYED:
+            return None
+        key.append((name, type(value), value.hex() if type(value) is float else None, value))
+    return tuple(key)
+
+
+@functools.lru_cache(maxsize=256)
+def _point_params(preset: str, key: tuple) -> MechanismParams:
+    return _validated(preset, {name: value for name, _, _, value in key})
+
+
 def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None,
               series_dir: str | None = None) -> PointResult:
     """Run one point; never raises for the point's own problems (module docstring).
@@ -219,7 +266,7 @@ def run_point(task: PointTask, blobs: Mapping[str, bytes] | None = None,
                          worker=f"{socket.gethostname()}:{os.getpid()}")
     try:
         inputs = task.inputs
-        params = apply_overrides(resolve_preset(inputs["preset"]), inputs["overrides"]).validate()
+        params = point_params(inputs["preset"], inputs["overrides"])
         res = simulate_point(params, inputs["scenario"], inputs["backend"], task.fmus)
         series = derive_series(res, params.n_stages)
         result.metrics = compute_metrics(series, task.metrics, int(res["rhs_calls"]))

@@ -6,7 +6,10 @@ costs the study's own process nothing.  The arrays are stored uncompressed (``nu
 zlib finds little to take out of float64 series (the start-up study's 24 series of 1001
 samples: 192 kB raw, 114 kB compressed) and compressing them cost more than the point's
 simulation (about 20 ms against 4 ms, benchmarks/sweep_scaling.py); ``numpy.load`` reads
-either.
+either.  The file is the one ``numpy.savez`` writes, laid out in memory
+(:func:`~prsm_fmu.sweep.npz_bytes.npz_chunks`) and written with one open, write and rename:
+``numpy.savez`` through :mod:`zipfile` cost about a tenth of a point's CPU
+(benchmarks/point_cost.py); values it cannot lay out go through ``numpy.savez``.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ from typing import Mapping
 
 import numpy as np
 
-from ..atomic import atomic_path
+from ..atomic import atomic_path, write_atomic
+from .npz_bytes import npz_chunks
 
 __all__ = ["series_path", "save_series", "load_series"]
 
@@ -29,6 +33,10 @@ def series_path(series_dir: str, point_id: str) -> str:
 def save_series(series_dir: str, point_id: str, series: Mapping[str, np.ndarray]) -> str:
     """Write a point's series (atomically: a reader never sees half a file); its path."""
     path = series_path(series_dir, point_id)
+    chunks = npz_chunks(series)
+    if chunks is not None:
+        write_atomic(path, chunks)
+        return path
     with atomic_path(path) as tmp:
         np.savez(tmp, **series)
     return path

@@ -72,6 +72,7 @@ others still run.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import itertools
 import json
@@ -137,11 +138,27 @@ def parameter_kind(name: str) -> str:
 def resolve_preset(name: str) -> MechanismParams:
     """A preset by registry key; also ``li2021_three_stage`` (PRSM3's parameters).
 
+    A preset is built and validated once per process and name (every point of a study asks
+    for it; its parameters are frozen, so the one object serves them all); a name that fails
+    raises each time it is asked for, with the same message.
+
     Raises
     ------
     ValueError
         If the name is unknown or not a multi-stage PRSM.
     """
+    if isinstance(name, str):
+        return _preset_of_name(name)
+    return _build_preset(name)
+
+
+@functools.lru_cache(maxsize=64)
+def _preset_of_name(name: str) -> MechanismParams:
+    return _build_preset(name)
+
+
+def _build_preset(name: str) -> MechanismParams:
+    """:func:`resolve_preset` without its cache."""
     from .. import presets
 
     try:
