@@ -835,8 +835,7 @@ def _regress_checked(args, parser, fmu, fmu_vars, where, out) -> int:
               "them into the FMU by rebuilding it (python -m fmu_build)")
         return 0
     params = dict(args.set) if args.set else None
-    results = regress.check(fmu, where, args.case, parameters=params, workers=1,
-                            loop=args.loop)
+    results = regress.check(fmu, where, args.case, parameters=params, loop=args.loop)
     print(verdict_table(results))
     failed = [r.case.name for r in results if not r.passed]
     if failed:

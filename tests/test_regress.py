@@ -247,7 +247,7 @@ def test_the_fast_run_of_every_case_is_the_old_run_bit_for_bit():
     cases = regress.load_cases(BASELINES)
     assert len(cases) == 7
     assert all(core.scene_loop(load_scene(c.scene)) == "native" for c in cases)
-    new = core._run_cases(cases, fmu, None, workers=1)
+    new = core._run_cases(cases, fmu, None)
     compared = 0
     for case, res in zip(cases, new):
         assert not isinstance(res, str), res

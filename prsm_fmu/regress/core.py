@@ -33,7 +33,7 @@ from .tube import Tolerance, TubeResult, compare
 
 __all__ = ["ROOT", "DEFAULT_DIR", "OUTPUTS", "Case", "Baseline", "CaseResult", "load_cases",
            "read_csv", "write_csv", "read_baselines", "baseline_columns", "build_fmu",
-           "why_build", "case_workers", "scene_loop", "simulate_case", "LOOPS",
+           "why_build", "scene_loop", "simulate_case", "LOOPS",
            "check_case", "check", "update"]
 
 #: the repository (parent of the prsm_fmu package)
@@ -280,21 +280,6 @@ def why_build(fmu: Path) -> str | None:
     return fmu_is_stale(fmu)
 
 
-def _warm() -> None:
-    """A case worker's start: what a run imports, while the parent builds the FMU."""
-    import fmpy.fmi2  # noqa: F401
-    import system_models.run  # noqa: F401
-
-
-def case_workers(n: int | None = None):
-    """Started worker processes for :func:`check` (``n``, default the cores), importing what the
-    cases need now; None for one core or if processes cannot start."""
-    from ..workers import started_pool
-
-    n = n if n is not None else (os.cpu_count() or 1)
-    return started_pool(n, _warm) if n > 1 else None
-
-
 def scene_loop(scene, loop: str = "native") -> str:
     """Who takes the macro steps of ``scene`` (a :class:`system_models.scenes.Scene`):
     ``loop``, except "python" where ``loop`` is "native" and the C loop cannot run the scene
@@ -363,12 +348,11 @@ def check_case(case: Case, baseline: Baseline, result) -> CaseResult:
 
 
 def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
-          parameters: dict[str, Any] | None = None, workers: int | None = None,
-          pool=None, loop: str = "native") -> list[CaseResult]:
+          parameters: dict[str, Any] | None = None,
+          loop: str = "native") -> list[CaseResult]:
     """Run every case (or those named) on ``fmu`` and compare with the baselines at ``where``
-    (a directory or an FMU with ``extra/baselines``); the cases run in ``workers`` processes
-    (default: the cores; 1: in this process), or in ``pool`` (:func:`case_workers`, started
-    earlier; the caller shuts it down)."""
+    (a directory or an FMU with ``extra/baselines``), in this process (:func:`_run_cases`);
+    ``loop``: who takes the macro steps (:func:`scene_loop`)."""
     all_cases = load_cases(where)
     chosen = [c for c in all_cases if cases is None or c.name in cases]
     unknown = set(cases or ()) - {c.name for c in all_cases}
@@ -376,11 +360,9 @@ def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
         raise ValueError(f"unknown case(s) {sorted(unknown)}: the cases are "
                          f"{', '.join(c.name for c in all_cases)}")
     bases = read_baselines(where, chosen)
-    # the longest first (by the baseline's points): the last case to start is a short one
-    runnable = sorted((c for c in chosen if c.name in bases),
-                      key=lambda c: -bases[c.name].time.size)
+    runnable = [c for c in chosen if c.name in bases]
     runs = dict(zip((c.name for c in runnable),
-                    _run_cases(runnable, fmu, parameters, workers, pool, loop)))
+                    _run_cases(runnable, fmu, parameters, loop)))
     out = []
     for c in chosen:
         if c.name not in bases:
@@ -412,30 +394,22 @@ def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None, progress
 
 
 def _run_cases(cases: list[Case], fmu: Path, parameters: dict[str, Any] | None,
-               workers: int | None, pool=None, loop: str = "native") -> list:
-    """The cases' Results (or failure messages), in order: the cases are independent, so with
-    ``workers`` > 1 (or a ``pool``) they run in that many fresh processes (each loads the FMU
-    once per case as the serial run does), else one after the other in this process."""
-    n = min(workers if workers is not None else (os.cpu_count() or 1), len(cases))
-    if pool is None and n <= 1:
-        # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
-        # FMU's fatal error, recorded as a failing case, and the next case would run)
-        from system_models.fmu import unpacked
+               loop: str = "native") -> list:
+    """The cases' Results (or failure messages), in order, one after the other in this process,
+    every case loading the FMU from one extraction (:func:`system_models.fmu.unpacked`).
 
-        with deferred_interrupt() as interrupted, unpacked(fmu):
-            return [_run_case(c, fmu, parameters, lambda t, t_end: interrupted(), loop)
-                    for c in cases]
-    own = pool is None
-    pool = pool if pool is not None else case_workers(n)
-    if pool is None:                               # processes cannot start here
-        return _run_cases(cases, fmu, parameters, 1, loop=loop)
-    try:
-        n = len(cases)
-        return list(pool.map(_run_case, cases, [fmu] * n, [parameters] * n, [None] * n,
-                             [loop] * n))
-    finally:
-        if own:
-            pool.shutdown(wait=True, cancel_futures=True)
+    Not in parallel processes: with the C loop the seven runs take ~0.3 s of CPU, less than a
+    spawned process costs (~0.8 s: a Python, numpy and what a run imports); a forked one
+    imports again what its cases need first (scipy.optimize for a steady start, ~0.4 s): the
+    command shared with one fork took 1.7 s CPU against 1.3 s here, and no less wall time,
+    on the 2 cores of the development machine under load."""
+    from system_models.fmu import unpacked
+
+    # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
+    # FMU's fatal error, recorded as a failing case, and the next case would run)
+    with deferred_interrupt() as interrupted, unpacked(fmu):
+        return [_run_case(c, fmu, parameters, lambda t, t_end: interrupted(), loop)
+                for c in cases]
 
 
 def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None,
