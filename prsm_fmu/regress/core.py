@@ -115,15 +115,19 @@ def _source(where) -> tuple[str, Any]:
     return "dir", p
 
 
-def _read_text(where, name: str) -> str:
+def _read_text(where, name: str, first_line: bool = False) -> str:
+    """The text of baseline file ``name`` (``first_line``: its first line only, with its
+    newline: the header of a CSV, without reading the rows)."""
     kind, p = _source(where)
     if kind == "fmu":
         with zipfile.ZipFile(p) as z:
             try:
-                return z.read(f"extra/baselines/{name}").decode("utf-8")
+                with z.open(f"extra/baselines/{name}") as fh:
+                    return (fh.readline() if first_line else fh.read()).decode("utf-8")
             except KeyError:
                 raise FileNotFoundError(f"{p}: no extra/baselines/{name} in the FMU") from None
-    return (p / name).read_text(encoding="utf-8")
+    with open(p / name, encoding="utf-8") as fh:
+        return fh.readline() if first_line else fh.read()
 
 
 def load_config(where=DEFAULT_DIR) -> dict[str, Any]:
@@ -165,7 +169,7 @@ def read_csv(text: str) -> Baseline:
 def baseline_columns(where, case: str) -> list[str] | None:
     """The output names of a case's baseline (its header), None if it has none."""
     try:
-        header = _read_text(where, f"{case}.csv").partition("\n")[0]
+        header = _read_text(where, f"{case}.csv", first_line=True).partition("\n")[0]
     except FileNotFoundError:
         return None
     return _columns(header)[0][1:]
