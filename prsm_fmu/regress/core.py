@@ -308,14 +308,15 @@ def scene_loop(scene, loop: str = "native") -> str:
 def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
                   parameters: dict[str, Any] | None = None, prsm: str = "fmu", progress=None,
                   loop: str = "native"):
-    """Run the case's scene on the FMU (fmpy); returns the master's Result.
+    """Run the case's scene on the FMU (fmpy); returns the master's Result (the scene's checks
+    are not evaluated).
 
     ``tolerance`` sets the FMU's ``tolerance`` parameter (None: the scene's, i.e. the FMU's
     default); ``parameters`` adds FMU start values (e.g. a changed ``mu_screw_roller``);
     ``progress(t, t_end)`` is called between macro steps (every step with the Python master,
     every 2048 with the C loop); ``loop``: who takes the macro steps (:func:`scene_loop`).
     """
-    from system_models.run import run_scene
+    from system_models.run import build_scene_system
     from system_models.scenes import load_scene
 
     sc = load_scene(case.scene)
@@ -323,9 +324,11 @@ def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
     if tolerance is not None:
         par["tolerance"] = tolerance
     sc = replace(sc, prsm={**sc.prsm, "parameters": par})
-    return run_scene(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity,
-                     progress=progress, loop=scene_loop(sc, loop) if prsm == "fmu" else
-                     "python").result
+    # the run alone: not the scene's checks (run_scene's), which a case does not use (the
+    # start-up's steady-state targets would be solved for nothing)
+    system = build_scene_system(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity,
+                                loop=scene_loop(sc, loop) if prsm == "fmu" else "python")
+    return system.run(progress)
 
 
 def case_outputs(case: Case, result) -> list[str]:
