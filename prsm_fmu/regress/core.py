@@ -406,10 +406,9 @@ def _run_cases(cases: list[Case], fmu: Path, parameters: dict[str, Any] | None,
     every case loading the FMU from one extraction (:func:`system_models.fmu.unpacked`).
 
     Not in parallel processes: with the C loop the seven runs take ~0.3 s of CPU, less than a
-    spawned process costs (~0.8 s: a Python, numpy and what a run imports); a forked one
-    imports again what its cases need first (scipy.optimize for a steady start, ~0.6 s): the
-    command shared with one fork took 1.7 s CPU against 1.3 s here, and no less wall time,
-    on the 2 cores of the development machine under load (docs/regression.md)."""
+    spawned process costs (~0.8 s: a Python, numpy and what a run imports); forked helpers
+    measured no less wall time on the 2 cores of the development machine under load
+    (docs/regression.md, "How the cases run")."""
     from system_models.fmu import unpacked
 
     # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
