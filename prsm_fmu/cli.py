@@ -13,7 +13,7 @@ Subcommands::
     prsm-fmu check   PRESET [--load N] [--length M] [--material NAME] [--safety-factor K]
                      [--stability-factor N] [--ends ENDS] [--teeth Z_R,Z_IG] [--set NAME=VALUE]
     prsm-fmu regress [--update] [--fmu PRSM2.fmu] [--baselines DIR|FMU] [--case NAME ...]
-                     [--set NAME=VALUE] [--out DIR]
+                     [--set NAME=VALUE] [--out DIR] [--loop native|python]
     prsm-fmu plot    RESULT.csv --fmu PRSM2.fmu [--out RESULT.png] [--variables NAME ...]
 
 ``startup`` runs the start-up scenario of Li et al. (2021) §3.1 (the screw speed stepped at t = 0 with
