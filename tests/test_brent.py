@@ -11,15 +11,17 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytest.importorskip("scipy")
 
-from scipy.optimize import brentq as scipy_brentq  # noqa: E402
-
 from system_models import brent  # noqa: E402
+
+# scipy.optimize is imported inside the tests: importing this module (as the fresh process of
+# test_the_compiled_routine_loads_alone does, for its cases) must not import it
 
 #: random cases compared (seeded)
 N_CASES = 400
@@ -53,17 +55,27 @@ def _cases(seed: int = 20261127):
 
 
 def test_the_compiled_routine_loads_alone():
+    """In a fresh process (here scipy.optimize is imported already, and :func:`brent.brentq`
+    uses its module): the routine loaded alone imports no scipy.optimize, and its roots of
+    the seeded cases are those of scipy.optimize.brentq imported afterwards, bit for bit."""
     assert brent._compiled() is not None
-    # √2 to within the tolerances asked: |x − √2| ≤ xtol + rtol·√2 ≈ 2.5e-14 < 4e-14
-    code = ("import sys; from system_models.brent import brentq; "
-            "x = brentq(lambda x: x * x - 2.0, 0.0, 2.0, 1e-14, 1e-14); "
-            "print(abs(x - 2.0 ** 0.5) < 4e-14, 'scipy.optimize' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout.split()
-    assert out == ["True", "False"], out
+    code = ("import sys\n"
+            "sys.path.insert(0, sys.argv[1])\n"
+            "from test_brent import _cases\n"
+            "from system_models.brent import brentq\n"
+            "mine = [brentq(f, a, b, x, r).hex() for f, a, b, x, r in _cases()]\n"
+            "alone = 'scipy.optimize' not in sys.modules\n"
+            "from scipy.optimize import brentq as theirs\n"
+            "same = mine == [theirs(f, a, b, xtol=x, rtol=r).hex() for f, a, b, x, r in _cases()]\n"
+            "print(alone, same, len(mine))\n")
+    out = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)],
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["True", "True", str(N_CASES)], out
 
 
 def test_roots_are_scipys_bit_for_bit():
+    from scipy.optimize import brentq as scipy_brentq
+
     n = 0
     for f, a, b, xtol, rtol in _cases():
         mine = brent.brentq(f, a, b, xtol=xtol, rtol=rtol)
