@@ -13,7 +13,7 @@ Subcommands::
     prsm-fmu check   PRESET [--load N] [--length M] [--material NAME] [--safety-factor K]
                      [--stability-factor N] [--ends ENDS] [--teeth Z_R,Z_IG] [--set NAME=VALUE]
     prsm-fmu regress [--update] [--fmu PRSM2.fmu] [--baselines DIR|FMU] [--case NAME ...]
-                     [--set NAME=VALUE] [--out DIR]
+                     [--set NAME=VALUE] [--out DIR] [--loop native|python]
     prsm-fmu plot    RESULT.csv --fmu PRSM2.fmu [--out RESULT.png] [--variables NAME ...]
 
 ``startup`` runs the start-up scenario of Li et al. (2021) §3.1 (the screw speed stepped at t = 0 with
@@ -659,6 +659,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(to see what a change does); repeatable")
     p.add_argument("--out", type=writable_dir, default="out/regress",
                    help="output directory (default %(default)s)")
+    from .regress.core import LOOPS
+
+    p.add_argument("--loop", choices=LOOPS, default=LOOPS[0],
+                   help="who takes the macro steps: the actuator loop compiled to C (native; "
+                        "the Python master where gcc is missing) or the Python master; the "
+                        "same outputs bit for bit (default %(default)s)")
     p.set_defaults(func=cmd_regress, parser=p)
 
     from .result_plot import DEFAULT_VARIABLES
@@ -753,8 +759,8 @@ def _parameter_problem(variables: Mapping[str, Variable], name: str,
 
 
 def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    """Build the FMU if missing or older than its sources (child process; the cases' worker
-    processes start meanwhile), run the regression cases, compare or update baselines.
+    """Build the FMU if missing or older than its sources (child process), run the regression
+    cases, compare or update baselines.
 
     Returns
     -------
@@ -765,7 +771,6 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     from pathlib import Path
 
     from . import regress
-    from .workers import IDLE_CORE, idle_cores
 
     out = Path(args.out)
     where = Path(args.baselines) if args.baselines else regress.DEFAULT_DIR
@@ -786,49 +791,33 @@ def cmd_regress(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     # the fmu extra, before anything is built or run: pythonfmu builds the FMU and runs inside
     # it, fmpy steps it
     require("fmpy", "pythonfmu", purpose="regress (building and running the FMU)")
-    pool = None
-    try:
-        if args.fmu:
-            fmu = Path(args.fmu)
-            try:
-                fmu_vars = fmu_variables(fmu)
-            except ValueError as exc:
-                parser.error(f"argument --fmu: {exc}")
-        else:
-            # the cases' processes start now and import what a run needs while the FMU is
-            # built (or read) and the baselines are read; one per case and core where cores
-            # are idle, else none (the cases then run here, one after the other)
-            if not args.update and idle_cores() >= IDLE_CORE:
-                pool = regress.case_workers(min(os.cpu_count() or 1, len(args.case or known)))
-            fmu = out / "fmu" / "PRSM2.fmu"
-            why = regress.why_build(fmu)
-            if why is None:
-                print(f"using {fmu} (built from the current sources)", flush=True)
-            else:
-                print(f"building {fmu} ({why}; python -m fmu_build, child process) ...",
-                      flush=True)
-                try:
-                    regress.build_fmu(fmu.parent)
-                except RuntimeError as exc:
-                    print(f"prsm-fmu: error: {one_line(exc)}", file=sys.stderr)
-                    return 1
+    if args.fmu:
+        fmu = Path(args.fmu)
+        try:
             fmu_vars = fmu_variables(fmu)
-        return _regress_checked(args, parser, fmu, fmu_vars, where, out, pool)
-    finally:
-        _close(pool)
+        except ValueError as exc:
+            parser.error(f"argument --fmu: {exc}")
+    else:
+        fmu = out / "fmu" / "PRSM2.fmu"
+        why = regress.why_build(fmu)
+        if why is None:
+            print(f"using {fmu} (built from the current sources)", flush=True)
+        else:
+            print(f"building {fmu} ({why}; python -m fmu_build, child process) ...",
+                  flush=True)
+            try:
+                regress.build_fmu(fmu.parent)
+            except RuntimeError as exc:
+                print(f"prsm-fmu: error: {one_line(exc)}", file=sys.stderr)
+                return 1
+        fmu_vars = fmu_variables(fmu)
+    return _regress_checked(args, parser, fmu, fmu_vars, where, out)
 
 
-def _close(pool) -> None:
-    if pool is not None:
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _regress_checked(args, parser, fmu, fmu_vars, where, out, pool) -> int:
-    """``regress`` once the FMU is there: its fit, then --update or the check (in ``pool``'s
-    processes when started, :func:`prsm_fmu.regress.case_workers`)."""
+def _regress_checked(args, parser, fmu, fmu_vars, where, out) -> int:
+    """``regress`` once the FMU is there: its fit, then --update or the check."""
     from . import regress
     from .regress.report import verdict_table, write_report
-    from .workers import IDLE_CORE, idle_cores
 
     for name, value in args.set or ():
         problem = _parameter_problem(fmu_vars, name, value)
@@ -841,14 +830,12 @@ def _regress_checked(args, parser, fmu, fmu_vars, where, out, pool) -> int:
         print(f"prsm-fmu: error: {problem}", file=sys.stderr)
         return 1
     if args.update:
-        print(regress.update(fmu, where, args.case))
+        print(regress.update(fmu, where, args.case, loop=args.loop))
         print(f"wrote the baselines and {where / 'REPORT.md'}: review the report, then pack "
               "them into the FMU by rebuilding it (python -m fmu_build)")
         return 0
     params = dict(args.set) if args.set else None
-    workers = None if pool is not None or idle_cores() >= IDLE_CORE else 1
-    results = regress.check(fmu, where, args.case, parameters=params, workers=workers,
-                            pool=pool)
+    results = regress.check(fmu, where, args.case, parameters=params, loop=args.loop)
     print(verdict_table(results))
     failed = [r.case.name for r in results if not r.passed]
     if failed:

@@ -4,7 +4,7 @@ needs while this process does something else (a run, a build).
 ``spawn``: a worker copies nothing of this process (no FMU, fmpy or matplotlib state); it
 imports what it needs itself, in ``initializer``, at once: :func:`started_pool` starts every
 process now instead of at the first task.  Used by ``prsm-ema run`` (the figures drawn while
-the CSV is written) and ``prsm-fmu regress`` (the cases' imports while the FMU is built).
+the CSV is written).
 """
 
 from __future__ import annotations

@@ -132,7 +132,7 @@ def steady_torque(config: PRSMConfig, fidelity: str, speed: float, load_force: f
 
     t_ideal = c * load_force
     span = 2.0 * abs(t_ideal) + 1.0
-    from scipy.optimize import brentq   # on demand: importing scipy.optimize costs ~0.8 s
+    from .brent import brentq   # scipy's brentq, without importing scipy.optimize (~0.6 s)
 
     return brentq(acc, t_ideal - span, t_ideal + span, xtol=1e-14, rtol=1e-14)
 

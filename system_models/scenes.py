@@ -153,24 +153,30 @@ def is_scene_path(name: str) -> bool:
         or name.startswith(".")
 
 
+def _names() -> str:
+    """The known scenes' names, for a refusal's message (every scene file is parsed: only when
+    a name or path is refused, not for each scene found)."""
+    return ", ".join(n for n, _ in list_scenes())
+
+
 def _find(name: str) -> Path:
-    names = ", ".join(n for n, _ in list_scenes())
     if is_scene_path(name):
         p = Path(name)
         if p.suffix != ".toml":
-            raise ValueError(f"--scene {name!r} is neither a scene name ({names}) nor a path to "
+            raise ValueError(f"--scene {name!r} is neither a scene name ({_names()}) nor a path to "
                              "a .toml file")
         if not p.is_file():
-            raise ValueError(f"--scene {name!r}: scene file does not exist (scene names: {names})")
+            raise ValueError(f"--scene {name!r}: scene file does not exist (scene names: "
+                             f"{_names()})")
         return p
     if not name or not set(name) <= _NAME_CHARS:
         raise ValueError(f"--scene {name!r} is not a scene name: names are letters, digits, '_' "
-                         f"and '-' ({names}), or give a path to a .toml file")
+                         f"and '-' ({_names()}), or give a path to a .toml file")
     for d in scene_dirs():
         f = d / f"{name}.toml"
         if f.is_file():
             return f
-    raise ValueError(f"--scene: unknown scene {name!r}: must be one of {names} "
+    raise ValueError(f"--scene: unknown scene {name!r}: must be one of {_names()} "
                      "or a path to a .toml file")
 
 

@@ -129,6 +129,7 @@ CASES: list[tuple[str, list[str], str]] = [
     ("prsm-fmu", ["regress", "--set", "novalue", "--out", OUT], "--set"),
     ("prsm-fmu", ["regress", "--update", "--set", "mu_spline=0.2", "--out", OUT], "--update"),
     ("prsm-fmu", ["regress", "--out", FILE + "/sub"], "--out"),
+    ("prsm-fmu", ["regress", "--loop", "fast", "--out", OUT], "--loop"),
     ("prsm-fmu", ["regress", "--fmu", "{fmu}", "--set", "no_such=1", "--out", OUT], "no_such"),
     ("prsm-fmu", ["regress", "--fmu", "{fmu}", "--set", "mu_spline=1.5", "--out", OUT],
      "mu_spline"),

@@ -277,7 +277,8 @@ def test_ctrl_c_stops_regress_instead_of_failing_the_case_and_going_on():
     """regress runs the pythonfmu FMU in this process: a Ctrl-C that lands inside the FMU's
     Python was its fatal error, recorded as a failing case, and the next case ran.  Now the
     interrupt is held to the next macro step and ends the check (SIGINT sent to this process
-    0.5 s into the longest case, sine_tracking: 10 000 steps)."""
+    0.5 s into the longest case, sine_tracking: 10 000 steps of the Python master, ~0.6 s;
+    the C loop, regress's default, is below)."""
     pytest.importorskip("pythonfmu")
     import threading
 
@@ -291,7 +292,30 @@ def test_ctrl_c_stops_regress_instead_of_failing_the_case_and_going_on():
     timer.start()
     try:
         with pytest.raises(KeyboardInterrupt):
-            core.check(fmu, cases=["sine_tracking", "load_step"])
+            core.check(fmu, cases=["sine_tracking", "load_step"], loop="python")
     finally:
         timer.cancel()
     assert time.monotonic() - t0 < 30.0
+
+
+def test_ctrl_c_stops_regress_on_the_c_loop_too(monkeypatch):
+    """With the C loop (10 000 steps of sine_tracking in ~0.1 s: too short to aim a timer at)
+    the interrupt is looked at between its chunks of macro steps: a SIGINT that came as the
+    first case began ends the check there, and the second case never starts."""
+    pytest.importorskip("pythonfmu")
+    from test_fmu import built_fmus
+
+    from prsm_fmu.regress import core
+
+    started = []
+    simulate = core.simulate_case
+
+    def interrupted_at_start(case, *args, **kwargs):
+        started.append(case.name)
+        os.kill(os.getpid(), signal.SIGINT)
+        return simulate(case, *args, **kwargs)
+
+    monkeypatch.setattr(core, "simulate_case", interrupted_at_start)
+    with pytest.raises(KeyboardInterrupt):
+        core.check(built_fmus()["PRSM2"], cases=["sine_tracking", "load_step"])
+    assert started == ["sine_tracking"]

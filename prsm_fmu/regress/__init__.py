@@ -10,11 +10,11 @@ Modules: :mod:`.tube` (the tube, numpy only), :mod:`.core` (cases, CSV, runs, up
 :mod:`.report` (PNG and HTML).  Nothing here is used by the FMU's slave.
 """
 
-from .core import (DEFAULT_DIR, Case, CaseResult, build_fmu, case_workers, check, check_case,
+from .core import (DEFAULT_DIR, Case, CaseResult, build_fmu, check, check_case,
                    fmu_mismatch, load_cases, read_baselines, simulate_case, update, why_build)
 from .tube import Tolerance, TubeResult, compare, tube
 
-__all__ = ["DEFAULT_DIR", "Case", "CaseResult", "build_fmu", "case_workers", "check",
+__all__ = ["DEFAULT_DIR", "Case", "CaseResult", "build_fmu", "check",
            "check_case", "fmu_mismatch", "why_build",
            "load_cases", "read_baselines", "simulate_case", "update", "Tolerance",
            "TubeResult", "compare", "tube"]

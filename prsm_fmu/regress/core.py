@@ -33,7 +33,7 @@ from .tube import Tolerance, TubeResult, compare
 
 __all__ = ["ROOT", "DEFAULT_DIR", "OUTPUTS", "Case", "Baseline", "CaseResult", "load_cases",
            "read_csv", "write_csv", "read_baselines", "baseline_columns", "build_fmu",
-           "why_build", "case_workers", "simulate_case",
+           "why_build", "scene_loop", "simulate_case", "LOOPS",
            "check_case", "check", "update"]
 
 #: the repository (parent of the prsm_fmu package)
@@ -50,6 +50,11 @@ OUTPUTS = ("prsm.screw_speed", "prsm.rod_position", "prsm.rod_velocity",
            "prsm.stage[2].carrier_speed_ratio", "prsm.efficiency", "prsm.friction_power",
            "prsm.friction_work", "motor.torque", "motor.current", "load.force",
            "controller.reference")
+
+#: who takes a case's macro steps (:func:`scene_loop`): the actuator loop compiled to C
+#: (system_models.native_loop, ~4x fewer seconds per step than the Python master) or the
+#: Python master
+LOOPS = ("native", "python")
 
 
 @dataclass
@@ -110,15 +115,19 @@ def _source(where) -> tuple[str, Any]:
     return "dir", p
 
 
-def _read_text(where, name: str) -> str:
+def _read_text(where, name: str, first_line: bool = False) -> str:
+    """The text of baseline file ``name`` (``first_line``: its first line only, with its
+    newline: the header of a CSV, without reading the rows)."""
     kind, p = _source(where)
     if kind == "fmu":
         with zipfile.ZipFile(p) as z:
             try:
-                return z.read(f"extra/baselines/{name}").decode("utf-8")
+                with z.open(f"extra/baselines/{name}") as fh:
+                    return (fh.readline() if first_line else fh.read()).decode("utf-8")
             except KeyError:
                 raise FileNotFoundError(f"{p}: no extra/baselines/{name} in the FMU") from None
-    return (p / name).read_text(encoding="utf-8")
+    with open(p / name, encoding="utf-8") as fh:
+        return fh.readline() if first_line else fh.read()
 
 
 def load_config(where=DEFAULT_DIR) -> dict[str, Any]:
@@ -160,7 +169,7 @@ def read_csv(text: str) -> Baseline:
 def baseline_columns(where, case: str) -> list[str] | None:
     """The output names of a case's baseline (its header), None if it has none."""
     try:
-        header = _read_text(where, f"{case}.csv").partition("\n")[0]
+        header = _read_text(where, f"{case}.csv", first_line=True).partition("\n")[0]
     except FileNotFoundError:
         return None
     return _columns(header)[0][1:]
@@ -275,30 +284,39 @@ def why_build(fmu: Path) -> str | None:
     return fmu_is_stale(fmu)
 
 
-def _warm() -> None:
-    """A case worker's start: what a run imports, while the parent builds the FMU."""
-    import fmpy.fmi2  # noqa: F401
-    import system_models.run  # noqa: F401
+def scene_loop(scene, loop: str = "native") -> str:
+    """Who takes the macro steps of ``scene`` (a :class:`system_models.scenes.Scene`):
+    ``loop``, except "python" where ``loop`` is "native" and the C loop cannot run the scene
+    (:func:`system_models.native_loop.check_native_loop`: not the direct topology, a retry
+    policy with a coupling tolerance) or cannot be compiled (no gcc).  Both loops give the same
+    outputs bit for bit (tests/test_native_loop.py, tests/test_regress.py)."""
+    if loop not in LOOPS:
+        raise ValueError(f"loop = {loop!r} is not allowed: must be one of {', '.join(LOOPS)}")
+    if loop == "python":
+        return loop
+    from fmu_build.errors import BuildError
+    from system_models.native_loop import check_native_loop, loop_library
 
-
-def case_workers(n: int | None = None):
-    """Started worker processes for :func:`check` (``n``, default the cores), importing what the
-    cases need now; None for one core or if processes cannot start."""
-    from ..workers import started_pool
-
-    n = n if n is not None else (os.cpu_count() or 1)
-    return started_pool(n, _warm) if n > 1 else None
+    try:
+        check_native_loop(scene.topology, "fmu", scene.retry.get("tolerance"))
+        loop_library()
+    except (ValueError, BuildError, OSError):
+        return "python"
+    return "native"
 
 
 def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
-                  parameters: dict[str, Any] | None = None, prsm: str = "fmu", progress=None):
-    """Run the case's scene on the FMU (fmpy); returns the master's Result.
+                  parameters: dict[str, Any] | None = None, prsm: str = "fmu", progress=None,
+                  loop: str = "native"):
+    """Run the case's scene on the FMU (fmpy); returns the master's Result (the scene's checks
+    are not evaluated).
 
     ``tolerance`` sets the FMU's ``tolerance`` parameter (None: the scene's, i.e. the FMU's
     default); ``parameters`` adds FMU start values (e.g. a changed ``mu_screw_roller``);
-    ``progress(t, t_end)`` is called after every macro step.
+    ``progress(t, t_end)`` is called between macro steps (every step with the Python master,
+    every 2048 with the C loop); ``loop``: who takes the macro steps (:func:`scene_loop`).
     """
-    from system_models.run import run_scene
+    from system_models.run import build_scene_system
     from system_models.scenes import load_scene
 
     sc = load_scene(case.scene)
@@ -306,8 +324,11 @@ def simulate_case(case: Case, fmu: Path, tolerance: float | None = None,
     if tolerance is not None:
         par["tolerance"] = tolerance
     sc = replace(sc, prsm={**sc.prsm, "parameters": par})
-    return run_scene(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity,
-                     progress=progress).result
+    # the run alone: not the scene's checks (run_scene's), which a case does not use (the
+    # start-up's steady-state targets would be solved for nothing)
+    system = build_scene_system(sc, prsm=prsm, fmu_path=fmu, fidelity=case.fidelity,
+                                loop=scene_loop(sc, loop) if prsm == "fmu" else "python")
+    return system.run(progress)
 
 
 def case_outputs(case: Case, result) -> list[str]:
@@ -334,12 +355,11 @@ def check_case(case: Case, baseline: Baseline, result) -> CaseResult:
 
 
 def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
-          parameters: dict[str, Any] | None = None, workers: int | None = None,
-          pool=None) -> list[CaseResult]:
+          parameters: dict[str, Any] | None = None,
+          loop: str = "native") -> list[CaseResult]:
     """Run every case (or those named) on ``fmu`` and compare with the baselines at ``where``
-    (a directory or an FMU with ``extra/baselines``); the cases run in ``workers`` processes
-    (default: the cores; 1: in this process), or in ``pool`` (:func:`case_workers`, started
-    earlier; the caller shuts it down)."""
+    (a directory or an FMU with ``extra/baselines``), in this process (:func:`_run_cases`);
+    ``loop``: who takes the macro steps (:func:`scene_loop`)."""
     all_cases = load_cases(where)
     chosen = [c for c in all_cases if cases is None or c.name in cases]
     unknown = set(cases or ()) - {c.name for c in all_cases}
@@ -347,11 +367,9 @@ def check(fmu: Path, where=DEFAULT_DIR, cases: list[str] | None = None,
         raise ValueError(f"unknown case(s) {sorted(unknown)}: the cases are "
                          f"{', '.join(c.name for c in all_cases)}")
     bases = read_baselines(where, chosen)
-    # the longest first (by the baseline's points): the last case to start is a short one
-    runnable = sorted((c for c in chosen if c.name in bases),
-                      key=lambda c: -bases[c.name].time.size)
+    runnable = [c for c in chosen if c.name in bases]
     runs = dict(zip((c.name for c in runnable),
-                    _run_cases(runnable, fmu, parameters, workers, pool)))
+                    _run_cases(runnable, fmu, parameters, loop)))
     out = []
     for c in chosen:
         if c.name not in bases:
@@ -373,39 +391,37 @@ def largest_finite(values: np.ndarray) -> float:
     return float(np.max(finite)) if finite.size else 0.0
 
 
-def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None, progress=None):
+def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None, progress=None,
+              loop: str = "native"):
     """One case's Result, or the message of its failure (a string), in whatever process."""
     try:
-        return simulate_case(case, fmu, parameters=parameters, progress=progress)
+        return simulate_case(case, fmu, parameters=parameters, progress=progress, loop=loop)
     except Exception as exc:  # noqa: BLE001 - a failing run is a failing case
         return str(exc) or type(exc).__name__
 
 
 def _run_cases(cases: list[Case], fmu: Path, parameters: dict[str, Any] | None,
-               workers: int | None, pool=None) -> list:
-    """The cases' Results (or failure messages), in order: the cases are independent, so with
-    ``workers`` > 1 (or a ``pool``) they run in that many fresh processes (each loads the FMU
-    once per case as the serial run does), else one after the other in this process."""
-    n = min(workers if workers is not None else (os.cpu_count() or 1), len(cases))
-    if pool is None and n <= 1:
-        # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
-        # FMU's fatal error, recorded as a failing case, and the next case would run)
-        with deferred_interrupt() as interrupted:
-            return [_run_case(c, fmu, parameters, lambda t, t_end: interrupted())
-                    for c in cases]
-    own = pool is None
-    pool = pool if pool is not None else case_workers(n)
-    if pool is None:                               # processes cannot start here
-        return _run_cases(cases, fmu, parameters, 1)
-    try:
-        return list(pool.map(_run_case, cases, [fmu] * len(cases), [parameters] * len(cases)))
-    finally:
-        if own:
-            pool.shutdown(wait=True, cancel_futures=True)
+               loop: str = "native") -> list:
+    """The cases' Results (or failure messages), in order, one after the other in this process,
+    every case loading the FMU from one extraction (:func:`system_models.fmu.unpacked`).
+
+    Not in parallel processes: with the C loop the seven runs take ~0.3 s of CPU, less than a
+    spawned process costs (~0.8 s: a Python, numpy and what a run imports); forked helpers
+    measured no less wall time on the 2 cores of the development machine under load
+    (docs/regression.md, "How the cases run")."""
+    from system_models.fmu import unpacked
+
+    # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
+    # FMU's fatal error, recorded as a failing case, and the next case would run)
+    with deferred_interrupt() as interrupted, unpacked(fmu):
+        return [_run_case(c, fmu, parameters, lambda t, t_end: interrupted(), loop)
+                for c in cases]
 
 
-def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None) -> str:
-    """Re-run the cases at ``baseline_tolerance``, write their CSVs and ``REPORT.md``.
+def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None,
+           loop: str = "native") -> str:
+    """Re-run the cases at ``baseline_tolerance``, write their CSVs and ``REPORT.md``
+    (``loop``: :func:`scene_loop`).
 
     The report says, per case, which outputs moved outside the old baseline's tube (max
     difference, where) and which stayed inside; returns its text.
@@ -431,9 +447,11 @@ def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None)
              "Changes against the previous baselines, measured with each case's tube "
              "(tolerances.toml); |Δ|/max|y| is the largest difference over the run divided by "
              "the output's largest magnitude.", ""]
-    with deferred_interrupt() as interrupted:      # as in check()
+    from system_models.fmu import unpacked
+
+    with deferred_interrupt() as interrupted, unpacked(fmu):      # as in check()
         runs = {c.name: simulate_case(c, fmu, tolerance=tight,
-                                      progress=lambda t, t_end: interrupted())
+                                      progress=lambda t, t_end: interrupted(), loop=loop)
                 for c in chosen}
     for c in chosen:
         res = runs[c.name]

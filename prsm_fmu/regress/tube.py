@@ -124,9 +124,12 @@ def compare(name: str, t_base: np.ndarray, y_base: np.ndarray, t_run: np.ndarray
                 lo, hi)
     yi = _interp_undefined(tb, tr, yr)
     rated = np.isfinite(lo) & np.isfinite(hi)      # the tube has edges there
-    # a NaN of the run is allowed where the baseline is undefined within ±dt
-    _, near_undefined = tube(tb, np.isnan(yb).astype(float), Tolerance(0.0, 0.0, tol.dt))
-    lost = rated & ~np.isfinite(yi) & ~(near_undefined > 0.0)
+    # a NaN of the run is allowed where the baseline is undefined within ±dt (nowhere if the
+    # baseline is defined everywhere: no second tube then)
+    undefined = np.isnan(yb)
+    near_undefined = (tube(tb, undefined.astype(float), Tolerance(0.0, 0.0, tol.dt))[1] > 0.0
+                      if undefined.any() else undefined)
+    lost = rated & ~np.isfinite(yi) & ~near_undefined
     rated &= np.isfinite(yi)
     if lost.any():
         bad = int(np.argmax(lost))
