@@ -33,7 +33,6 @@ from typing import Any, Iterable
 import numpy as np
 
 from prsm_fmu.atomic import atomic_path
-from prsm_fmu.csv_format import format_blocks
 from prsm_fmu.figures import legend_outside, subplots
 from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MICROMETRE,
                             MILLIMETRE, MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
@@ -58,6 +57,10 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     Every value reads back as the same double, bit for bit (15 significant digits where they
     suffice, else 17; formatted with numpy, :mod:`prsm_fmu.csv_format`; its cost against the
     old writer: ``benchmarks/command_cost.py``, item 3)."""
+    # imported here: its tables cost ~50 ms, which the figures' processes (that import this
+    # module) need not pay
+    from prsm_fmu.csv_format import format_blocks
+
     cols = ordered_columns(res, first)
     path = Path(path)
     header = io.StringIO()
