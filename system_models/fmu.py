@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import ctypes
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -34,6 +33,7 @@ from prsm_fmu.fmu_log import STATUS as _STATUS
 from prsm_fmu.fmu_log import FmuLog
 
 from .blocks import Block, Port, StepRefused
+from .fmu_cache import release, unpack
 
 __all__ = ["FMUBlock", "FMUError", "ensure_fmu", "fmu_is_stale"]
 
@@ -147,7 +147,7 @@ class FMUBlock(Block):
                  inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None,
                  parameters: dict[str, Any] | None = None, start_time: float = 0.0) -> None:
         try:
-            from fmpy import extract, read_model_description
+            from fmpy import read_model_description
             from fmpy.fmi2 import FMU2Slave
         except ImportError as exc:
             raise FMUError(f"fmpy is needed to run an FMU ({exc}): pip install -e \".[fmu]\", "
@@ -180,14 +180,16 @@ class FMUBlock(Block):
         self._buf_in = (fmi2Real * len(self._vr_in))()
         self._arr_in = (fmi2ValueReference * len(self._vr_in))(*self._vr_in)
         self._read(range(len(out_names)))
-        self._unzipdir = extract(str(self.path))
+        # unpacked once per FMU file and kept (system_models.fmu_cache), not at every run
+        self._unzipdir, self._private_copy = unpack(self.path)
         self._alive = False
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         try:
             self.fmu.instantiate(callbacks=self._log.callbacks, loggingOn=True)
         except Exception as exc:
-            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            release(self._unzipdir, self._private_copy)
+            self._unzipdir = None
             raise FMUError(f"{self.path}: instantiation failed: {exc}") from exc
         self._alive = True
         # the step loop's four functions without fmpy's declared argument types, every
@@ -372,4 +374,6 @@ class FMUBlock(Block):
                 self.fmu.freeInstance()
             except Exception:  # noqa: BLE001
                 pass
-        shutil.rmtree(self._unzipdir, ignore_errors=True)
+        if self._unzipdir is not None:
+            release(self._unzipdir, self._private_copy)
+            self._unzipdir = None
