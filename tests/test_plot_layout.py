@@ -7,8 +7,8 @@ legend boxes against the axes, the plotted data), not on pixels.
 * the sweep's time panels say which line style is which stage;
 * the loop's efficiency plot shows standstill as a gap (NaN), not a drop to 0.
 
-The figures are caught when saved (``Figure.savefig`` spied on), so the tests drive the public
-writers (``write_plots``, ``plot_steady``, ``plot_time_panels``).
+The figures are caught when saved (``prsm_fmu.figures.save``, which every writer calls, spied
+on), so the tests drive the public writers (``write_plots``, ``plot_steady``, ``plot_time_panels``).
 """
 
 from __future__ import annotations
@@ -30,17 +30,17 @@ METRES_PER = {"µm": 1e-6, "mm": 1e-3, "m": 1.0}
 def saved(monkeypatch):
     """Figures saved while active, by the file name they were saved to (not rendered: the
     tests read the Figure objects)."""
-    from matplotlib.figure import Figure
+    from pathlib import Path
 
-    figs: dict[str, Figure] = {}
+    from prsm_fmu import figures
 
-    def spy(self, fname, *args, **kwargs):
-        name = str(fname).rsplit("/", 1)[-1]
-        # written whole: saved to a temporary ".NAME.<random>.part.png" beside NAME, then renamed
-        whole = re.fullmatch(r"\.(.+)\.[^.]+\.part\.[^.]+", name)
-        figs[whole.group(1) if whole else name] = self
+    figs = {}
 
-    monkeypatch.setattr(Figure, "savefig", spy)
+    def spy(fig, path, dpi=110):
+        figs[Path(path).name] = fig
+        return Path(path)
+
+    monkeypatch.setattr(figures, "save", spy)
     return figs
 
 
