@@ -3,7 +3,9 @@ the CSV.
 
 Started (:func:`early_drawer`) first thing in ``prsm-ema run``, the process is a ``fork`` of
 the command: it copies the interpreter (a few ms, against ~0.8 s CPU for a spawned one), imports
-matplotlib while the parent checks and runs the scene and then waits for the run's result.  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
+matplotlib while the parent checks and runs the scene, then makes the figures' frames (axes,
+labels, ticks: :func:`system_models.output.frame`, none needs the run) until the run's result
+arrives.  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
 (the second process inherits matplotlib, imported once) and the two draw half the figures each,
 while the parent writes the CSV.  The CPU is the work the command would do in its own process
 plus the forks, so the drawer is used on a busy machine too.
@@ -57,31 +59,47 @@ def _ignore_interrupts() -> None:
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
-def _draw(names: list[str], job: tuple) -> list[Path]:
+def _draw(names: list[str], job: tuple, frames: dict[str, tuple]) -> list[Path]:
     from .output import _save_figures
 
     res, out_dir, scene, reference, mode, current_limit, kw = job
-    return _save_figures(res, out_dir, scene, reference, mode, current_limit, kw, only=names)
+    return _save_figures(res, out_dir, scene, reference, mode, current_limit, kw, only=names,
+                         frames={n: frames[n] for n in names if n in frames})
 
 
-def _half(conn, names: list[str], job: tuple) -> None:
+def _frames(conn) -> dict[str, tuple]:
+    """The figures' frames (:func:`system_models.output.frame`), made one after another until
+    the job arrives on ``conn`` (the processes that draw make the rest)."""
+    from .output import FRAMED, frame
+
+    made: dict[str, tuple] = {}
+    for name in FRAMED:
+        if conn.poll():
+            break
+        made[name] = frame(name)
+    return made
+
+
+def _half(conn, names: list[str], job: tuple, frames: dict[str, tuple]) -> None:
     """The second process: its figures' paths, or the error, on ``conn``."""
     _ignore_interrupts()
     try:
-        conn.send(("ok", _draw(names, job)))
+        conn.send(("ok", _draw(names, job, frames)))
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which draws instead
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
     conn.close()
 
 
 def _main(conn, split: int) -> None:
-    """The drawing process: import matplotlib, wait for a job, draw it (in ``split`` processes),
-    answer ``("ok", paths)`` or ``("error", text)``; end on EOF (no figures wanted)."""
+    """The drawing process: import matplotlib, make the figures' frames while it waits for a
+    job, draw it (in ``split`` processes), answer ``("ok", paths)`` or ``("error", text)``; end
+    on EOF (no figures wanted)."""
     _ignore_interrupts()
     from .output import _warm
 
     _warm()
     try:
+        frames = _frames(conn)
         job = conn.recv()
     except EOFError:
         return
@@ -101,12 +119,12 @@ def _main(conn, split: int) -> None:
             if pid == 0:
                 try:
                     here.close()
-                    _half(there, names, job)
+                    _half(there, names, job, frames)
                 finally:
                     os._exit(0)
             there.close()
             others.append((pid, here))
-        done = _draw(parts[0], job)
+        done = _draw(parts[0], job, frames)
         for pid, here in others:
             status, value = here.recv()
             os.waitpid(pid, 0)

@@ -218,6 +218,28 @@ def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path, monk
     _same_bytes(here, there)
 
 
+@pytest.mark.parametrize("mode, reference", [("position", lambda t: 0.01), ("speed", None)])
+def test_figures_drawn_on_frames_made_ahead_equal_those_made_at_once(tmp_path, mode, reference):
+    """The drawing process makes the figures' frames (axes, labels, grid, fixed limits and 8
+    ticks per axis) before the run's result arrives: the figures drawn on them are the files,
+    byte for byte, drawn without (position and speed control; the speed figure's y axis needs
+    more than 8 ticks, the tracking error's fewer)."""
+    from system_models import output
+
+    res = _step_result()
+    kw = dict(voltage_limit=300.0, n_rollers=[10, 10], description="a step")
+    frames = {name: output.frame(name) for name in output.FRAMED}
+    assert set(frames) == set(output.FIGURES) - {"carriers"}
+    (tmp_path / "ahead").mkdir()
+    (tmp_path / "at_once").mkdir()
+    ahead = output._save_figures(res, tmp_path / "ahead", "s", reference, mode, 40.0, kw,
+                                 frames=frames)
+    assert frames == {}                             # each frame used once
+    at_once = write_plots(res, tmp_path / "at_once", "s", reference, mode, 40.0, **kw)
+    assert len(at_once) == 6
+    _same_bytes(at_once, ahead)
+
+
 def test_a_drawer_that_dies_leaves_the_figures_to_this_process(tmp_path):
     """The forked drawer killed before it is given the run: write_plots still writes every
     figure (drawn here), byte for byte as write_plots does."""
