@@ -44,8 +44,10 @@ def processes() -> int:
 
 def early_drawer() -> "ForkedDrawer | None":
     """A started :class:`ForkedDrawer` of :func:`processes` processes, or None where it cannot
-    start.  This module imports no numpy: called first thing, the fork copies a small process
-    and its matplotlib import overlaps the command's own imports too."""
+    start.  This module imports no numpy; ``prsm-ema run`` calls this once numpy and
+    :mod:`system_models.output` are imported (the drawer inherits them instead of importing
+    them again), before anything else, so that its matplotlib import overlaps the command's
+    own imports, check and run."""
     return ForkedDrawer(processes()).start() if available() else None
 
 
