@@ -32,7 +32,7 @@ from pathlib import Path
 from prsm_fmu.arguments import ArgumentParser, existing_file, float_in, int_in, writable_dir
 from prsm_fmu.engine import ENGINE_ENV, ENGINES
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "entry", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -323,5 +323,15 @@ def main(argv: list[str] | None = None) -> int:
     return run_command("prsm-ema", body)
 
 
+def entry() -> None:
+    """The ``prsm-ema`` console script and ``python -m system_models``: :func:`main`, then the
+    process ends at once with its status (:func:`prsm_fmu.command.end_process`: the
+    interpreter's teardown skipped; everything is written and every child process has ended
+    when :func:`main` returns)."""
+    from prsm_fmu.command import end_process
+
+    end_process(main())
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()
