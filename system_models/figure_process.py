@@ -5,7 +5,7 @@ Started (:func:`early_drawer`) first thing in ``prsm-ema run``, the process is a
 the command: it copies the interpreter (a few ms, against ~0.8 s CPU for a spawned one), imports
 matplotlib while the parent checks and runs the scene, then makes the figures' frames (axes,
 labels, ticks: :func:`system_models.output.frame`, none needs the run) until the run's result
-arrives.  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
+arrives (:func:`_ahead`).  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
 (the second process inherits matplotlib, imported once) and the two draw half the figures each,
 while the parent writes the CSV.  The CPU is the work the command would do in its own process
 plus the forks, so the drawer is used on a busy machine too.
@@ -69,16 +69,22 @@ def _draw(names: list[str], job: tuple, frames: dict[str, tuple]) -> list[Path]:
                          frames={n: frames[n] for n in names if n in frames})
 
 
-def _frames(conn) -> dict[str, tuple]:
-    """The figures' frames (:func:`system_models.output.frame`), made one after another until
-    the job arrives on ``conn`` (the processes that draw make the rest)."""
-    from .output import FRAMED, frame
+def _ahead(conn) -> dict[str, tuple]:
+    """What the figures need but the run does not, done until the job arrives on ``conn``:
+    the figures' frames (:func:`system_models.output.frame`) one after another, then one small
+    figure drawn (:func:`system_models.output._warm`: the fonts loaded, ~5-9 ms of each drawing
+    process's first draw, for ~35 ms here).  Whatever is left when the job arrives, the
+    processes that draw do themselves, in parallel; so a drawer that is ready only after the
+    run (its matplotlib import is the longer path on a busy machine) starts drawing at once."""
+    from .output import FRAMED, _warm, frame
 
     made: dict[str, tuple] = {}
     for name in FRAMED:
         if conn.poll():
-            break
+            return made
         made[name] = frame(name)
+    if not conn.poll():
+        _warm()
     return made
 
 
@@ -97,11 +103,11 @@ def _main(conn, split: int) -> None:
     job, draw it (in ``split`` processes), answer ``("ok", paths)`` or ``("error", text)``; end
     on EOF (no figures wanted)."""
     _ignore_interrupts()
-    from .output import _warm
+    import matplotlib.figure  # noqa: F401 - what this process is for: imported while the run goes
+    from matplotlib.backends import backend_agg  # noqa: F401
 
-    _warm()
     try:
-        frames = _frames(conn)
+        frames = _ahead(conn)
         job = conn.recv()
     except EOFError:
         return

@@ -446,10 +446,10 @@ def _draw_some(args: tuple) -> list[Path]:
 
 def _warm() -> None:
     """A drawing worker's start, while the run is still going: matplotlib imported, and one
-    small figure drawn (title, labels, ticks, legend, grid) so that the fonts and the text
-    layouts the figures share are loaded and cached (drawing position_step's figures after it:
-    0.94 s against 0.99 s CPU, medians of seven runs each on the shared machine; it costs
-    ~35 ms, off the figures' path as the run goes on meanwhile)."""
+    small figure drawn (title, labels, ticks, legend, grid) so that the fonts the figures share
+    are loaded (a figure drawn after it costs ~5-9 ms less than the first: five runs on the
+    shared machine; it costs ~35 ms, so the forked drawer draws it only while it waits for the
+    run, :func:`system_models.figure_process._ahead`)."""
     from prsm_fmu.figures import subplots
 
     fig, ax = subplots(figsize=(2.0, 1.5))
