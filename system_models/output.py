@@ -206,16 +206,18 @@ def speed_figure(res: Result, scene: str, mode: str = "position", sub: str = "",
     return fig
 
 
+def _stacked_frame(*ylabels: tuple[str, str]):
+    """Panels stacked on one time axis (8 × 8.5 in), y labelled ``(quantity, unit)``, gridded."""
+    fig, axes = subplots(len(ylabels), 1, figsize=(8, 8.5), sharex=True)
+    for ax, (quantity, unit) in zip(axes, ylabels):
+        ax.set_ylabel(label(quantity, unit))
+        ax.grid(True)
+    axes[-1].set_xlabel(label("time", MILLISECOND))
+    return fig, tuple(axes)
+
+
 def _motor_frame():
-    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
-    a1.set_ylabel(label("current", AMPERE))
-    a1.grid(True)
-    a2.set_ylabel(label("voltage", VOLT))
-    a2.grid(True)
-    a3.set_ylabel(label("torque", NEWTON_METRE))
-    a3.set_xlabel(label("time", MILLISECOND))
-    a3.grid(True)
-    return fig, (a1, a2, a3)
+    return _stacked_frame(("current", AMPERE), ("voltage", VOLT), ("torque", NEWTON_METRE))
 
 
 def motor_figure(res: Result, scene: str, current_limit: float | None = None,
@@ -244,15 +246,8 @@ def motor_figure(res: Result, scene: str, current_limit: float | None = None,
 
 
 def _forces_frame():
-    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
-    a1.set_ylabel(label("per roller", KILONEWTON))
-    a1.grid(True)
-    a2.set_ylabel(label("total", KILONEWTON))
-    a2.grid(True)
-    a3.set_ylabel(label("friction", NEWTON))
-    a3.set_xlabel(label("time", MILLISECOND))
-    a3.grid(True)
-    return fig, (a1, a2, a3)
+    return _stacked_frame(("per roller", KILONEWTON), ("total", KILONEWTON),
+                          ("friction", NEWTON))
 
 
 def forces_figure(res: Result, scene: str, n_rollers: list[int] | None = None, sub: str = "",
