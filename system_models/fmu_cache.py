@@ -38,7 +38,10 @@ def cache_root() -> Path:
 
 
 def _own_private_dir(path: Path) -> bool:
-    """``path`` is a real directory (no symlink) of this user, closed to everyone else."""
+    """``path`` is a real directory (no symlink) of this user, closed to everyone else (never
+    on a system without POSIX owners, Windows: every instance gets a private copy there)."""
+    if not hasattr(os, "getuid"):
+        return False
     try:
         st = os.lstat(path)
     except OSError:

@@ -87,6 +87,15 @@ def test_a_cache_directory_others_can_enter_or_write_is_not_used(root, tmp_path,
     assert not Path(d).exists() and list(root.iterdir()) == []
 
 
+def test_no_cache_where_files_have_no_posix_owner(root, tmp_path, monkeypatch):
+    # Windows: no os.getuid, no owner to check: private copies, as before the cache
+    monkeypatch.delattr(fmu_cache.os, "getuid")
+    d, private = fmu_cache.unpack(_fmu(tmp_path / "A.fmu", "one"))
+    assert private and (Path(d) / "resources" / "data.txt").read_text() == "one"
+    fmu_cache.release(d, private)
+    assert not Path(d).exists()
+
+
 def test_a_symlinked_cache_directory_is_not_used(tmp_path, monkeypatch):
     real = tmp_path / "elsewhere"
     real.mkdir(mode=0o700)
