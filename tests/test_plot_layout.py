@@ -240,6 +240,28 @@ def test_figures_drawn_on_frames_made_ahead_equal_those_made_at_once(tmp_path, m
     _same_bytes(at_once, ahead)
 
 
+@pytest.mark.parametrize("polls_before_job", [0, 2, 6, 100])
+def test_the_drawer_makes_frames_only_until_the_job_arrives(monkeypatch, polls_before_job):
+    """figure_process._ahead: frames in DRAW_ORDER while no job has arrived, then the warm-up
+    figure; a job waiting stops it at once (0: none made; 2: two; 6: all six, then the job
+    arrives before the warm-up; 100: all six and the warm-up)."""
+    from system_models import figure_process, output
+
+    class Conn:
+        polls = 0
+
+        def poll(self):
+            self.polls += 1
+            return self.polls > polls_before_job
+
+    warmed = []
+    monkeypatch.setattr(output, "_warm", lambda: warmed.append(True))
+    made = figure_process._ahead(Conn())
+    n = min(polls_before_job, len(output.FRAMED))
+    assert list(made) == list(output.FRAMED[:n])
+    assert warmed == ([True] if polls_before_job > len(output.FRAMED) else [])
+
+
 def test_a_drawer_that_dies_leaves_the_figures_to_this_process(tmp_path):
     """The forked drawer killed before it is given the run: write_plots still writes every
     figure (drawn here), byte for byte as write_plots does."""
