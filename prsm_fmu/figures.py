@@ -78,8 +78,14 @@ def save(fig, path: str | Path, dpi: int = 110) -> Path:
     from .atomic import atomic_path
     from .png import encode_rgba
 
-    fig.savefig(io.BytesIO(), dpi=dpi, format="rgba")     # the canvas keeps the pixels
-    data = encode_rgba(np.asarray(fig.canvas.buffer_rgba()), dpi,
+    raw = io.BytesIO()
+    fig.savefig(raw, dpi=dpi, format="rgba")
+    # the canvas's size at ``dpi``, as Agg sizes it (whole pixels, truncated)
+    w, h = (int(v) for v in np.asarray(fig.get_size_inches(), dtype=float) * dpi)
+    pixels = np.frombuffer(raw.getbuffer(), dtype=np.uint8)
+    if pixels.size != 4 * w * h:
+        raise RuntimeError(f"savefig wrote {pixels.size} bytes of RGBA, not {w} × {h} × 4")
+    data = encode_rgba(pixels.reshape(h, w, 4), dpi,
                        {"Software": f"Matplotlib version{matplotlib.__version__}, "
                                     "https://matplotlib.org/"}, PNG_COMPRESS_LEVEL)
     with atomic_path(path) as tmp:

@@ -72,13 +72,18 @@ def test_bad_input_one_line_naming_it(pixels, dpi, word):
     assert msg.startswith(word) and "\n" not in msg and "must be" in msg
 
 
-def test_a_saved_figure_has_the_pixels_and_text_of_matplotlibs_png(tmp_path):
+@pytest.mark.parametrize("figsize, pixels", [
+    ((4.0, 3.0), (440, 330)),        # 4 × 110 = 440, 3 × 110 = 330
+    ((4.3, 3.07), (473, 337)),       # 4.3 × 110 = 473; 3.07 × 110 = 337.7: 337, Agg truncates
+    ((10.5, 1.6), (1155, 176)),      # 10.5 × 110 = 1155; 1.6 × 110 = 176
+])
+def test_a_saved_figure_has_the_pixels_and_text_of_matplotlibs_png(tmp_path, figsize, pixels):
     # a figure with lines, text, a legend and a grid: prsm_fmu.figures.save against
-    # matplotlib's savefig(png) at the same dpi
+    # matplotlib's savefig(png) at the same dpi, at sizes whose pixels are whole or not
     pytest.importorskip("matplotlib")
     from prsm_fmu.figures import save, subplots
 
-    fig, ax = subplots(figsize=(4, 3))
+    fig, ax = subplots(figsize=figsize)
     t = np.linspace(0.0, 1.0, 200)
     ax.plot(t, np.sin(7 * t), label="sin")
     ax.step(t, np.cos(3 * t), where="post", ls="--", label="cos")
@@ -90,6 +95,6 @@ def test_a_saved_figure_has_the_pixels_and_text_of_matplotlibs_png(tmp_path):
     fig.savefig(ref, dpi=110, format="png")
     ours = save(fig, tmp_path / "ours.png")
     a, b = Image.open(ref), _decode(ours.read_bytes())
-    assert (a.mode, a.size) == (b.mode, b.size) == ("RGBA", (440, 330))   # 4 × 3 in at 110 dpi
+    assert (a.mode, a.size) == (b.mode, b.size) == ("RGBA", pixels)
     assert np.array_equal(np.asarray(a), np.asarray(b))
     assert a.info["Software"] == b.info["Software"] and a.info["dpi"] == b.info["dpi"]
