@@ -187,8 +187,20 @@ def test_two_live_fmu_blocks_of_one_fmu_step_alike(tmp_path, monkeypatch):
             blk.set_inputs([2.0, 100.0])         # screw torque [N·m], load force [N]
             for k in range(5):
                 blk.do_step(k * 1e-3, 1e-3)
-        assert a.get_outputs() == b.get_outputs()
+        first = a.get_outputs()
+        assert b.get_outputs() == first
     finally:
         a.terminate()
         b.terminate()
     assert Path(da).is_dir() and not Path(db).exists()
+    # a later instance in this process loads the kept copy again (the library may still be
+    # loaded from the first: pythonfmu's is never unloaded) and steps alike
+    c = FMUBlock(path, "c")
+    try:
+        assert c._unzipdir == da and not c._private_copy
+        c.set_inputs([2.0, 100.0])
+        for k in range(5):
+            c.do_step(k * 1e-3, 1e-3)
+        assert c.get_outputs() == first
+    finally:
+        c.terminate()
