@@ -131,7 +131,7 @@ def _plots(run, out: Path, workers=None) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
-    from .figure_process import early_drawer
+    from .figure_process import collector_paused, early_drawer
 
     drawer = None
     if not args.no_plots:
@@ -139,7 +139,8 @@ def _cmd_run(args, ap) -> int:
         # them) are imported here, so that they are imported once, not in each (~0.1 s of CPU
         # less; the drawer's matplotlib import follows numpy's either way): it imports
         # matplotlib while the scene is checked, the FMU loaded and the scene run
-        from . import output  # noqa: F401
+        with collector_paused():
+            from . import output  # noqa: F401
 
         drawer = early_drawer()
     try:

@@ -360,3 +360,25 @@ def test_forked_drawing_processes_busy_machine_or_not(monkeypatch):
         monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
         monkeypatch.setattr(os, "getloadavg", lambda lo=load: (lo, lo, lo))
         assert FigureWorkers().n == expected, (cores, load)
+
+
+def test_the_collector_is_paused_for_the_block_only():
+    import gc
+
+    from system_models.figure_process import collector_paused
+
+    assert gc.isenabled()
+    with collector_paused():
+        assert not gc.isenabled()
+    assert gc.isenabled()
+    with pytest.raises(KeyError):
+        with collector_paused():
+            raise KeyError("x")
+    assert gc.isenabled()                       # resumed after an error too
+    gc.disable()
+    try:
+        with collector_paused():
+            pass
+        assert not gc.isenabled()               # left paused: it was paused before
+    finally:
+        gc.enable()
