@@ -131,7 +131,7 @@ def _plots(run, out: Path, workers=None) -> list[Path]:
 
 
 def _cmd_run(args, ap) -> int:
-    from .figure_process import collector_paused, early_drawer
+    from .figure_process import early_drawer, long_lived_imports
 
     drawer = None
     if not args.no_plots:
@@ -139,7 +139,7 @@ def _cmd_run(args, ap) -> int:
         # them) are imported here, so that they are imported once, not in each (~0.1 s of CPU
         # less; the drawer's matplotlib import follows numpy's either way): it imports
         # matplotlib while the scene is checked, the FMU loaded and the scene run
-        with collector_paused():
+        with long_lived_imports():
             from . import output  # noqa: F401
 
         drawer = early_drawer()

@@ -23,15 +23,19 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-__all__ = ["available", "processes", "early_drawer", "ForkedDrawer", "collector_paused"]
+__all__ = ["available", "processes", "early_drawer", "ForkedDrawer", "long_lived_imports"]
 
 
 @contextmanager
-def collector_paused() -> Iterator[None]:
-    """Python's cyclic garbage collector paused for the block (and resumed after it if it ran
-    before): for large imports, which make many objects and almost no garbage, so that the
-    collector's passes over them are wasted (numpy and system_models.output: ~15 % of their
-    import's CPU; matplotlib's: ~10-20 %, five and six runs on the shared machine)."""
+def long_lived_imports() -> Iterator[None]:
+    """Imports whose objects live as long as the process: Python's cyclic garbage collector
+    paused for the block, and everything made so far then moved out of its reach
+    (``gc.freeze``) before it resumes (if it ran before).  Large imports make many objects and
+    almost no garbage: the collector's passes over them are wasted (numpy and
+    system_models.output: ~15 % of their import's CPU; matplotlib's: ~10-20 %, five and six runs
+    on the shared machine).  Frozen, they stay out of every later pass too, in this process and
+    in its forks (without the freeze, the paused imports' objects were still young at the
+    fork: each drawing process spent ~35 ms more in the collector, ``gc.callbacks``)."""
     import gc
 
     running = gc.isenabled()
@@ -39,6 +43,7 @@ def collector_paused() -> Iterator[None]:
     try:
         yield
     finally:
+        gc.freeze()
         if running:
             gc.enable()
 
@@ -121,7 +126,7 @@ def _main(conn, split: int) -> None:
     job, draw it (in ``split`` processes), answer ``("ok", paths)`` or ``("error", text)``; end
     on EOF (no figures wanted)."""
     _ignore_interrupts()
-    with collector_paused():
+    with long_lived_imports():
         import matplotlib.figure  # noqa: F401 - what this process is for: imported as the run goes
         from matplotlib.backends import backend_agg  # noqa: F401
 

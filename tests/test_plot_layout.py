@@ -362,23 +362,25 @@ def test_forked_drawing_processes_busy_machine_or_not(monkeypatch):
         assert FigureWorkers().n == expected, (cores, load)
 
 
-def test_the_collector_is_paused_for_the_block_only():
+def test_long_lived_imports_pause_the_collector_and_freeze_what_they_made(monkeypatch):
     import gc
 
-    from system_models.figure_process import collector_paused
+    from system_models.figure_process import long_lived_imports
 
+    frozen = []
+    monkeypatch.setattr(gc, "freeze", lambda: frozen.append(gc.isenabled()))
     assert gc.isenabled()
-    with collector_paused():
+    with long_lived_imports():
         assert not gc.isenabled()
-    assert gc.isenabled()
+    assert gc.isenabled() and frozen == [False]     # frozen before the collector resumed
     with pytest.raises(KeyError):
-        with collector_paused():
+        with long_lived_imports():
             raise KeyError("x")
-    assert gc.isenabled()                       # resumed after an error too
+    assert gc.isenabled() and len(frozen) == 2      # after an error too
     gc.disable()
     try:
-        with collector_paused():
+        with long_lived_imports():
             pass
-        assert not gc.isenabled()               # left paused: it was paused before
+        assert not gc.isenabled()                   # left paused: it was paused before
     finally:
         gc.enable()
