@@ -10,8 +10,14 @@ and renamed into place whole: a run that races another finds either no copy or a
 
 A second instance of the same FMU alive in the same process gets a private copy (removed when it
 ends), as before this cache: two instances never share one loaded library.  Where the cache
-cannot be used (a directory not the user's own, a read-only file system) every instance gets a
-private copy, also as before.
+cannot be used (a directory not the user's own, a read-only file system, no POSIX owners or
+locks) every instance gets a private copy, also as before.
+
+The copies do not pile up (each rebuild of an FMU is a new one, ~6 MB): an instance holds a
+shared ``flock`` on its copy's directory while it lives, and whenever a new copy is made, the
+copies no instance holds and none has used for :data:`PRUNE_AFTER` are removed (each under an
+exclusive lock taken without waiting, so never one in use), with the half-unpacked leftovers of
+runs killed that long ago.
 """
 
 from __future__ import annotations
@@ -23,12 +29,18 @@ import shutil
 import stat
 import tempfile
 import threading
+import time
 from pathlib import Path
 
-__all__ = ["cache_root", "unpack", "release"]
+__all__ = ["cache_root", "unpack", "release", "PRUNE_AFTER"]
 
-#: the cached copies alive in this process (a second instance of the same FMU gets its own)
-_in_use: set[str] = set()
+#: a copy no instance holds and none has used for this long [s] is removed when a new copy is
+#: made
+PRUNE_AFTER = 3600.0
+
+#: the cached copies alive in this process -> the descriptor holding their shared lock (a
+#: second instance of the same FMU gets a private copy)
+_in_use: dict[str, int] = {}
 _lock = threading.Lock()
 
 
@@ -39,8 +51,13 @@ def cache_root() -> Path:
 
 def _own_private_dir(path: Path) -> bool:
     """``path`` is a real directory (no symlink) of this user, closed to everyone else (never
-    on a system without POSIX owners, Windows: every instance gets a private copy there)."""
+    on a system without POSIX owners or ``flock``, Windows: every instance gets a private copy
+    there)."""
     if not hasattr(os, "getuid"):
+        return False
+    try:
+        import fcntl  # noqa: F401
+    except ImportError:
         return False
     try:
         st = os.lstat(path)
@@ -103,7 +120,59 @@ def _cached_copy(path: Path) -> str | None:
             shutil.rmtree(tmp, ignore_errors=True)
     except (OSError, zipfile.BadZipFile):
         return None
+    _prune(root, keep=target)
     return str(target)
+
+
+def _held(target: Path) -> int | None:
+    """An open descriptor of the copy ``target`` holding a shared lock on it (its use marked
+    now), or None if the copy is gone (removed while this waited for the lock)."""
+    import fcntl
+
+    try:
+        fd = os.open(target, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH)
+        # the directory locked is the one at ``target`` still, and whole
+        if os.fstat(fd).st_ino == os.stat(target).st_ino and _complete(target):
+            os.utime(target)
+            return fd
+    except OSError:
+        pass
+    os.close(fd)
+    return None
+
+
+def _prune(root: Path, keep: Path) -> None:
+    """Remove the copies under ``root`` (but ``keep``) that no instance holds and none has used
+    for :data:`PRUNE_AFTER`, and half-unpacked leftovers as old."""
+    import fcntl
+
+    now = time.time()
+    for d in root.iterdir():
+        try:
+            if d == keep or now - d.lstat().st_mtime < PRUNE_AFTER:
+                continue
+        except OSError:
+            continue
+        if d.name.startswith("."):                   # a killed run's half-unpacked copy
+            shutil.rmtree(d, ignore_errors=True)
+            continue
+        try:
+            fd = os.open(d, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:                              # an instance holds it
+            os.close(fd)
+            continue
+        try:
+            shutil.rmtree(d, ignore_errors=True)
+        finally:
+            os.close(fd)
 
 
 def unpack(path: str | os.PathLike) -> tuple[str, bool]:
@@ -111,12 +180,18 @@ def unpack(path: str | os.PathLike) -> tuple[str, bool]:
     instance alone, to remove with :func:`release`; else the shared cached copy (module
     docstring), which :func:`release` only marks free."""
     p = Path(path)
-    cached = _cached_copy(p)
-    with _lock:
-        shared = cached is not None and cached not in _in_use
-        if shared:
-            _in_use.add(cached)
-    return (cached, False) if shared else (_private_copy(p), True)
+    for _ in range(2):                   # twice: a copy removed as this took it is made again
+        cached = _cached_copy(p)
+        if cached is None:
+            break
+        with _lock:
+            if cached in _in_use:        # a live instance of this process has it
+                break
+            fd = _held(Path(cached))
+            if fd is not None:
+                _in_use[cached] = fd
+                return cached, False
+    return _private_copy(p), True
 
 
 def release(unzipdir: str, private: bool) -> None:
@@ -126,4 +201,6 @@ def release(unzipdir: str, private: bool) -> None:
         shutil.rmtree(unzipdir, ignore_errors=True)
     else:
         with _lock:
-            _in_use.discard(unzipdir)
+            fd = _in_use.pop(unzipdir, None)
+        if fd is not None:
+            os.close(fd)                 # the shared lock goes with it

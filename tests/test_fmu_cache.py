@@ -4,8 +4,10 @@ runs race, a private copy for a second live instance, unused where other users c
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
+import time
 import zipfile
 from pathlib import Path
 
@@ -107,6 +109,50 @@ def test_a_symlinked_cache_directory_is_not_used(tmp_path, monkeypatch):
     fmu_cache.release(d, private)
 
 
+def test_old_copies_no_instance_holds_are_removed_when_a_new_one_is_made(root, tmp_path):
+    # copies of A (held by a live instance), B (unused) and C (used recently), a killed
+    # run's half-unpacked leftover (old) and one being unpacked (young); then a new FMU D
+    old = fmu_cache.PRUNE_AFTER + 60.0            # [s] older than the bound
+    dirs = {}
+    for name in "ABC":
+        d, private = fmu_cache.unpack(_fmu(tmp_path / f"{name}.fmu", name))
+        assert not private
+        dirs[name] = Path(d)
+    for name in "BC":
+        fmu_cache.release(str(dirs[name]), False)
+    leftover, young = root / ".A-killed", root / ".A-unpacking"
+    leftover.mkdir()
+    young.mkdir()
+    t = time.time()
+    for d in (dirs["A"], dirs["B"], leftover):
+        os.utime(d, (t - old, t - old))
+    d, private = fmu_cache.unpack(_fmu(tmp_path / "D.fmu", "D"))
+    assert not private
+    left = {p.name for p in root.iterdir()}
+    assert left == {dirs["A"].name, dirs["C"].name, Path(d).name, young.name}, left
+    fmu_cache.release(str(dirs["A"]), False)
+    fmu_cache.release(d, False)
+
+
+def test_a_copy_removed_as_it_is_taken_is_unpacked_again(root, tmp_path, monkeypatch):
+    fmu = _fmu(tmp_path / "A.fmu", "one")
+    real = fmu_cache._cached_copy
+    calls = []
+
+    def removed_meanwhile(path):
+        d = real(path)
+        calls.append(d)
+        if len(calls) == 1:                       # a prune in another run, just now
+            shutil.rmtree(d)
+        return d
+
+    monkeypatch.setattr(fmu_cache, "_cached_copy", removed_meanwhile)
+    d, private = fmu_cache.unpack(fmu)
+    assert len(calls) == 2 and not private
+    assert (Path(d) / "resources" / "data.txt").read_text() == "one"
+    fmu_cache.release(d, private)
+
+
 _RACER = """
 import sys, time
 from pathlib import Path
@@ -123,8 +169,6 @@ print(d, private, (Path(d) / "resources" / "data.txt").read_text())
 def test_runs_that_race_all_get_one_whole_copy(root, tmp_path):
     # 6 processes released at the same instant on an empty cache (an FMU of 200 members so
     # that the unpacking takes a while): each gets the one copy, whole; no temporary left
-    import time
-
     fmu = tmp_path / "A.fmu"
     with zipfile.ZipFile(fmu, "w") as z:
         z.writestr("modelDescription.xml", "<fmiModelDescription/>")
