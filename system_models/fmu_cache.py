@@ -178,7 +178,7 @@ def _prune(root: Path, keep: Path) -> None:
 def unpack(path: str | os.PathLike) -> tuple[str, bool]:
     """(directory, private): the FMU at ``path`` unpacked.  ``private``: a copy of this
     instance alone, to remove with :func:`release`; else the shared cached copy (module
-    docstring), which :func:`release` only marks free."""
+    docstring), held (its shared lock) until :func:`release`."""
     p = Path(path)
     for _ in range(2):                   # twice: a copy removed as this took it is made again
         cached = _cached_copy(p)
@@ -195,8 +195,9 @@ def unpack(path: str | os.PathLike) -> tuple[str, bool]:
 
 
 def release(unzipdir: str, private: bool) -> None:
-    """The instance that used ``unzipdir`` has ended: a private copy is removed, the cached one
-    is free for the next instance of this process."""
+    """The instance that used ``unzipdir`` has ended: a private copy is removed; the cached one
+    is let go (its lock released: free for the next instance, and for a prune once unused
+    long enough)."""
     if private:
         shutil.rmtree(unzipdir, ignore_errors=True)
     else:
