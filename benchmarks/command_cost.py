@@ -22,13 +22,13 @@ hits both alike.  Printed, each beside its goal:
    scipy was imported by then (``--startup-only``: this alone).
 
 ``--write-only``: 3. alone (a minute, not several; ``--repeat 7`` steadies it on a loaded
-machine).
+machine).  ``--readme-only``: 2. alone (``--repeat 7``: two minutes on an idle machine).
 
 Not measured here (say so rather than guess): the sweep's scaling (``benchmarks/sweep_scaling.py``)
 and ``prsm-fmu regress`` (``--regress`` adds it: wall time, old / new).
 
 Run: ``python benchmarks/command_cost.py [--old 707572e] [--repeat 3] [--regress]
-[--startup-only | --write-only]``
+[--startup-only | --write-only | --readme-only]``
 (several minutes: the README command runs 2 × repeat times).
 """
 
@@ -196,6 +196,23 @@ def _write_cost(py: str, trees: dict[str, Path], work: dict[str, Path], tmp: Pat
     return short, long_
 
 
+def _readme(py: str, trees: dict[str, Path], work: dict[str, Path], repeat: int) -> None:
+    """2. the README's first command, wall time, old / new (each run's beside the medians)."""
+    def readme(k: str) -> float:
+        out = work[k] / "out"
+        shutil.rmtree(out, ignore_errors=True)
+        return _child([py, "-m", "system_models", "run", "--scene", "position_step",
+                       "--out", str(out)], trees[k], cwd=work[k])[1]
+
+    r = _interleaved(repeat, {k: (lambda k=k: readme(k)) for k in trees})
+    files = {k: sorted(p.name for p in (work[k] / "out").iterdir()) for k in trees}
+    o, w = _med(r["old"]), _med(r["new"])
+    runs = "; ".join(f"{k} " + " ".join(f"{x:.2f}" for x in r[k]) for k in trees)
+    print(f"2. prsm-ema run --scene position_step, wall: old {o:.2f} s, new {w:.2f} s, "
+          f"{o / w:.2f}x faster   goal >= 3x [>= 2x]; same files written: "
+          f"{files['old'] == files['new']} ({len(files['new'])} files); runs [s]: {runs}")
+
+
 def _build_fmus(py: str, trees: dict[str, Path], tmp: Path,
                 only: tuple[str, ...] | None = None) -> dict[str, Path]:
     """Each tree's ``dist/PRSM2.fmu`` (the README command's), built before any clock (``only``:
@@ -217,6 +234,8 @@ def main() -> None:
     ap.add_argument("--regress", action="store_true", help="also time prsm-fmu regress")
     ap.add_argument("--startup-only", action="store_true",
                     help="only 5., the FMU's start-up (a minute, not several)")
+    ap.add_argument("--readme-only", action="store_true",
+                    help="only 2., the README's first command")
     ap.add_argument("--write-only", action="store_true",
                     help="only 3., writing the results CSV (a minute, not several)")
     args = ap.parse_args()
@@ -228,6 +247,9 @@ def main() -> None:
               f"median of {args.repeat} interleaved runs each, this machine, this run\n")
         if args.startup_only:
             _startup(py, trees, _build_fmus(py, trees, tmp), args.repeat + 2)
+            return
+        if args.readme_only:
+            _readme(py, trees, _build_fmus(py, trees, tmp), args.repeat)
             return
         if args.write_only:
             _write_cost(py, trees, _build_fmus(py, trees, tmp, only=("new",)), tmp,
@@ -245,20 +267,7 @@ def main() -> None:
 
         work = _build_fmus(py, trees, tmp)
 
-        # 2. the README's first command
-        def readme(k: str) -> float:
-            out = work[k] / "out"
-            shutil.rmtree(out, ignore_errors=True)
-            wall = _child([py, "-m", "system_models", "run", "--scene", "position_step",
-                           "--out", str(out)], trees[k], cwd=work[k])[1]
-            return wall
-
-        r = _interleaved(args.repeat, {k: (lambda k=k: readme(k)) for k in trees})
-        files = {k: sorted(p.name for p in (work[k] / "out").iterdir()) for k in trees}
-        o, w = _med(r["old"]), _med(r["new"])
-        print(f"2. prsm-ema run --scene position_step, wall: old {o:.2f} s, new {w:.2f} s, "
-              f"{o / w:.2f}x faster   goal >= 3x [>= 2x]; same files written: "
-              f"{files['old'] == files['new']} ({len(files['new'])} files)")
+        _readme(py, trees, work, args.repeat)
 
         # 3. writing the 1.5 s result; 4. the figures of the 0.25 s run
         short, _ = _write_cost(py, trees, work, tmp, args.repeat)

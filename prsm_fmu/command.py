@@ -11,15 +11,16 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
 from contextlib import contextmanager
-from typing import Callable, Iterator
+from typing import Callable, Iterator, NoReturn
 
 from .extras import missing_extra_message
 
-__all__ = ["run_command", "child_failure", "deferred_interrupt", "INTERRUPTED"]
+__all__ = ["run_command", "child_failure", "deferred_interrupt", "end_process", "INTERRUPTED"]
 
 #: exit status after Ctrl-C: 128 + SIGINT (2)
 INTERRUPTED = 130
@@ -47,6 +48,24 @@ def run_command(prog: str, body: Callable[[], int]) -> int:
             raise
         print(f"{prog}: error: {message}", file=sys.stderr)
         return 1
+
+
+def end_process(status: int) -> NoReturn:
+    """End this process now with exit status ``status``, its stdout and stderr flushed: for a
+    console script whose work is done (every file it wrote closed, its child processes ended).
+
+    The interpreter's own teardown is skipped: freeing every module and object, and the
+    libraries' exit-time destructors, took ~0.05-0.1 s of the user's wait after ``prsm-ema
+    run`` had written everything (and pythonfmu's destructors are those that
+    :mod:`prsm_fmu.fmu_exit` guards; skipped, they cannot misbehave).  Python's ``atexit``
+    handlers are skipped too: none that such a command registers has work left by then.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):   # a closed pipe, a closed or no stream
+            pass
+    os._exit(status)
 
 
 def child_failure(what: str, returncode: int, stderr: str, stdout: str = "") -> str:

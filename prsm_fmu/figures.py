@@ -65,10 +65,30 @@ PNG_COMPRESS_LEVEL = 1
 
 def save(fig, path: str | Path, dpi: int = 110) -> Path:
     """Write the figure as PNG (one draw), whole or not at all (:func:`prsm_fmu.atomic.atomic_path`:
-    an interrupted run leaves no half-written file)."""
-    from .atomic import atomic_path
+    an interrupted run leaves no half-written file).
 
+    Drawn by ``savefig`` (its settings: dpi, face colour, ...) to raw RGBA pixels and encoded by
+    :func:`prsm_fmu.png.encode_rgba` (rows unfiltered: ~2.5x less CPU than Pillow's encoder,
+    the same pixels) with matplotlib's ``Software`` entry, as ``savefig`` writes it."""
+    import io
+
+    import matplotlib
+    import numpy as np
+
+    from .atomic import atomic_path
+    from .png import encode_rgba
+
+    raw = io.BytesIO()
+    fig.savefig(raw, dpi=dpi, format="rgba")
+    # the canvas's size at ``dpi``, as Agg sizes it (whole pixels, truncated)
+    w, h = (int(v) for v in np.asarray(fig.get_size_inches(), dtype=float) * dpi)
+    pixels = np.frombuffer(raw.getbuffer(), dtype=np.uint8)
+    if pixels.size != 4 * w * h:
+        raise RuntimeError(f"savefig wrote {pixels.size} bytes of RGBA, not {w} × {h} × 4")
+    data = encode_rgba(pixels.reshape(h, w, 4), dpi,
+                       {"Software": f"Matplotlib version{matplotlib.__version__}, "
+                                    "https://matplotlib.org/"}, PNG_COMPRESS_LEVEL)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png",
-                    pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
+        with open(tmp, "wb") as f:
+            f.write(data)
     return Path(path)

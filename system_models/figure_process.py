@@ -3,7 +3,9 @@ the CSV.
 
 Started (:func:`early_drawer`) first thing in ``prsm-ema run``, the process is a ``fork`` of
 the command: it copies the interpreter (a few ms, against ~0.8 s CPU for a spawned one), imports
-matplotlib while the parent checks and runs the scene and then waits for the run's result.  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
+matplotlib while the parent checks and runs the scene, then makes the figures' frames (axes,
+labels, ticks: :func:`system_models.output.frame`, none needs the run) until the run's result
+arrives (:func:`_ahead`).  Given it (:meth:`ForkedDrawer.draw`), it forks once more after its import
 (the second process inherits matplotlib, imported once) and the two draw half the figures each,
 while the parent writes the CSV.  The CPU is the work the command would do in its own process
 plus the forks, so the drawer is used on a busy machine too.
@@ -17,10 +19,33 @@ from __future__ import annotations
 
 import os
 import sys
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
-__all__ = ["available", "processes", "early_drawer", "ForkedDrawer"]
+__all__ = ["available", "processes", "early_drawer", "ForkedDrawer", "long_lived_imports"]
+
+
+@contextmanager
+def long_lived_imports() -> Iterator[None]:
+    """Imports whose objects live as long as the process: Python's cyclic garbage collector
+    paused for the block, and everything made so far then moved out of its reach
+    (``gc.freeze``) before it resumes (if it ran before).  Large imports make many objects and
+    almost no garbage: the collector's passes over them are wasted (numpy and
+    system_models.output: ~15 % of their import's CPU; matplotlib's: ~10-20 %, five and six runs
+    on the shared machine).  Frozen, they stay out of every later pass too, in this process and
+    in its forks (without the freeze, the paused imports' objects were still young at the
+    fork: each drawing process spent ~35 ms more in the collector, ``gc.callbacks``)."""
+    import gc
+
+    running = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.freeze()
+        if running:
+            gc.enable()
 
 
 def available() -> bool:
@@ -42,8 +67,10 @@ def processes() -> int:
 
 def early_drawer() -> "ForkedDrawer | None":
     """A started :class:`ForkedDrawer` of :func:`processes` processes, or None where it cannot
-    start.  This module imports no numpy: called first thing, the fork copies a small process
-    and its matplotlib import overlaps the command's own imports too."""
+    start.  This module imports no numpy; ``prsm-ema run`` calls this once numpy and
+    :mod:`system_models.output` are imported (the drawer inherits them instead of importing
+    them again), before anything else, so that its matplotlib import overlaps the command's
+    own imports, check and run."""
     return ForkedDrawer(processes()).start() if available() else None
 
 
@@ -57,31 +84,54 @@ def _ignore_interrupts() -> None:
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
-def _draw(names: list[str], job: tuple) -> list[Path]:
+def _draw(names: list[str], job: tuple, frames: dict[str, tuple]) -> list[Path]:
     from .output import _save_figures
 
     res, out_dir, scene, reference, mode, current_limit, kw = job
-    return _save_figures(res, out_dir, scene, reference, mode, current_limit, kw, only=names)
+    return _save_figures(res, out_dir, scene, reference, mode, current_limit, kw, only=names,
+                         frames={n: frames[n] for n in names if n in frames})
 
 
-def _half(conn, names: list[str], job: tuple) -> None:
+def _ahead(conn) -> dict[str, tuple]:
+    """What the figures need but the run does not, done until the job arrives on ``conn``:
+    the figures' frames (:func:`system_models.output.frame`) one after another, then one small
+    figure drawn (:func:`system_models.output._warm`: the fonts loaded, ~5-9 ms of each drawing
+    process's first draw, for ~35 ms here).  Whatever is left when the job arrives, the
+    processes that draw do themselves, in parallel; so a drawer that is ready only after the
+    run (its matplotlib import is the longer path on a busy machine) starts drawing at once."""
+    from .output import FRAMED, _warm, frame
+
+    made: dict[str, tuple] = {}
+    for name in FRAMED:
+        if conn.poll():
+            return made
+        made[name] = frame(name)
+    if not conn.poll():
+        _warm()
+    return made
+
+
+def _half(conn, names: list[str], job: tuple, frames: dict[str, tuple]) -> None:
     """The second process: its figures' paths, or the error, on ``conn``."""
     _ignore_interrupts()
     try:
-        conn.send(("ok", _draw(names, job)))
+        conn.send(("ok", _draw(names, job, frames)))
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which draws instead
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
     conn.close()
 
 
 def _main(conn, split: int) -> None:
-    """The drawing process: import matplotlib, wait for a job, draw it (in ``split`` processes),
-    answer ``("ok", paths)`` or ``("error", text)``; end on EOF (no figures wanted)."""
+    """The drawing process: import matplotlib, make the figures' frames while it waits for a
+    job, draw it (in ``split`` processes), answer ``("ok", paths)`` or ``("error", text)``; end
+    on EOF (no figures wanted)."""
     _ignore_interrupts()
-    from .output import _warm
+    with long_lived_imports():
+        import matplotlib.figure  # noqa: F401 - what this process is for: imported as the run goes
+        from matplotlib.backends import backend_agg  # noqa: F401
 
-    _warm()
     try:
+        frames = _ahead(conn)
         job = conn.recv()
     except EOFError:
         return
@@ -101,12 +151,12 @@ def _main(conn, split: int) -> None:
             if pid == 0:
                 try:
                     here.close()
-                    _half(there, names, job)
+                    _half(there, names, job, frames)
                 finally:
                     os._exit(0)
             there.close()
             others.append((pid, here))
-        done = _draw(parts[0], job)
+        done = _draw(parts[0], job, frames)
         for pid, here in others:
             status, value = here.recv()
             os.waitpid(pid, 0)

@@ -17,30 +17,25 @@ How it reacts to the FMU (docs/fmu.md, "Errors"):
 :func:`ensure_fmu` builds ``dist/PRSM<n>.fmu`` with ``python -m fmu_build`` in a child process
 when it is missing or older than the sources (a process that loads an FMU must not be the one
 that built it: pythonfmu imports the generated module while building).
-
-:func:`unpacked`: the FMUBlocks of one FMU made inside it (in this process or a fork of it)
-share one extraction and one parsed modelDescription instead of one each (~0.06 s per block
-for the pythonfmu FMU's ~140 files): ``prsm-fmu regress`` runs seven scenes on one FMU.
 """
 
 from __future__ import annotations
 
 import ctypes
 import os
-import shutil
 import subprocess
 import sys
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Sequence
 
 from prsm_fmu.fmi_enum import enumeration_value
 from prsm_fmu.fmu_log import STATUS as _STATUS
 from prsm_fmu.fmu_log import FmuLog
 
 from .blocks import Block, Port, StepRefused
+from .fmu_cache import release, unpack
 
-__all__ = ["FMUBlock", "FMUError", "ensure_fmu", "fmu_is_stale", "unpacked"]
+__all__ = ["FMUBlock", "FMUError", "ensure_fmu", "fmu_is_stale"]
 
 _double = ctypes.c_double
 
@@ -127,57 +122,6 @@ def ensure_fmu(path: str | os.PathLike = "dist/PRSM2.fmu", rebuild_stale: bool =
     return p
 
 
-def _fmpy() -> tuple[Any, Any, Any]:
-    """fmpy's ``extract``, ``read_model_description`` and ``FMU2Slave``; FMUError without fmpy."""
-    try:
-        from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave
-    except ImportError as exc:
-        raise FMUError(f"fmpy is needed to run an FMU ({exc}): pip install -e \".[fmu]\", "
-                       "or run the PRSM as the plain Python model (--prsm python)") from None
-    return extract, read_model_description, FMU2Slave
-
-
-def _check_file(path: Path) -> None:
-    """FMUError if there is no FMU file at ``path``."""
-    if not path.is_file():
-        raise FMUError(f"{path}: no such FMU (build it with python -m fmu_build)")
-
-
-#: FMUs unpacked for every block made of them (:func:`unpacked`): the FMU's resolved path ->
-#: (its extraction directory, its model description)
-_UNPACKED: dict[Path, tuple[str, Any]] = {}
-
-
-@contextmanager
-def unpacked(path: str | os.PathLike) -> Iterator[str]:
-    """Unpack the FMU at ``path`` once for every :class:`FMUBlock` of it made inside the
-    ``with`` (here, or in a process forked inside it); yields the extraction directory, removed
-    at the end.  Each block still instantiates the FMU itself: only the unzipping and the
-    parsing of ``modelDescription.xml`` are shared.  Inside another ``unpacked`` of the same
-    FMU: that one's extraction.
-
-    Raises
-    ------
-    FMUError
-        If ``path`` is not a file or fmpy is missing.
-    """
-    key = Path(path).resolve()
-    if key in _UNPACKED:
-        yield _UNPACKED[key][0]
-        return
-    _check_file(key)
-    extract, read_model_description, _ = _fmpy()
-    md = read_model_description(str(key))
-    unzipdir = extract(str(key))
-    _UNPACKED[key] = (unzipdir, md)
-    try:
-        yield unzipdir
-    finally:
-        del _UNPACKED[key]
-        shutil.rmtree(unzipdir, ignore_errors=True)
-
-
 class FMUBlock(Block):
     """One instance of an FMI 2.0 co-simulation FMU (module docstring).
 
@@ -202,15 +146,18 @@ class FMUBlock(Block):
     def __init__(self, path: str | os.PathLike, name: str = "fmu",
                  inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None,
                  parameters: dict[str, Any] | None = None, start_time: float = 0.0) -> None:
-        extract, read_model_description, FMU2Slave = _fmpy()
+        try:
+            from fmpy import read_model_description
+            from fmpy.fmi2 import FMU2Slave
+        except ImportError as exc:
+            raise FMUError(f"fmpy is needed to run an FMU ({exc}): pip install -e \".[fmu]\", "
+                           "or run the PRSM as the plain Python model (--prsm python)") from None
 
         self.name = name
         self.path = Path(path)
-        _check_file(self.path)
-        #: the extraction and model description of an enclosing :func:`unpacked` (kept), or
-        #: None: this block's own (removed by :meth:`terminate`)
-        shared = _UNPACKED.get(self.path.resolve())
-        md = shared[1] if shared else read_model_description(str(self.path))
+        if not self.path.is_file():
+            raise FMUError(f"{self.path}: no such FMU (build it with python -m fmu_build)")
+        md = read_model_description(str(self.path))
         if md.coSimulation is None:
             raise FMUError(f"{self.path} is not a co-simulation FMU")
         self.model_description = md
@@ -233,15 +180,16 @@ class FMUBlock(Block):
         self._buf_in = (fmi2Real * len(self._vr_in))()
         self._arr_in = (fmi2ValueReference * len(self._vr_in))(*self._vr_in)
         self._read(range(len(out_names)))
-        self._own_dir = shared is None
-        self._unzipdir = extract(str(self.path)) if self._own_dir else shared[0]
+        # unpacked once per FMU file and kept (system_models.fmu_cache), not at every run
+        self._unzipdir, self._private_copy = unpack(self.path)
         self._alive = False
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         try:
             self.fmu.instantiate(callbacks=self._log.callbacks, loggingOn=True)
         except Exception as exc:
-            self._remove_dir()
+            release(self._unzipdir, self._private_copy)
+            self._unzipdir = None
             raise FMUError(f"{self.path}: instantiation failed: {exc}") from exc
         self._alive = True
         # the step loop's four functions without fmpy's declared argument types, every
@@ -426,9 +374,6 @@ class FMUBlock(Block):
                 self.fmu.freeInstance()
             except Exception:  # noqa: BLE001
                 pass
-        self._remove_dir()
-
-    def _remove_dir(self) -> None:
-        """Remove this block's own extraction (not a shared one: :func:`unpacked`)."""
-        if self._own_dir:
-            shutil.rmtree(self._unzipdir, ignore_errors=True)
+        if self._unzipdir is not None:
+            release(self._unzipdir, self._private_copy)
+            self._unzipdir = None

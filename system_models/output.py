@@ -33,7 +33,6 @@ from typing import Any, Iterable
 import numpy as np
 
 from prsm_fmu.atomic import atomic_path
-from prsm_fmu.csv_format import format_columns
 from prsm_fmu.figures import legend_outside, subplots
 from prsm_fmu.units import (AMPERE, DIMENSIONLESS, JOULE, KILONEWTON, METRE, MICROMETRE,
                             MILLIMETRE, MILLIMETRE_PER_SECOND, MILLISECOND, NEWTON, NEWTON_METRE,
@@ -60,6 +59,10 @@ def write_csv(res: Result, path: str | Path, first: Iterable[str] = ()) -> Path:
     the same bytes; the columns formatted as they are, not stacked first; its cost against the
     old writer: ``benchmarks/command_cost.py``, item 3, compiled against numpy:
     ``benchmarks/csv_write_cost.py``)."""
+    # imported here: its tables cost ~50 ms, which the figures' processes (that import this
+    # module) need not pay
+    from prsm_fmu.csv_format import format_columns
+
     cols = ordered_columns(res, first)
     path = Path(path)
     header = io.StringIO()
@@ -147,12 +150,22 @@ def _limit_lines(ax, value, label_text, unit, symmetric=True):
         ax.axhline(-value, color="k", lw=0.9, ls=":")
 
 
-def position_figure(res: Result, scene: str, reference=None, mode: str = "position",
-                    sub: str = ""):
-    """Rod position against the reference and the tracking error (position control), or the
-    rod's motion; the error in µm, mm or m so that its ticks read well."""
+def _position_frame():
     fig, (a1, a2) = subplots(2, 1, figsize=(8, 6), sharex=True,
                              gridspec_kw={"height_ratios": [2, 1]})
+    a1.set_ylabel(label("rod position", MILLIMETRE))
+    a1.grid(True)
+    a2.grid(True)
+    a2.set_xlabel(label("time", MILLISECOND))
+    return fig, (a1, a2)
+
+
+def position_figure(res: Result, scene: str, reference=None, mode: str = "position",
+                    sub: str = "", frame=None):
+    """Rod position against the reference and the tracking error (position control), or the
+    rod's motion; the error in µm, mm or m so that its ticks read well.  ``frame``: the
+    figure's :func:`frame` (made while the run goes), else one is made here."""
+    fig, (a1, a2) = frame or _position_frame()
     t = res.time
     tm = 1e3 * t
     x = res["prsm.rod_position"]
@@ -169,91 +182,99 @@ def position_figure(res: Result, scene: str, reference=None, mode: str = "positi
         a2.plot(tm, 1e3 * res["prsm.rod_velocity"], color="C2")
         a2.set_ylabel(label("rod velocity", MILLIMETRE_PER_SECOND))
         title = f"rod motion ({mode} control: no position reference)"
-    a1.set_ylabel(label("rod position", MILLIMETRE))
     a1.legend()
-    a1.grid(True)
-    a2.grid(True)
-    a2.set_xlabel(label("time", MILLISECOND))
     a1.set_title(f"{scene}: {title}{sub}", fontsize=10)
     return fig
 
 
-def speed_figure(res: Result, scene: str, mode: str = "position", sub: str = ""):
-    """Screw speed and the speed reference."""
+def _speed_frame():
     fig, ax = subplots(figsize=(8, 4))
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("speed", RADIAN_PER_SECOND))
+    ax.grid(True)
+    return fig, ax
+
+
+def speed_figure(res: Result, scene: str, mode: str = "position", sub: str = "", frame=None):
+    """Screw speed and the speed reference (``frame``: as :func:`position_figure`'s)."""
+    fig, ax = frame or _speed_frame()
     tm = 1e3 * res.time
     ax.plot(tm, res["prsm.screw_speed"], label="screw (motor) speed")
     ax.step(tm, res["controller.speed_ref"], where="post", ls="--",
             label="speed reference" + (" (position loop output)" if mode == "position" else ""))
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("speed", RADIAN_PER_SECOND))
-    ax.grid(True)
     ax.legend()
     ax.set_title(f"{scene}: screw (motor) speed{sub}", fontsize=10)
     return fig
 
 
+def _stacked_frame(*ylabels: tuple[str, str]):
+    """Panels stacked on one time axis (8 × 8.5 in), y labelled ``(quantity, unit)``, gridded."""
+    fig, axes = subplots(len(ylabels), 1, figsize=(8, 8.5), sharex=True)
+    for ax, (quantity, unit) in zip(axes, ylabels):
+        ax.set_ylabel(label(quantity, unit))
+        ax.grid(True)
+    axes[-1].set_xlabel(label("time", MILLISECOND))
+    return fig, tuple(axes)
+
+
+def _motor_frame():
+    return _stacked_frame(("current", AMPERE), ("voltage", VOLT), ("torque", NEWTON_METRE))
+
+
 def motor_figure(res: Result, scene: str, current_limit: float | None = None,
-                 voltage_limit: float | None = None, sub: str = ""):
-    """Motor currents, voltage against the inverter's limit, torque."""
-    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
+                 voltage_limit: float | None = None, sub: str = "", frame=None):
+    """Motor currents, voltage against the inverter's limit, torque (``frame``: as
+    :func:`position_figure`'s)."""
+    fig, (a1, a2, a3) = frame or _motor_frame()
     tm = 1e3 * res.time
     a1.plot(tm, res["motor.i_q"], label="i_q")
     a1.plot(tm, res["motor.i_d"], label="i_d")
     a1.step(tm, res["controller.i_q_ref"], where="post", ls="--", label="i_q reference")
     if current_limit:
         _limit_lines(a1, current_limit, "current limit", "A")
-    a1.set_ylabel(label("current", AMPERE))
     a1.legend(fontsize=8, loc="best")
-    a1.grid(True)
     vmag = np.hypot(res["motor.v_d"], res["motor.v_q"])
     a2.plot(tm, vmag, color="C4", label="phase voltage amplitude √(v_d² + v_q²)")
     if voltage_limit:
         _limit_lines(a2, voltage_limit, "inverter limit V_dc/√3 =", "V", symmetric=False)
         a2.set_ylim(0.0, 1.1 * max(voltage_limit, float(np.max(vmag))))
-    a2.set_ylabel(label("voltage", VOLT))
     a2.legend(fontsize=8, loc="best")
-    a2.grid(True)
     a3.plot(tm, res["motor.torque"], label="electromagnetic torque")
     a3.plot(tm, res["prsm.stage[1].driven_torque"], "--", label="torque held at the screw (PRSM input)")
-    a3.set_ylabel(label("torque", NEWTON_METRE))
-    a3.set_xlabel(label("time", MILLISECOND))
     a3.legend(fontsize=8)
-    a3.grid(True)
     a1.set_title(f"{scene}: motor current, voltage and torque{sub}", fontsize=10)
     return fig
 
 
-def forces_figure(res: Result, scene: str, n_rollers: list[int] | None = None, sub: str = ""):
+def _forces_frame():
+    return _stacked_frame(("per roller", KILONEWTON), ("total", KILONEWTON),
+                          ("friction", NEWTON))
+
+
+def forces_figure(res: Result, scene: str, n_rollers: list[int] | None = None, sub: str = "",
+                  frame=None):
     """Axial contact force per roller of each stage, the total load against N_R × the per-roller
-    force, spline friction."""
+    force, spline friction (``frame``: as :func:`position_figure`'s)."""
     n = _stages(res)
     nr = list(n_rollers) if n_rollers else [None] * n
     tm = 1e3 * res.time
-    fig, (a1, a2, a3) = subplots(3, 1, figsize=(8, 8.5), sharex=True)
+    fig, (a1, a2, a3) = frame or _forces_frame()
     for k in range(1, n + 1):
         what = f" ({nr[k - 1]} rollers)" if nr[k - 1] else ""
         a1.plot(tm, 1e-3 * res[f"prsm.stage[{k}].contact_force"],
                 label=f"stage {k}: axial contact force per roller{what}")
-    a1.set_ylabel(label("per roller", KILONEWTON))
     a1.legend(fontsize=8)
-    a1.grid(True)
     a2.plot(tm, 1e-3 * res["load.force"], "k", lw=1.2, label="load force on the rod (total)")
     for k in range(1, n + 1):
         if nr[k - 1]:
             a2.plot(tm, 1e-3 * nr[k - 1] * res[f"prsm.stage[{k}].contact_force"], "--",
                     label=f"stage {k}: {nr[k - 1]} × per-roller force (all its threads)")
-    a2.set_ylabel(label("total", KILONEWTON))
     a2.legend(fontsize=8)
-    a2.grid(True)
     for k in range(2, n + 1):
         a3.plot(tm, res[f"prsm.stage[{k}].spline_friction"], color=f"C{k - 1}",
                 label=f"stage {k}: spline friction (screw {k - 1} → {k})")
-    a3.set_ylabel(label("friction", NEWTON))
-    a3.set_xlabel(label("time", MILLISECOND))
     if n > 1:
         a3.legend(fontsize=8)
-    a3.grid(True)
     a1.set_title(f"{scene}: thread forces per roller, and the total load{sub}", fontsize=10)
     return fig
 
@@ -282,10 +303,19 @@ def carriers_figure(res: Result, scene: str, carrier_equilibrium: dict[int, floa
     return fig
 
 
-def efficiency_figure(res: Result, scene: str, sub: str = ""):
-    """PRSM and actuator efficiency; a gap wherever no power flows (:func:`power_flows`) or the
-    efficiency is undefined (NaN), not a drop to 0."""
+def _efficiency_frame():
     fig, ax = subplots(figsize=(8, 4))
+    ax.set_ylim(-0.05, 1.2)
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("efficiency", DIMENSIONLESS))
+    ax.grid(True)
+    return fig, ax
+
+
+def efficiency_figure(res: Result, scene: str, sub: str = "", frame=None):
+    """PRSM and actuator efficiency; a gap wherever no power flows (:func:`power_flows`) or the
+    efficiency is undefined (NaN), not a drop to 0 (``frame``: as :func:`position_figure`'s)."""
+    fig, ax = frame or _efficiency_frame()
     tm = 1e3 * res.time
     pel = res["motor.electrical_power"]
     pout = res["prsm.output_power"]
@@ -295,19 +325,24 @@ def efficiency_figure(res: Result, scene: str, sub: str = ""):
     with np.errstate(divide="ignore", invalid="ignore"):
         eta = np.where((pel > 1.0) & (pout >= 0.0), pout / pel, np.nan)
     ax.plot(tm, eta, label="actuator: load power / electrical power")
-    ax.set_ylim(-0.05, 1.2)
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("efficiency", DIMENSIONLESS))
-    ax.grid(True)
     ax.legend(title="gaps: standstill (no power flows)", title_fontsize=8, fontsize=8)
     ax.set_title(f"{scene}: efficiency (instantaneous; > 1 while stored energy is released){sub}",
                  fontsize=10)
     return fig
 
 
-def power_figure(res: Result, scene: str, sub: str = ""):
-    """The power bookkeeping integrated over the run; the legend beside the axes, off the data."""
+def _power_frame():
     fig, ax = subplots(figsize=(10.5, 4), margins={"right": 2.7})
+    ax.set_xlabel(label("time", MILLISECOND))
+    ax.set_ylabel(label("energy", JOULE))
+    ax.grid(True)
+    return fig, ax
+
+
+def power_figure(res: Result, scene: str, sub: str = "", frame=None):
+    """The power bookkeeping integrated over the run; the legend beside the axes, off the data
+    (``frame``: as :func:`position_figure`'s)."""
+    fig, ax = frame or _power_frame()
     tm = 1e3 * res.time
     e0 = {k: res[k] - res[k][0] for k in ("motor.magnetic_energy", "prsm.kinetic_energy")}
     ax.plot(tm, res["motor.electrical_energy"], label="electrical input")
@@ -318,9 +353,6 @@ def power_figure(res: Result, scene: str, sub: str = ""):
     resid = (res["motor.electrical_energy"] - res["motor.copper_energy"] - res["prsm.friction_work"]
              - res["prsm.output_work"] - e0["motor.magnetic_energy"] - e0["prsm.kinetic_energy"])
     ax.plot(tm, resid, "k:", label="residual")
-    ax.set_xlabel(label("time", MILLISECOND))
-    ax.set_ylabel(label("energy", JOULE))
-    ax.grid(True)
     legend_outside(ax)
     ax.set_title(f"{scene}: power bookkeeping (integrated){sub}", fontsize=10)
     return fig
@@ -333,27 +365,56 @@ FIGURES = ("position", "speed", "motor", "forces", "carriers", "efficiency", "po
 #: largest first, alternating, as the 3-panel figures take longest
 DRAW_ORDER = ("motor", "forces", "position", "power", "speed", "efficiency", "carriers")
 
+#: each figure's frame: the figure, its axes, axis labels, grid and fixed limits, none of which
+#: depends on the run (the carriers' figure, drawn only when they are recorded, has none)
+_FRAMES = {"position": _position_frame, "speed": _speed_frame, "motor": _motor_frame,
+           "forces": _forces_frame, "efficiency": _efficiency_frame, "power": _power_frame}
+
+#: the figures with a frame, in :data:`DRAW_ORDER`
+FRAMED = tuple(n for n in DRAW_ORDER if n in _FRAMES)
+
+#: major ticks made with a frame on each axis: position_step's figures use 8 on the time axis
+#: and 5 to 10 on the others; a draw makes any more it needs, and a tick beyond those its axis
+#: shows is never drawn
+FRAME_TICKS = 8
+
+
+def frame(name: str) -> tuple:
+    """(figure, axes) of the figure ``name`` (one of :data:`FRAMED`) without its data, and
+    :data:`FRAME_TICKS` major ticks made on each axis: the part of the figure's making that
+    needs no run (~40 % of making and drawing it: its axes, and its ticks at ~1 ms each),
+    made by the drawing process while the run goes; the figure's function then adds the data."""
+    fig, axes = _FRAMES[name]()
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.get_major_ticks(FRAME_TICKS)
+            axis.get_minor_ticks(1)
+    return fig, axes
+
 
 def figures(res: Result, scene: str, reference=None, mode: str = "position",
             current_limit: float | None = None, *, description: str = "",
             voltage_limit: float | None = None, n_rollers: list[int] | None = None,
             carrier_equilibrium: dict[int, float] | None = None,
-            only: Iterable[str] | None = None) -> dict[str, Any]:
+            only: Iterable[str] | None = None,
+            frames: dict[str, tuple] | None = None) -> dict[str, Any]:
     """The figures of the module docstring by name (``position``, ``speed``, ...), unsaved;
     parameters as :func:`write_plots` (``reference`` may also be its values on the time grid);
-    ``only``: those names only."""
+    ``only``: those names only; ``frames``: figure name -> its :func:`frame`, made already
+    (each used once: taken out of the dict)."""
     sub = f"\n{description}" if description else ""
-    make = {"position": lambda: position_figure(res, scene, reference, mode, sub),
-            "speed": lambda: speed_figure(res, scene, mode, sub),
-            "motor": lambda: motor_figure(res, scene, current_limit, voltage_limit, sub),
-            "forces": lambda: forces_figure(res, scene, n_rollers, sub),
-            "carriers": lambda: carriers_figure(res, scene, carrier_equilibrium or {}, sub),
-            "efficiency": lambda: efficiency_figure(res, scene, sub),
-            "power": lambda: power_figure(res, scene, sub)}
+    frames = {} if frames is None else frames
+    make = {"position": lambda f: position_figure(res, scene, reference, mode, sub, f),
+            "speed": lambda f: speed_figure(res, scene, mode, sub, f),
+            "motor": lambda f: motor_figure(res, scene, current_limit, voltage_limit, sub, f),
+            "forces": lambda f: forces_figure(res, scene, n_rollers, sub, f),
+            "carriers": lambda f: carriers_figure(res, scene, carrier_equilibrium or {}, sub),
+            "efficiency": lambda f: efficiency_figure(res, scene, sub, f),
+            "power": lambda f: power_figure(res, scene, sub, f)}
     wanted = FIGURES if only is None else [n for n in FIGURES if n in set(only)]
     out = {}
     for name in wanted:
-        fig = make[name]()
+        fig = make[name](frames.pop(name, None))
         if fig is not None:
             out[name] = fig
     return out
@@ -361,12 +422,14 @@ def figures(res: Result, scene: str, reference=None, mode: str = "position",
 
 def _save_figures(res: Result, out_dir: str | Path, scene: str, reference, mode: str,
                   current_limit: float | None, kw: dict[str, Any],
-                  only: Iterable[str] | None = None) -> list[Path]:
-    """Build and save the figures (``only``: those named); their paths in :data:`FIGURES`
-    order.  :func:`write_plots` here, :meth:`FigureWorkers.write_plots` in each worker."""
+                  only: Iterable[str] | None = None,
+                  frames: dict[str, tuple] | None = None) -> list[Path]:
+    """Build and save the figures (``only``: those named; ``frames``: as :func:`figures`');
+    their paths in :data:`FIGURES` order.  :func:`write_plots` here,
+    :meth:`FigureWorkers.write_plots` in each worker."""
     save, files = figure_writer(out_dir, scene)
     for name, fig in figures(res, scene, reference, mode, current_limit, only=only,
-                             **kw).items():
+                             frames=frames, **kw).items():
         save(fig, name)
     return files
 
@@ -379,10 +442,10 @@ def _draw_some(args: tuple) -> list[Path]:
 
 def _warm() -> None:
     """A drawing worker's start, while the run is still going: matplotlib imported, and one
-    small figure drawn (title, labels, ticks, legend, grid) so that the fonts and the text
-    layouts the figures share are loaded and cached (drawing position_step's figures after it:
-    0.94 s against 0.99 s CPU, medians of seven runs each on the shared machine; it costs
-    ~35 ms, off the figures' path as the run goes on meanwhile)."""
+    small figure drawn (title, labels, ticks, legend, grid) so that the fonts the figures share
+    are loaded (a figure drawn after it costs ~5-9 ms less than the first: five runs on the
+    shared machine; it costs ~35 ms, so the forked drawer draws it only while it waits for the
+    run, :func:`system_models.figure_process._ahead`)."""
     from prsm_fmu.figures import subplots
 
     fig, ax = subplots(figsize=(2.0, 1.5))

@@ -319,3 +319,39 @@ def test_ctrl_c_stops_regress_on_the_c_loop_too(monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         core.check(built_fmus()["PRSM2"], cases=["sine_tracking", "load_step"])
     assert started == ["sine_tracking"]
+
+
+_ENDS = """
+import sys
+from prsm_fmu.command import end_process
+sys.stdout.write("x" * 100000 + "\\n")      # a pipe: block-buffered, still in the buffer
+sys.stderr.write("last words\\n")
+end_process(int(sys.argv[1]))
+"""
+
+
+@pytest.mark.parametrize("status", [0, 1, 2, 130])
+def test_end_process_flushes_both_streams_and_keeps_the_status(status):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env.pop("PYTHONUNBUFFERED", None)
+    proc = subprocess.run([sys.executable, "-c", _ENDS, str(status)], capture_output=True,
+                          text=True, env=env, timeout=60)
+    assert proc.returncode == status
+    assert proc.stdout == "x" * 100000 + "\n" and proc.stderr == "last words\n"
+
+
+def test_prsm_ema_from_the_shell_ends_with_mains_status_and_all_its_output(tmp_path):
+    # python -m system_models (= the prsm-ema script: system_models.cli.entry): every line
+    # printed and the status of main, for a success (list: 0) and a refused argument (2)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env.pop("PYTHONUNBUFFERED", None)
+    listed = subprocess.run([sys.executable, "-m", "system_models", "list"], cwd=tmp_path,
+                            capture_output=True, text=True, env=env, timeout=120)
+    from system_models.scenes import list_scenes
+
+    assert listed.returncode == 0
+    assert [ln.split()[0] for ln in listed.stdout.splitlines()] == [n for n, _ in list_scenes()]
+    bad = subprocess.run([sys.executable, "-m", "system_models", "run", "--scene",
+                          "position_step", "--retry", "-1"], cwd=tmp_path, capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--retry" in bad.stderr

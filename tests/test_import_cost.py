@@ -45,6 +45,16 @@ def test_the_figure_process_module_imports_no_numerics():
     assert not loaded & {"numpy", "scipy", "matplotlib", "fmpy"}, loaded
 
 
+def test_the_drawing_processes_do_not_load_the_csv_writer():
+    # the figures' processes import system_models.output and draw: the CSV formatter's tables
+    # (prsm_fmu.csv_format, built at its import) are the command's own process's business
+    probe = ("import sys\nfrom system_models.output import _warm\n_warm()\n"
+             "print('prsm_fmu.csv_format' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True, timeout=120)
+    assert out.stdout.split()[-1] == "False"
+
+
 _NO_SCIPY = ["prsm_fmu", "prsm_fmu.geometry", "prsm_fmu.models", "prsm_fmu.steady_state",
              "prsm_fmu.design_checks", "prsm_fmu.report", "system_models.ema",
              "system_models.coupling_analysis", "system_models.run", "prsm_fmu.cli"]

@@ -23,8 +23,9 @@ Layers, lowest first (a module may import its own layer or lower ones, never a h
    ``design_checks``, ``sweep``, ``regress``, ``arguments`` (their argument checks),
    ``fmu_log``, ``fmu_variables``, ``fmi_enum`` and ``result_plot`` (what a host reads off an
    FMU), ``atomic`` (outputs written whole), ``command`` and ``extras`` (how a command ends:
-   Ctrl-C, a missing optional extra), ``csv_format``, ``csv_compiled`` and ``figures`` (how results
-   are written: CSV text, its compiled formatter, figure setup), ``workers`` (processes started ahead of their work).
+   Ctrl-C, a missing optional extra), ``csv_format``, ``csv_compiled``, ``figures`` and ``png``
+   (how results are written: CSV text, its compiled formatter, figure setup, the PNG encoder),
+   ``workers`` (processes started ahead of their work).
 
 Layers 0–3 (the physics and its time stepping) import neither an FMI library nor the tools
 outside the package (``system_models``, ``fmu_build``), with one exception: ``engine`` imports
@@ -52,7 +53,7 @@ LAYERS = {
     "cli": 5, "report": 5, "results": 5, "design_checks": 5, "sweep": 5, "regress": 5,
     "arguments": 5, "fmu_log": 5, "fmu_variables": 5, "result_plot": 5, "fmi_enum": 5,
     "atomic": 5, "command": 5, "extras": 5, "csv_format": 5, "csv_compiled": 5,
-    "figures": 5, "workers": 5,
+    "figures": 5, "png": 5, "workers": 5,
 }
 
 #: top-level names the physics layers (0-3) must not import

@@ -7,8 +7,8 @@ legend boxes against the axes, the plotted data), not on pixels.
 * the sweep's time panels say which line style is which stage;
 * the loop's efficiency plot shows standstill as a gap (NaN), not a drop to 0.
 
-The figures are caught when saved (``Figure.savefig`` spied on), so the tests drive the public
-writers (``write_plots``, ``plot_steady``, ``plot_time_panels``).
+The figures are caught when saved (``prsm_fmu.figures.save``, which every writer calls, spied
+on), so the tests drive the public writers (``write_plots``, ``plot_steady``, ``plot_time_panels``).
 """
 
 from __future__ import annotations
@@ -30,17 +30,17 @@ METRES_PER = {"µm": 1e-6, "mm": 1e-3, "m": 1.0}
 def saved(monkeypatch):
     """Figures saved while active, by the file name they were saved to (not rendered: the
     tests read the Figure objects)."""
-    from matplotlib.figure import Figure
+    from pathlib import Path
 
-    figs: dict[str, Figure] = {}
+    from prsm_fmu import figures
 
-    def spy(self, fname, *args, **kwargs):
-        name = str(fname).rsplit("/", 1)[-1]
-        # written whole: saved to a temporary ".NAME.<random>.part.png" beside NAME, then renamed
-        whole = re.fullmatch(r"\.(.+)\.[^.]+\.part\.[^.]+", name)
-        figs[whole.group(1) if whole else name] = self
+    figs = {}
 
-    monkeypatch.setattr(Figure, "savefig", spy)
+    def spy(fig, path, dpi=110):
+        figs[Path(path).name] = fig
+        return Path(path)
+
+    monkeypatch.setattr(figures, "save", spy)
     return figs
 
 
@@ -218,6 +218,50 @@ def test_figures_drawn_in_worker_processes_equal_those_drawn_here(tmp_path, monk
     _same_bytes(here, there)
 
 
+@pytest.mark.parametrize("mode, reference", [("position", lambda t: 0.01), ("speed", None)])
+def test_figures_drawn_on_frames_made_ahead_equal_those_made_at_once(tmp_path, mode, reference):
+    """The drawing process makes the figures' frames (axes, labels, grid, fixed limits and 8
+    ticks per axis) before the run's result arrives: the figures drawn on them are the files,
+    byte for byte, drawn without (position and speed control; the speed figure's y axis needs
+    more than 8 ticks, the tracking error's fewer)."""
+    from system_models import output
+
+    res = _step_result()
+    kw = dict(voltage_limit=300.0, n_rollers=[10, 10], description="a step")
+    frames = {name: output.frame(name) for name in output.FRAMED}
+    assert set(frames) == set(output.FIGURES) - {"carriers"}
+    (tmp_path / "ahead").mkdir()
+    (tmp_path / "at_once").mkdir()
+    ahead = output._save_figures(res, tmp_path / "ahead", "s", reference, mode, 40.0, kw,
+                                 frames=frames)
+    assert frames == {}                             # each frame used once
+    at_once = write_plots(res, tmp_path / "at_once", "s", reference, mode, 40.0, **kw)
+    assert len(at_once) == 6
+    _same_bytes(at_once, ahead)
+
+
+@pytest.mark.parametrize("polls_before_job", [0, 2, 6, 100])
+def test_the_drawer_makes_frames_only_until_the_job_arrives(monkeypatch, polls_before_job):
+    """figure_process._ahead: frames in DRAW_ORDER while no job has arrived, then the warm-up
+    figure; a job waiting stops it at once (0: none made; 2: two; 6: all six, then the job
+    arrives before the warm-up; 100: all six and the warm-up)."""
+    from system_models import figure_process, output
+
+    class Conn:
+        polls = 0
+
+        def poll(self):
+            self.polls += 1
+            return self.polls > polls_before_job
+
+    warmed = []
+    monkeypatch.setattr(output, "_warm", lambda: warmed.append(True))
+    made = figure_process._ahead(Conn())
+    n = min(polls_before_job, len(output.FRAMED))
+    assert list(made) == list(output.FRAMED[:n])
+    assert warmed == ([True] if polls_before_job > len(output.FRAMED) else [])
+
+
 def test_a_drawer_that_dies_leaves_the_figures_to_this_process(tmp_path):
     """The forked drawer killed before it is given the run: write_plots still writes every
     figure (drawn here), byte for byte as write_plots does."""
@@ -316,3 +360,27 @@ def test_forked_drawing_processes_busy_machine_or_not(monkeypatch):
         monkeypatch.setattr(os, "cpu_count", lambda c=cores: c)
         monkeypatch.setattr(os, "getloadavg", lambda lo=load: (lo, lo, lo))
         assert FigureWorkers().n == expected, (cores, load)
+
+
+def test_long_lived_imports_pause_the_collector_and_freeze_what_they_made(monkeypatch):
+    import gc
+
+    from system_models.figure_process import long_lived_imports
+
+    frozen = []
+    monkeypatch.setattr(gc, "freeze", lambda: frozen.append(gc.isenabled()))
+    assert gc.isenabled()
+    with long_lived_imports():
+        assert not gc.isenabled()
+    assert gc.isenabled() and frozen == [False]     # frozen before the collector resumed
+    with pytest.raises(KeyError):
+        with long_lived_imports():
+            raise KeyError("x")
+    assert gc.isenabled() and len(frozen) == 2      # after an error too
+    gc.disable()
+    try:
+        with long_lived_imports():
+            pass
+        assert not gc.isenabled()                   # left paused: it was paused before
+    finally:
+        gc.enable()

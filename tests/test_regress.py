@@ -237,8 +237,7 @@ def _same_bits(a, b) -> bool:
 
 
 def test_the_fast_run_of_every_case_is_the_old_run_bit_for_bit():
-    """What ``check`` runs now (the C loop, the FMU unpacked once for all cases, no scene
-    checks) against what it ran before (``run_scene`` of the scene at the case's fidelity: the
+    """What ``check`` runs now (the C loop, no scene checks) against what it ran before (``run_scene`` of the scene at the case's fidelity: the
     Python master, the FMU unpacked for the run, the checks evaluated): the same times and
     every output the same double, in all 7 cases.  The C loop must really run here (gcc is
     present on the test machines), else the comparison would be of the old run with itself."""
@@ -260,25 +259,3 @@ def test_the_fast_run_of_every_case_is_the_old_run_bit_for_bit():
             assert _same_bits(res[name], old[name]), (case.name, name)
             compared += 1
     print(f"{compared} outputs of 7 cases equal bit for bit")
-
-
-def test_one_extraction_is_shared_inside_unpacked_and_removed_after():
-    """FMUBlocks made inside ``unpacked`` load the FMU from its one directory and leave it in
-    place when they end; it is gone after the ``with``.  A block made outside has its own,
-    removed when it ends (as before)."""
-    from system_models.fmu import FMUBlock, unpacked
-
-    fmu = built_fmus()["PRSM2"]
-    with unpacked(fmu) as where:
-        a, b = FMUBlock(fmu, name="a"), FMUBlock(fmu, name="b")
-        assert a._unzipdir == b._unzipdir == where
-        a.terminate()
-        assert Path(where, "modelDescription.xml").is_file()     # b still loads from it
-        b.do_step(0.0, 1e-4)
-        b.terminate()
-        assert Path(where).is_dir()
-    assert not Path(where).exists()
-    own = FMUBlock(fmu, name="own")
-    assert own._unzipdir != where and Path(own._unzipdir).is_dir()
-    own.terminate()
-    assert not Path(own._unzipdir).exists()

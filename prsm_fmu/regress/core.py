@@ -403,17 +403,16 @@ def _run_case(case: Case, fmu: Path, parameters: dict[str, Any] | None, progress
 def _run_cases(cases: list[Case], fmu: Path, parameters: dict[str, Any] | None,
                loop: str = "native") -> list:
     """The cases' Results (or failure messages), in order, one after the other in this process,
-    every case loading the FMU from one extraction (:func:`system_models.fmu.unpacked`).
+    every case loading the FMU from its copy unpacked once and kept
+    (:mod:`system_models.fmu_cache`).
 
     Not in parallel processes: with the C loop the seven runs take ~0.3 s of CPU, less than a
     spawned process costs (~0.8 s: a Python, numpy and what a run imports); forked helpers
     measured no less wall time on the 2 cores of the development machine under load
     (docs/regression.md, "How the cases run")."""
-    from system_models.fmu import unpacked
-
     # Ctrl-C between two macro steps, never inside the FMU's Python (there it would be the
     # FMU's fatal error, recorded as a failing case, and the next case would run)
-    with deferred_interrupt() as interrupted, unpacked(fmu):
+    with deferred_interrupt() as interrupted:
         return [_run_case(c, fmu, parameters, lambda t, t_end: interrupted(), loop)
                 for c in cases]
 
@@ -447,9 +446,7 @@ def update(fmu: Path, where: Path = DEFAULT_DIR, cases: list[str] | None = None,
              "Changes against the previous baselines, measured with each case's tube "
              "(tolerances.toml); |Δ|/max|y| is the largest difference over the run divided by "
              "the output's largest magnitude.", ""]
-    from system_models.fmu import unpacked
-
-    with deferred_interrupt() as interrupted, unpacked(fmu):      # as in check()
+    with deferred_interrupt() as interrupted:      # as in check()
         runs = {c.name: simulate_case(c, fmu, tolerance=tight,
                                       progress=lambda t, t_end: interrupted(), loop=loop)
                 for c in chosen}
