@@ -14,7 +14,10 @@ hits both alike.  Printed, each beside its goal:
    before the clock starts (its first run builds it; not timed);
 3. writing the results CSV of ``position_step`` held 1.5 s (15 001 rows: the 0.25 s run's
    result repeated to that length, every column a real output): CPU of ``write_csv``, old / new
-   — goal ≥ 10× [≥ 5×];
+   — goal ≥ 10× [≥ 5×], each tree's modules imported before the clock (the old writer's came
+   with ``system_models.output``; the new one imports ``prsm_fmu.csv_format`` in its first
+   call, so that the figures' processes need not: that import is timed apart and the ratio
+   with it printed too); the compiled formatter's library is loaded inside the timed call;
 4. the figures of that 0.25 s run (``write_plots``, matplotlib imported inside): CPU, old / new;
 5. the pythonfmu FMU's start-up to the end of the first ``doStep`` (fmpy, in a fresh process),
    from ``import fmpy`` (imports included) and from ``instantiate`` (the FMU's own start-up:
@@ -106,8 +109,14 @@ import pickle, sys, time
 from system_models.output import write_csv
 res = pickle.load(open(sys.argv[1], 'rb'))
 t = time.process_time()
+try:    # imported by write_csv itself where system_models.output does not import it
+    import prsm_fmu.csv_format
+except ImportError:     # a tree without it
+    pass
+formatter = time.process_time() - t
+t = time.process_time()
 write_csv(res, sys.argv[2], ["prsm.rod_position"])
-print(time.process_time() - t)
+print(formatter, time.process_time() - t)
 """
 
 _PLOTS = """
@@ -184,15 +193,21 @@ def _write_cost(py: str, trees: dict[str, Path], work: dict[str, Path], tmp: Pat
                     str(long_)], env=_env(trees["new"]), cwd=NEUTRAL, check=True,
                    capture_output=True)
 
+    imports: dict[str, list[float]] = {k: [] for k in trees}
+
     def write(k: str) -> float:
-        return float(_child([py, "-c", _WRITE, str(long_), str(tmp / f"w-{k}.csv")],
-                            trees[k])[2].split()[-1])
+        formatter, cost = map(float, _child([py, "-c", _WRITE, str(long_),
+                                             str(tmp / f"w-{k}.csv")], trees[k])[2].split()[-2:])
+        imports[k].append(formatter)
+        return cost
 
     r = _interleaved(repeat, {k: (lambda k=k: write(k)) for k in trees})
     o, w = _med(r["old"]), _med(r["new"])
+    f = _med(imports["new"])
     rows = sum(1 for _ in open(tmp / "w-new.csv", encoding="utf-8")) - 1
     print(f"3. write_csv, {rows} rows: old {o:.3f} s, new {w:.3f} s CPU, {o / w:.1f}x faster"
-          f"   goal >= 10x [>= 5x]")
+          f"   goal >= 10x [>= 5x]; with the import of the new formatter's module, which "
+          f"write_csv does on its first call ({f:.3f} s): {o / (w + f):.1f}x")
     return short, long_
 
 
