@@ -46,8 +46,8 @@ machine is shared):
   point = the slope, [median(N) − median(N/2)] / (N − N/2), as a fraction of a point's own CPU
   in the loop, and per study = the rest, median(N) − N × the per-point part (the first chunks
   of one point, the last chunk's round trip, publishing the progress); in wall time and CPU
-  time (this process with its scheduler thread, the workers and their nannies: what Dask
-  costs whatever else runs on the machine) as measured, and outside the points: the wall time
+  time (this process, where a local cluster's scheduler and its workers' nannies run, and the
+  worker processes: what Dask costs whatever else runs on the machine) as measured, and outside the points: the wall time
   less the sum of the points' own wall time (``PointResult.wall_time``, from the start of a
   point to its end where it ran), the CPU time less the sum of their own CPU: what Dask adds
   around the points, which the drift of the points themselves (a run's ±20 %, ten times the
@@ -185,23 +185,12 @@ def _verdict(value: float, goal: float, floor: float) -> str:
     return "goal met" if value >= goal else "floor met" if value >= floor else "NOT met"
 
 
-def _proc_cpu(pid: int) -> float:
-    """CPU time [s] (user + system) of process ``pid`` from /proc (10 ms ticks); 0 if gone."""
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
-            fields = fh.read().rsplit(")", 1)[1].split()
-    except (FileNotFoundError, ProcessLookupError):
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def _cluster_cpu(client) -> float:
-    """CPU time [s] of this process (with the scheduler of a local cluster) and, given a
-    client, of its workers (their own clocks) and their nannies (/proc)."""
+    """CPU time [s] of this process (with a local cluster's scheduler and its workers' nannies,
+    which run here) and, given a client, of its worker processes (their own clocks)."""
     total = time.process_time()
     if client is not None:
         total += sum(client.run(time.process_time).values())
-        total += sum(_proc_cpu(pid) for pid in set(client.run(os.getppid).values()))
     return total
 
 
