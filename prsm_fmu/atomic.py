@@ -18,23 +18,29 @@ from typing import Iterable, Iterator
 __all__ = ["atomic_path", "write_atomic"]
 
 
-def _create_temp(target: Path) -> tuple[int, str]:
-    """(descriptor, name) of a new empty file next to ``target``: ``.<name>.<random>.part<ext>``,
-    created exclusively with the mode ``open()`` gives (0666 less the umask: the kernel applies
-    it)."""
+@contextmanager
+def _beside(path: str | os.PathLike) -> Iterator[tuple[int, str]]:
+    """(open descriptor, name) of a new empty file next to ``path``:
+    ``.<name>.<random>.part<ext>``, created exclusively with the mode ``open()`` gives (0666
+    less the umask: the kernel applies it).  The block closes the descriptor; on success the
+    file is renamed to ``path``, else removed."""
+    target = Path(path)
     while True:
         tmp = str(target.parent / f".{target.name}.{os.urandom(6).hex()}.part{target.suffix}")
         try:
-            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), tmp
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            break
         except FileExistsError:         # 48 random bits taken: draw again
             continue
-
-
-def _remove(tmp: str) -> None:
     try:
-        os.remove(tmp)
-    except FileNotFoundError:
-        pass
+        yield fd, tmp
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.remove(tmp)
+        except FileNotFoundError:
+            pass
+        raise
 
 
 @contextmanager
@@ -51,15 +57,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
     str
         The temporary file to write instead (it exists, empty).
     """
-    target = Path(path)
-    fd, tmp = _create_temp(target)
-    os.close(fd)
-    try:
+    with _beside(path) as (fd, tmp):
+        os.close(fd)
         yield tmp
-        os.replace(tmp, target)
-    except BaseException:
-        _remove(tmp)
-        raise
 
 
 def write_atomic(path: str | os.PathLike, chunks: Iterable[bytes]) -> None:
@@ -72,16 +72,10 @@ def write_atomic(path: str | os.PathLike, chunks: Iterable[bytes]) -> None:
     chunks : iterable of bytes
         Its content.
     """
-    target = Path(path)
-    fd, tmp = _create_temp(target)
-    try:
+    with _beside(path) as (fd, _):
         try:
             data = memoryview(b"".join(chunks))
             while data:                 # os.write may write less than it is given
                 data = data[os.write(fd, data):]
         finally:
             os.close(fd)
-        os.replace(tmp, target)
-    except BaseException:
-        _remove(tmp)
-        raise

@@ -64,8 +64,8 @@ PNG_COMPRESS_LEVEL = 1
 
 
 def save(fig, path: str | Path, dpi: int = 110) -> Path:
-    """Write the figure as PNG (one draw), whole or not at all (:func:`prsm_fmu.atomic.atomic_path`:
-    an interrupted run leaves no half-written file).
+    """Write the figure as PNG (one draw), whole or not at all
+    (:func:`prsm_fmu.atomic.write_atomic`: an interrupted run leaves no half-written file).
 
     Drawn by ``savefig`` (its settings: dpi, face colour, ...) to raw RGBA pixels and encoded by
     :func:`prsm_fmu.png.encode_rgba` (rows unfiltered: ~2.5x less CPU than Pillow's encoder,
@@ -75,7 +75,7 @@ def save(fig, path: str | Path, dpi: int = 110) -> Path:
     import matplotlib
     import numpy as np
 
-    from .atomic import atomic_path
+    from .atomic import write_atomic
     from .png import encode_rgba
 
     raw = io.BytesIO()
@@ -88,7 +88,5 @@ def save(fig, path: str | Path, dpi: int = 110) -> Path:
     data = encode_rgba(pixels.reshape(h, w, 4), dpi,
                        {"Software": f"Matplotlib version{matplotlib.__version__}, "
                                     "https://matplotlib.org/"}, PNG_COMPRESS_LEVEL)
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            f.write(data)
+    write_atomic(path, [data])
     return Path(path)
