@@ -19,7 +19,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["BuildError", "COMPILE_FLAGS", "compile_library", "cached_library"]
+__all__ = ["BuildError", "COMPILE_FLAGS", "compile_library", "cached_library", "user_cache_dir"]
 
 #: flags of every target (no fused multiply-add, no fast-math: the Python model's rounding)
 COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
@@ -28,6 +28,14 @@ COMPILE_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
 class BuildError(RuntimeError):
     """A C library or an FMU could not be built (gcc missing or failing, an FMU whose
     modelDescription is not valid)."""
+
+
+def user_cache_dir(kind: str) -> Path:
+    """``<system's temporary directory>/prsm-fmu-<kind>-<user>``: a cache of this user's
+    (the compiled libraries: ``native``; the unpacked FMUs, :mod:`system_models.fmu_cache`:
+    ``unpacked``), created by its user with mode 0700 so that no other user can put a file
+    there; not created here."""
+    return Path(tempfile.gettempdir()) / f"prsm-fmu-{kind}-{getpass.getuser()}"
 
 
 def compile_library(src: Path, out: Path, sources: tuple[str, ...],
@@ -70,7 +78,7 @@ def cached_library(prefix: str, files: dict[str, bytes], sources: tuple[str, ...
     """
     digest = hashlib.sha256(b"".join(name.encode() + b"\0" + data + b"\0"
                                      for name, data in sorted(files.items()))).hexdigest()[:20]
-    cache = Path(tempfile.gettempdir()) / f"prsm-fmu-native-{getpass.getuser()}"
+    cache = user_cache_dir("native")
     lib = cache / f"{prefix}_{digest}.so"
     if not lib.exists():
         cache.mkdir(mode=0o700, parents=True, exist_ok=True)

@@ -3,8 +3,9 @@
 Unzipping the PRSM FMU (136 members, ~2.5 MB) took ~0.07 s of every ``prsm-ema run`` before
 the co-simulation could start.  The copy is kept under the SHA-256 of the FMU file's bytes
 (never stale: a rebuilt FMU is another key), in a directory of the user's own (mode 0700, in the
-system's temporary directory, as :func:`fmu_build.native.cached_library` keeps its libraries), so
-no other user can put a library there.  A copy is unpacked into a temporary directory beside it
+system's temporary directory, :func:`prsm_fmu.compiled.user_cache_dir`, as
+:func:`prsm_fmu.compiled.cached_library` keeps its libraries), so no other user can put a
+library there.  A copy is unpacked into a temporary directory beside it
 and renamed into place whole: a run that races another finds either no copy or a complete one
 (the loser of the race removes its own).
 
@@ -22,7 +23,6 @@ runs killed that long ago.
 
 from __future__ import annotations
 
-import getpass
 import hashlib
 import os
 import shutil
@@ -45,8 +45,11 @@ _lock = threading.Lock()
 
 
 def cache_root() -> Path:
-    """``<temporary directory>/prsm-fmu-unpacked-<user>``: where the copies are kept."""
-    return Path(tempfile.gettempdir()) / f"prsm-fmu-unpacked-{getpass.getuser()}"
+    """``<temporary directory>/prsm-fmu-unpacked-<user>``: where the copies are kept
+    (:func:`prsm_fmu.compiled.user_cache_dir`)."""
+    from prsm_fmu.compiled import user_cache_dir
+
+    return user_cache_dir("unpacked")
 
 
 def _own_private_dir(path: Path) -> bool:
