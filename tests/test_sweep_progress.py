@@ -22,13 +22,13 @@ def test_time_left_at_the_rate_so_far():
 def test_progress_bar_shows_done_failed_and_time_left():
     out = io.StringIO()                      # not a terminal: a line every 10 %
     bar = Progress(4, 0, out)
-    bar.update(True)
-    bar.update(False)
+    bar.update(1)
+    bar.update(0, 1)
     lines = out.getvalue().splitlines()
     assert lines[0].startswith("[") and "0/4 points, 0 failed" in lines[0]
     assert "2/4 points, 1 failed" in lines[-1] and "s left" in lines[-1]
-    bar.update(True)
-    bar.update(True)
+    bar.update(1)
+    bar.update(1)
     assert "4/4 points, 1 failed" in out.getvalue().splitlines()[-1]
     assert "left" not in out.getvalue().splitlines()[-1]
 

@@ -232,10 +232,10 @@ class Progress:
         self.publish: Callable[[dict], None] | None = None
         self._draw(force=True)
 
-    def update(self, ok: bool, count: int = 1) -> None:
-        """``count`` more points done, all of them ``ok`` or all failed; drawn once."""
-        self.done += count
-        self.failed += 0 if ok else count
+    def update(self, ok: int, failed: int = 0) -> None:
+        """``ok`` more points done well and ``failed`` more failed; drawn once."""
+        self.done += ok + failed
+        self.failed += failed
         self._draw()
 
     def state(self) -> dict[str, Any]:
@@ -688,9 +688,7 @@ def run_study(study: Study, out_dir: str | None = None, *, backend: str | None =
             done.append(res)
         append_rows(table_path, header, rows)
         ok = sum(res.status == "ok" for res in chunk)
-        for good, count in ((True, ok), (False, len(chunk) - ok)):
-            if count:
-                bar.update(good, count)
+        bar.update(ok, len(chunk) - ok)
 
     if tasks:
         if executor == "loop":
