@@ -1037,11 +1037,7 @@ static int auto_memory_ok(const prsm_auto_memory *a) {
  * function of the model's built constants alone, the same values whenever it is computed. */
 static int model_built_from(const component *c, const snapshot *s) {
     return c->s.phase >= PH_STEPPING && s->phase >= PH_STEPPING
-           && s->auto_start == c->s.auto_start
-           && !memcmp(s->par_real, c->s.par_real, sizeof s->par_real)
-           && !memcmp(s->par_int, c->s.par_int, sizeof s->par_int)
-           && !memcmp(s->par_bool, c->s.par_bool, sizeof s->par_bool)
-           && !memcmp(s->par_str, c->s.par_str, sizeof s->par_str);
+           && s->auto_start == c->s.auto_start && same_parameters(s, &c->s);
 }
 
 /* the whole snapshot checked; the model it needs is built into m (and for auto its stepper into
