@@ -53,13 +53,13 @@ def loop_library() -> ctypes.CDLL:
 
     Raises
     ------
-    fmu_build.builder.BuildError
-        When gcc is missing or fails.
+    prsm_fmu.compiled.BuildError
+        When gcc is missing or fails (the class :mod:`fmu_build` re-exports).
     """
     global _lib
     if _lib is not None:
         return _lib
-    from fmu_build.native import cached_library
+    from prsm_fmu.compiled import cached_library
 
     path = cached_library("ema_loop", {_SOURCE.name: _SOURCE.read_bytes()}, (_SOURCE.name,))
     dll = ctypes.CDLL(str(path))

@@ -64,8 +64,7 @@ def loop_library() -> tuple[Any, str | None]:
     global _lib, _why
     if _lib is None and _why is None:
         try:
-            from fmu_build.builder import BuildError
-            from fmu_build.native import cached_library
+            from ..compiled import BuildError, cached_library
 
             path = cached_library("fmu_track", {_SOURCE.name: _SOURCE.read_bytes()},
                                   (_SOURCE.name,))
